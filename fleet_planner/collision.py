@@ -58,8 +58,10 @@ def _segments(paths: Sequence[np.ndarray]):
         lens.append(seg_len)
         owner.append(np.full(len(d), idx))
         offset.append(np.concatenate([[0.0], np.cumsum(seg_len)[:-1]]))
+    first = np.concatenate([np.arange(len(o)) == 0 for o in owner])
+    last = np.concatenate([np.arange(len(o)) == len(o) - 1 for o in owner])
     return (np.vstack(starts), np.vstack(dirs), np.concatenate(lens), np.concatenate(owner),
-            np.concatenate(offset))
+            np.concatenate(offset), first, last)
 
 
 def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray):
@@ -118,18 +120,25 @@ class CollisionModel:
     (re-ordering robots re-plans one or two paths; everything else is kept).
     """
 
-    def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0):
+    def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0,
+                 speeds: Sequence[float] | None = None):
         self.radii = np.asarray(radii, dtype=float)
+        self.speeds = np.ones(len(radii)) if speeds is None else np.asarray(speeds, dtype=float)
         self.margin = float(margin)
         self.paths = [np.asarray(p, dtype=float).reshape(-1, 2) for p in paths]
         self.lengths = np.array([_length(p) for p in self.paths])
         self._regions: dict[tuple[int, int], list[Region]] = {}
+        self._pieces: dict[tuple[int, int], np.ndarray] = {}
         self._compute(range(len(self.paths)), all_pairs=True)
 
     # -- queries --------------------------------------------------------------------------------
     def regions(self, x: int, y: int) -> list[Region]:
         """Regions between robots x and y (any order), sorted along the smaller index's path."""
         return self._regions.get((min(x, y), max(x, y)), [])
+
+    def pieces(self, x: int, y: int) -> np.ndarray:
+        """Per-segment-pair pieces of the regions of x < y: rows indexed by the ``P_*`` columns."""
+        return self._pieces.get((min(x, y), max(x, y)), _NO_PIECES)
 
     def neighbours(self, x: int) -> Iterable[int]:
         for (a, b) in self._regions:
@@ -155,6 +164,7 @@ class CollisionModel:
             self.lengths[x] = _length(self.paths[x])
         dirty = set(changed)
         self._regions = {k: v for k, v in self._regions.items() if k[0] not in dirty and k[1] not in dirty}
+        self._pieces = {k: v for k, v in self._pieces.items() if k[0] not in dirty and k[1] not in dirty}
         self._compute(sorted(dirty), all_pairs=False)
 
     # -- the geometry ---------------------------------------------------------------------------
@@ -164,7 +174,7 @@ class CollisionModel:
         robots = list(robots)
         if not robots or len(self.paths) < 2:
             return
-        p0, u, seg_len, owner, offset = _segments(self.paths)
+        p0, u, seg_len, owner, offset, first, last = _segments(self.paths)
         p1 = p0 + u * seg_len[:, None]
         lines = shapely.linestrings(np.stack([p0, p1], axis=1))
         reach = 2 * float(self.radii.max()) + self.margin
@@ -190,17 +200,86 @@ class CollisionModel:
         a_lo, a_hi = capsule_interval(p0[qi], u[qi], seg_len[qi], p0[ti], u[ti], seg_len[ti], R)
         b_lo, b_hi = capsule_interval(p0[ti], u[ti], seg_len[ti], p0[qi], u[qi], seg_len[qi], R)
         hit = (a_lo <= a_hi) & (b_lo <= b_hi)
-        boxes = np.column_stack([owner[qi], owner[ti], offset[qi] + a_lo, offset[qi] + a_hi,
-                                 offset[ti] + b_lo, offset[ti] + b_hi])[hit]
-        order = np.lexsort((boxes[:, 2], boxes[:, 1], boxes[:, 0]))
-        boxes = boxes[order]
-        if len(boxes) == 0:
+        qi, ti, R = qi[hit], ti[hit], R[hit]
+        if len(qi) == 0:
             return
-        pair_key = boxes[:, 0] * len(self.paths) + boxes[:, 1]
+        pieces = _piece_table(p0[qi], u[qi], seg_len[qi], offset[qi], self.speeds[owner[qi]],
+                              p0[ti], u[ti], seg_len[ti], offset[ti], self.speeds[owner[ti]], R)
+        pieces[:, P_X], pieces[:, P_Y] = owner[qi], owner[ti]
+        pieces[:, P_A_LO], pieces[:, P_A_HI] = offset[qi] + a_lo[hit], offset[qi] + a_hi[hit]
+        pieces[:, P_B_LO], pieces[:, P_B_HI] = offset[ti] + b_lo[hit], offset[ti] + b_hi[hit]
+        pieces[:, P_X_FIRST], pieces[:, P_X_LAST] = first[qi], last[qi]
+        pieces[:, P_Y_FIRST], pieces[:, P_Y_LAST] = first[ti], last[ti]
+        pieces = pieces[np.lexsort((pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
+        pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
         cuts = np.nonzero(np.diff(pair_key))[0] + 1
-        for chunk in np.split(boxes, cuts):
-            x, y = int(chunk[0, 0]), int(chunk[0, 1])
-            self._regions[(x, y)] = [Region(x, y, *b) for b in _merge_boxes(chunk[:, 2:])]
+        for chunk in np.split(pieces, cuts):
+            x, y = int(chunk[0, P_X]), int(chunk[0, P_Y])
+            self._pieces[(x, y)] = chunk
+            self._regions[(x, y)] = [Region(x, y, *b) for b in _merge_boxes(chunk[:, P_A_LO:P_B_HI + 1])]
+
+
+# Columns of a piece table: one row per pair of segments (one of robot x, one of robot y, x < y)
+# whose discs come closer than R. A/B: travelled lengths of x/y bounding the piece. PHI: the range of
+# t_x(a) - t_y(b) (undelayed) over the piece, so that y collides with a delayed x here iff
+# d_y - d_x lies strictly inside (PHI_LO, PHI_HI). E_*: the piece's extent on the edges of the
+# segment pair where a robot may be parked (x at the start / end of its segment, y likewise), as
+# the other robot's travelled length (lo > hi when empty).
+(P_X, P_Y, P_A_LO, P_A_HI, P_B_LO, P_B_HI, P_PHI_LO, P_PHI_HI,
+ P_XS_LO, P_XS_HI, P_XE_LO, P_XE_HI, P_YS_LO, P_YS_HI, P_YE_LO, P_YE_HI,
+ P_X_FIRST, P_X_LAST, P_Y_FIRST, P_Y_LAST) = range(20)
+_NO_PIECES = np.zeros((0, 20))
+
+
+def _piece_table(p0, u, lp, offp, vx, q0, v, lq, offq, vy, R) -> np.ndarray:
+    """Exact extents of the convex set S = {(a, b) in [0, lp] x [0, lq] : |p0 + a u - q0 - b v| < R}
+    per row: the range of phi(a, b) = (offp + a)/vx - (offq + b)/vy over S, and S's edge intervals.
+
+    A linear function's extremes over a convex set lie on its boundary: on the square's edges (the
+    ends of the four edge intervals) or where the ellipse boundary is tangent to phi's level lines."""
+    n = len(p0)
+    out = np.zeros((n, 20))
+
+    def clip(lo, hi, length):
+        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, length)
+        return np.where(lo <= hi, lo, np.inf), np.where(lo <= hi, hi, -np.inf)
+
+    p1, q1 = p0 + u * lp[:, None], q0 + v * lq[:, None]
+    xs = clip(*_circle_interval(q0 - p0, v, R), lq)   # b-range with x at its segment start
+    xe = clip(*_circle_interval(q0 - p1, v, R), lq)   # ... at its segment end
+    ys = clip(*_circle_interval(p0 - q0, u, R), lp)   # a-range with y at its segment start
+    ye = clip(*_circle_interval(p0 - q1, u, R), lp)
+    phi = lambda a, b: (offp + a) / vx - (offq + b) / vy  # noqa: E731
+    zero = np.zeros(n)
+    cands = [phi(zero, xs[0]), phi(zero, xs[1]), phi(lp, xe[0]), phi(lp, xe[1]),
+             phi(ys[0], zero), phi(ys[1], zero), phi(ye[0], lq), phi(ye[1], lq)]
+    valid = [np.isfinite(xs[0])] * 2 + [np.isfinite(xe[0])] * 2 + [np.isfinite(ys[0])] * 2 + [np.isfinite(ye[0])] * 2
+    # tangent points: y = w + A z with A = [u, -v]; phi = c + g.z, g = (1/vx, -1/vy)
+    det = u[:, 0] * (-v[:, 1]) - (-v[:, 0]) * u[:, 1]
+    ok = np.abs(det) > 1e-12
+    sdet = np.where(ok, det, 1.0)
+    # A^-1 = [[-v1, v0], [-u1, u0]] / det ; h = A^-T g
+    inv = np.stack([np.stack([-v[:, 1], v[:, 0]], 1), np.stack([-u[:, 1], u[:, 0]], 1)], 1) / sdet[:, None, None]
+    g = np.stack([1.0 / vx, -1.0 / vy], 1)
+    h = np.einsum("nji,nj->ni", inv, g)
+    hn = np.hypot(h[:, 0], h[:, 1])
+    hn = np.where(hn > 0, hn, 1.0)
+    w = p0 - q0
+    for sign in (1.0, -1.0):
+        y = sign * R[:, None] * h / hn[:, None]
+        z = np.einsum("nij,nj->ni", inv, y - w)
+        inside = ok & (z[:, 0] >= 0) & (z[:, 0] <= lp) & (z[:, 1] >= 0) & (z[:, 1] <= lq)
+        cands.append(phi(z[:, 0], z[:, 1]))
+        valid.append(inside)
+    c = np.stack(cands, 1)
+    m = np.stack(valid, 1)
+    out[:, P_PHI_LO] = np.where(m, c, np.inf).min(1)
+    out[:, P_PHI_HI] = np.where(m, c, -np.inf).max(1)
+    out[:, P_XS_LO], out[:, P_XS_HI] = offq + xs[0], offq + xs[1]
+    out[:, P_XE_LO], out[:, P_XE_HI] = offq + xe[0], offq + xe[1]
+    out[:, P_YS_LO], out[:, P_YS_HI] = offp + ys[0], offp + ys[1]
+    out[:, P_YE_LO], out[:, P_YE_HI] = offp + ye[0], offp + ye[1]
+    return out
 
 
 def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:

@@ -19,7 +19,7 @@ import numpy as np
 from ..collision import CollisionModel
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, timed_path_from_polyline
-from ..scheduler import Blocked, DelayScheduler, Network
+from ..scheduler import MODES, Blocked, DelayScheduler, Network
 from .base import Planner, Progress
 
 ORDERS = ("given", "shortest", "longest")
@@ -37,13 +37,14 @@ class Schedule:
 
 def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Sequence[float],
                    speeds: Sequence[float], order: Sequence[int] | None = None,
-                   margin: float = 0.0) -> Schedule:
+                   margin: float = 0.0, mode: str = "box") -> Schedule:
     """Departure delays for robots on the given paths (no re-planning): the bare method of the paper.
 
-    ``order`` lists robot indices from highest to lowest priority (default: as given)."""
+    ``order`` lists robot indices from highest to lowest priority (default: as given); ``mode`` is
+    "box" (the paper's collision boxes) or "exact" (the regions themselves, see the scheduler)."""
     order = list(range(len(ids))) if order is None else list(order)
-    model = CollisionModel(paths, radii, margin)
-    sched = DelayScheduler(model, speeds)
+    model = CollisionModel(paths, radii, margin, speeds)
+    sched = DelayScheduler(model, speeds, mode)
     blocked = sched.schedule(order)
     return Schedule(order, sched.delays.copy(), sched.network(order, ids), blocked)
 
@@ -53,11 +54,16 @@ class MDPlanner(Planner):
 
     ``margin`` (m) is added to every pair's sum of radii; ``order`` is the initial priority
     ("given": as listed; "shortest"/"longest": by straight-line distance to the goal);
-    ``max_reorders`` bounds the re-ordering attempts (default 4 N)."""
+    ``max_reorders`` bounds the re-ordering attempts (default 4 N); ``mode`` picks the collision
+    test: "exact" (default; robots may follow each other) or "box" (paper 001 as written)."""
 
     name = "md"
 
-    def __init__(self, margin: float = 0.02, order: str = "given", max_reorders: int | None = None):
+    def __init__(self, margin: float = 0.02, order: str = "given", max_reorders: int | None = None,
+                 mode: str = "exact"):
+        if mode not in MODES:
+            raise ValueError(f"mode: must be one of {', '.join(MODES)} (got {mode!r})")
+        self.mode = mode
         if order not in ORDERS:
             raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
         if not margin >= 0:
@@ -86,8 +92,9 @@ class MDPlanner(Planner):
         if missing:
             raise PlanningError(missing)
 
-        model = CollisionModel(paths, [r.radius for r in robots], self.margin)
-        sched = DelayScheduler(model, [r.max_speed for r in robots])
+        speeds = [r.max_speed for r in robots]
+        model = CollisionModel(paths, [r.radius for r in robots], self.margin, speeds)
+        sched = DelayScheduler(model, speeds, self.mode)
         blocked = sched.schedule(order)
         reorders = 0
         swaps: dict[tuple[int, int], int] = {}
@@ -122,7 +129,8 @@ class MDPlanner(Planner):
         timed = [timed_path_from_polyline(r.id, r.radius, paths[x], r.max_speed, float(sched.delays[x]))
                  for x, r in enumerate(robots)]
         return Plan("md", timed, time.perf_counter() - t_start,
-                    {"network": network.to_dict(), "reorders": reorders, "regions": model.region_count})
+                    {"network": network.to_dict(), "mode": self.mode, "reorders": reorders,
+                     "regions": model.region_count})
 
     # ------------------------------------------------------------------------------------------
     def _initial_order(self, robots: list[RobotSpec]) -> list[int]:
