@@ -129,6 +129,7 @@ class CollisionModel:
         self.lengths = np.array([_length(p) for p in self.paths])
         self._regions: dict[tuple[int, int], list[Region]] = {}
         self._pieces: dict[tuple[int, int], np.ndarray] = {}
+        self._adj: dict[int, set[int]] = {}
         self._compute(range(len(self.paths)), all_pairs=True)
 
     # -- queries --------------------------------------------------------------------------------
@@ -141,11 +142,8 @@ class CollisionModel:
         return self._pieces.get((min(x, y), max(x, y)), _NO_PIECES)
 
     def neighbours(self, x: int) -> Iterable[int]:
-        for (a, b) in self._regions:
-            if a == x:
-                yield b
-            elif b == x:
-                yield a
+        """Robots that have at least one collision region with x."""
+        return self._adj.get(x, ())
 
     def pairs(self) -> Iterable[tuple[int, int]]:
         return self._regions.keys()
@@ -165,6 +163,9 @@ class CollisionModel:
         dirty = set(changed)
         self._regions = {k: v for k, v in self._regions.items() if k[0] not in dirty and k[1] not in dirty}
         self._pieces = {k: v for k, v in self._pieces.items() if k[0] not in dirty and k[1] not in dirty}
+        for x in dirty:
+            for y in self._adj.pop(x, ()):
+                self._adj.get(y, set()).discard(x)
         self._compute(sorted(dirty), all_pairs=False)
 
     # -- the geometry ---------------------------------------------------------------------------
@@ -216,6 +217,8 @@ class CollisionModel:
         for chunk in np.split(pieces, cuts):
             x, y = int(chunk[0, P_X]), int(chunk[0, P_Y])
             self._pieces[(x, y)] = chunk
+            self._adj.setdefault(x, set()).add(y)
+            self._adj.setdefault(y, set()).add(x)
             self._regions[(x, y)] = [Region(x, y, *b) for b in _merge_boxes(chunk[:, P_A_LO:P_B_HI + 1])]
 
 

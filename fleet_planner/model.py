@@ -114,8 +114,10 @@ class Plan:
 class PlanningError(RuntimeError):
     """No valid plan: ``failures`` maps robot ids to the reason, in words."""
 
-    def __init__(self, failures: dict[str, str]):
+    def __init__(self, failures: dict[str, str], blockers: dict[str, str] | None = None):
         self.failures = dict(failures)
+        #: robot id -> id of the robot in its way, where one is known (e.g. parked on its only path)
+        self.blockers = dict(blockers or {})
         lines = [f"{rid}: {why}" for rid, why in self.failures.items()]
         super().__init__("no valid plan for %d robot(s):\n  %s" % (len(lines), "\n  ".join(lines)))
 

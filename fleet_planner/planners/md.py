@@ -18,7 +18,7 @@ import numpy as np
 
 from ..collision import CollisionModel
 from ..grid import GridMap
-from ..model import Plan, PlanningError, RobotSpec, timed_path_from_polyline
+from ..model import Plan, PlanningError, RobotSpec, TimedPath, timed_path_from_polyline
 from ..scheduler import MODES, Blocked, DelayScheduler, Network
 from .base import Planner, Progress
 
@@ -133,6 +133,57 @@ class MDPlanner(Planner):
                      "regions": model.region_count})
 
     # ------------------------------------------------------------------------------------------
+    def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
+                         t0: float) -> list[TimedPath]:
+        """Plan new legs for ``robots`` (starting at ``t0`` from their ``start``) around trajectories
+        that are already being driven and stay as they are (``fixed``, absolute times; a robot on
+        its last waypoint stays there). The fixed robots rank above the new ones, so only the new
+        ones are delayed; new robots are re-ordered among themselves if needed. Returns timed paths
+        in absolute time, or raises PlanningError (with ``blockers``) naming who is in the way."""
+        robots = list(robots)
+        kept = [_remaining(tp, t0) for tp in fixed]
+        nf, n = len(kept), len(kept) + len(robots)
+        specs = [RobotSpec(tp.robot_id, tp.radius, speed, tuple(poly[0]), tuple(poly[-1]))
+                 for tp, (poly, _, speed) in zip(fixed, kept)] + robots
+        _check_endpoints(specs[nf:], self.margin)
+        order = list(range(nf)) + [nf + x for x in self._initial_order(robots)]
+        rank = {x: k for k, x in enumerate(order)}
+        finder = _Finders(grid)
+        paths: list[np.ndarray | None] = [poly for poly, _, _ in kept] + [None] * len(robots)
+        for x in order[nf:]:
+            paths[x] = self._safe_path(finder, specs, x, rank)
+            if paths[x] is None:
+                raise PlanningError({specs[x].id: "no path from start to goal on this map for its radius"})
+        speeds = [s.max_speed for s in specs]
+        model = CollisionModel(paths, [s.radius for s in specs], self.margin, speeds)
+        sched = DelayScheduler(model, speeds, self.mode)
+        sched.delays[:nf] = [delay for _, delay, _ in kept]
+        blocked = sched.schedule(order, start_at=nf)
+        swaps: dict[tuple[int, int], int] = {}
+        while blocked is not None:
+            j, i = blocked.j, blocked.blocker
+            swaps[(j, i)] = swaps.get((j, i), 0) + 1
+            if i < nf or swaps[(j, i)] > 2 or sum(swaps.values()) > 4 * n:
+                raise PlanningError({specs[j].id: f"blocked by {specs[i].id}, which {blocked.why}"},
+                                    {specs[j].id: specs[i].id})
+            old_j, pos_i = rank[j], rank[i]
+            order.insert(pos_i, order.pop(old_j))
+            rank = {x: k for k, x in enumerate(order)}
+            changed = {}
+            for x in [j] + [x for x in order[pos_i + 1:old_j + 1]
+                            if _passes_near(paths[x], specs[j].goal, specs[j].radius + specs[x].radius + self.margin)]:
+                paths[x] = changed[x] = self._safe_path(finder, specs, x, rank)
+                if paths[x] is None:
+                    raise PlanningError({specs[x].id: "no path from start to goal on this map for its radius"})
+            model.set_paths(changed)
+            blocked = sched.schedule(order, start_at=pos_i)
+        out = []
+        for x in range(nf, n):
+            tp = timed_path_from_polyline(specs[x].id, specs[x].radius, paths[x], speeds[x], float(sched.delays[x]))
+            tp.waypoints[:, 2] += t0
+            out.append(tp)
+        return out
+
     def _initial_order(self, robots: list[RobotSpec]) -> list[int]:
         idx = list(range(len(robots)))
         if self.order == "given":
@@ -173,6 +224,33 @@ class _Finders:
         if radius not in self._by_radius:
             self._by_radius[radius] = PathFinder(self.grid, radius)
         return self._by_radius[radius]
+
+
+def _remaining(tp: TimedPath, t0: float) -> tuple[np.ndarray, float, float]:
+    """The part of a hold-then-drive timed path still ahead at ``t0``: (polyline from the robot's
+    position at t0, delay from t0 until it moves, its speed). A path that holds again after it has
+    started moving is not of this form and is refused (the md planner never makes one)."""
+    wp = tp.waypoints
+    seg = np.hypot(*np.diff(wp[:, :2], axis=0).T)
+    dt = np.diff(wp[:, 2])
+    moving = seg > 1e-9
+    if not moving.any():
+        return wp[-1:, :2].copy(), 0.0, 1.0
+    first, last = int(np.argmax(moving)), len(moving) - 1 - int(np.argmax(moving[::-1]))
+    if not moving[first:last + 1].all():
+        raise ValueError(f"fixed path of {tp.robot_id!r}: holds after it starts moving; cannot be kept as is")
+    speeds = seg[first:last + 1] / np.maximum(dt[first:last + 1], 1e-12)
+    speed = float(np.median(speeds))
+    if np.max(np.abs(speeds - speed)) > 1e-6 * max(speed, 1.0):
+        raise ValueError(f"fixed path of {tp.robot_id!r}: speed varies along the path; cannot be kept as is")
+    depart = float(wp[first, 2])
+    if t0 <= depart:
+        return wp[first:last + 2, :2].copy(), depart - t0, speed
+    if t0 >= wp[last + 1, 2]:
+        return wp[last + 1:last + 2, :2].copy(), 0.0, speed
+    k = int(np.searchsorted(wp[:, 2], t0, side="right"))   # next vertex ahead of t0
+    here = np.array(tp.position(t0))
+    return np.vstack([here, wp[k:last + 2, :2]]), 0.0, speed
 
 
 def _passes_near(path: np.ndarray, point: tuple[float, float], dist: float) -> bool:
