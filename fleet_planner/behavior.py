@@ -1,0 +1,1022 @@
+"""BBMRCA: behaviour-based multi-robot collision avoidance (paper 002, section IV), no rclpy.
+
+Every robot plans its own A* path without looking at the others and drives it; when another robot
+shows up in its *front area* it picks one of eight behaviours by the paper's traffic rules. This
+module keeps the rules pure and separately testable, and wraps them in one steppable simulation:
+
+* geometry   - :func:`front_area_check`, :func:`in_front_area`, :func:`in_critical_area`,
+  :func:`collision_type` (rear-end / head-on / side, by the angle between travel directions);
+* rules      - :func:`select_behavior` (Algorithms 1-4, SolveActiveAndWaitCollision, the Dock and
+  WaitForDocking rules) with the helpers :func:`low_order`, :func:`no_other_active`,
+  :func:`same_goal_station`;
+* docking    - :class:`DockingArbiter`: one robot docks at a station at a time (first come first
+  served, ties by priority);
+* deadlocks  - :class:`WaitMessage` and :func:`on_wait_message`: the wait-chain messages of IV.C;
+* re-planning - :func:`virtual_wall_cells`: the cells between a robot and its next waypoint;
+* :class:`BehaviorFleet` - the decentralised fleet as one object: ``assign`` goals, ``step(dt)``.
+
+Frames: a robot's *front frame* has its origin at the robot, axis ``u`` from the robot to its next
+waypoint (its heading is ignored, as in the paper) and ``n`` = ``u`` turned +90 degrees. ``s`` is the
+distance ahead along ``u``, ``l`` the lateral offset along ``n``.
+
+Where the paper leaves a choice open, the choice and its reason are written where it is made
+(search for "Interpretation").
+"""
+from __future__ import annotations
+
+import enum
+import math
+import re
+from dataclasses import dataclass, field, fields, replace
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .grid import GridMap
+from .model import Point, PlanningError
+
+
+class Behavior(enum.Enum):
+    """The 8 behaviours of paper 002, IV.A. The first five are *active* (the robot moves on its own
+    account), the last three are *Wait* behaviours (the robot holds, or only gives way)."""
+
+    FOLLOW_WAYPOINT = "FollowWayPoint"
+    AVOID = "Avoid"
+    EXCHANGE = "Exchange"
+    GO_THROUGH = "GoThrough"
+    DOCK = "Dock"
+    WAIT_KEEP_DISTANCE = "WaitKeepDistance"
+    WAIT_FOR_GO_THROUGH = "WaitForGoThrough"
+    WAIT_FOR_DOCKING = "WaitForDocking"
+
+    @property
+    def is_active(self) -> bool:
+        return self in ACTIVE
+
+    @property
+    def is_wait(self) -> bool:
+        return self in WAITS
+
+
+B = Behavior
+ACTIVE = frozenset({B.FOLLOW_WAYPOINT, B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.DOCK})
+WAITS = frozenset({B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH, B.WAIT_FOR_DOCKING})
+
+#: Collision classes by the angle between the two robots' travel directions (documented thresholds):
+#: below 45 degrees the robots go the same way (rear-end), above 135 degrees opposite ways (head-on),
+#: in between their paths cross (side).
+REAR_END_MAX_ANGLE_DEG = 45.0
+HEAD_ON_MIN_ANGLE_DEG = 135.0
+_COS_REAR = math.cos(math.radians(REAR_END_MAX_ANGLE_DEG))
+_COS_HEAD = math.cos(math.radians(HEAD_ON_MIN_ANGLE_DEG))
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class BehaviorParams:
+    """Tuning of the behaviour layer (metres, seconds). Defaults suit discs of radius 0.3-0.5 m at
+    about 1 m/s on 1 m cells."""
+
+    front_length: float = 2.0       # how far ahead of the robot the front area reaches
+    front_width: float = 2.0        # full width of the front area
+    critical_margin: float = 0.2    # critical area (drive channel) width = 2 * radius + this
+    comm_range: float = 6.0         # robots sense / message only robots this close
+    wait_msg_period: float = 2.0    # a waiting robot sends a WaitMessage this often (paper: 2 s)
+    keep_gap: float = 0.3           # WaitKeepDistance / WaitForDocking keep this free gap to others
+    avoid_margin: float = 0.15      # free gap left when driving round a partner
+    safety_margin: float = 0.02     # the hard safety layer keeps discs this far apart
+    dock_region: float = 1.5        # a robot this close to its station asks to dock
+    dock_give_up: float = 3.0       # WaitForDocking ends when pushed this far from the station
+    go_through_timeout: float = 30.0  # a GoThrough lasting longer fails (paper IV.C.4)
+    blocked_timeout: float = 5.0    # FollowWayPoint unable to move with nobody in front fails
+    long_wait: float = 60.0         # stats: waits longer than this count as unresolved
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise ValueError(f"BehaviorParams.{f.name}: must be a finite number, got {value!r}")
+            if value < 0 or (value == 0 and f.name not in ("safety_margin", "avoid_margin", "critical_margin")):
+                raise ValueError(f"BehaviorParams.{f.name}: must be > 0, got {value!r}")
+        if self.dock_give_up < self.dock_region:
+            raise ValueError(f"BehaviorParams.dock_give_up: must be >= dock_region ({self.dock_region}), "
+                             f"got {self.dock_give_up}")
+
+
+DEFAULT_PARAMS = BehaviorParams()
+
+
+@dataclass(frozen=True)
+class RobotView:
+    """What a robot knows of itself or hears from a neighbour: position, path, status.
+
+    ``next_waypoint`` is None for a robot without a path (idle, or arrived): it stands still.
+    ``remaining`` is the length of the rest of its path (for :func:`low_order`).
+    ``partner`` is the id of the robot its current behaviour is about (the one it waits for,
+    avoids, exchanges with...).
+    """
+
+    id: str
+    position: Point
+    radius: float
+    behavior: Behavior = B.FOLLOW_WAYPOINT
+    next_waypoint: Point | None = None
+    remaining: float = 0.0
+    station: str | None = None
+    partner: str | None = None
+
+    @property
+    def direction(self) -> tuple[float, float] | None:
+        """Unit vector from the position to the next waypoint (the travel direction), or None."""
+        if self.next_waypoint is None:
+            return None
+        dx = self.next_waypoint[0] - self.position[0]
+        dy = self.next_waypoint[1] - self.position[1]
+        d = math.hypot(dx, dy)
+        if d < _EPS:
+            return None
+        return dx / d, dy / d
+
+    @property
+    def travelling(self) -> bool:
+        """Has somewhere to go (a robot without a path is a standing obstacle to the others)."""
+        return self.direction is not None
+
+
+# -- geometry ---------------------------------------------------------------------------------
+def front_coords(me: RobotView, other: RobotView) -> tuple[float, float] | None:
+    """``(s, l)`` of the other robot's centre in my front frame, or None if I have no direction."""
+    d = me.direction
+    if d is None:
+        return None
+    rx, ry = other.position[0] - me.position[0], other.position[1] - me.position[1]
+    return rx * d[0] + ry * d[1], -rx * d[1] + ry * d[0]
+
+
+def in_front_area(me: RobotView, other: RobotView, params: BehaviorParams = DEFAULT_PARAMS) -> bool:
+    """The other disc overlaps my front area: a ``front_length`` x ``front_width`` rectangle
+    starting at my position, pointing at my next waypoint (the other's centre must be ahead)."""
+    c = front_coords(me, other)
+    if c is None or other.id == me.id:
+        return False
+    s, l = c
+    return 0.0 <= s <= params.front_length + other.radius and abs(l) <= params.front_width / 2 + other.radius
+
+
+def in_critical_area(me: RobotView, other: RobotView, params: BehaviorParams = DEFAULT_PARAMS) -> bool:
+    """The other disc overlaps my drive channel (width ``2 * radius + critical_margin``) inside
+    my front area: driving straight on, I would touch it (when the margin is 0)."""
+    if not in_front_area(me, other, params):
+        return False
+    _, l = front_coords(me, other)  # type: ignore[misc]
+    return abs(l) < me.radius + params.critical_margin / 2 + other.radius
+
+
+def robots_in_front(me: RobotView, others: Iterable[RobotView],
+                    params: BehaviorParams = DEFAULT_PARAMS) -> list[RobotView]:
+    """The robots in my front area, closest first."""
+    found = [o for o in others if in_front_area(me, o, params)]
+    found.sort(key=lambda o: math.dist(o.position, me.position))
+    return found
+
+
+def front_area_check(me: RobotView, others: Iterable[RobotView],
+                     params: BehaviorParams = DEFAULT_PARAMS) -> RobotView | None:
+    """The paper's FrontAreaCheck: the robot in my front area closest to me, where robots in the
+    critical area come first (if any robot is in it, those outside it are ignored)."""
+    in_front = robots_in_front(me, others, params)
+    critical = [o for o in in_front if in_critical_area(me, o, params)]
+    pool = critical or in_front
+    return pool[0] if pool else None
+
+
+class Collision(enum.Enum):
+    NONE = "none"
+    REAR_END = "rearEndCollision"
+    HEAD_ON = "headOnCollision"
+    SIDE = "sideCollision"
+
+
+def _enters_channel(me: RobotView, other: RobotView, params: BehaviorParams) -> bool:
+    """The other robot's travel ray crosses my drive channel ahead of me within a front length."""
+    c = front_coords(me, other)
+    d_me, d_o = me.direction, other.direction
+    if c is None or d_o is None:
+        return False
+    s, l = c
+    ds = d_o[0] * d_me[0] + d_o[1] * d_me[1]   # its direction in my frame
+    dl = -d_o[0] * d_me[1] + d_o[1] * d_me[0]
+    half = me.radius + params.critical_margin / 2 + other.radius
+    if abs(l) < half:
+        t = 0.0
+    elif l * dl < 0:
+        t = (abs(l) - half) / abs(dl)
+    else:
+        return False
+    return t <= params.front_length and -half <= s + ds * t <= params.front_length + other.radius
+
+
+def collision_type(me: RobotView, other: RobotView, params: BehaviorParams = DEFAULT_PARAMS) -> Collision:
+    """How my path collides with the other robot's, if it does.
+
+    There is a path collision when the other is in my critical area or its travel direction takes
+    it into my drive channel within a front length; its class is then given by the angle between
+    the two travel directions (see :data:`REAR_END_MAX_ANGLE_DEG`, :data:`HEAD_ON_MIN_ANGLE_DEG`).
+    Interpretation: a standing robot (no path) in my channel is a rear-end collision (I would run
+    into it from behind), elsewhere no collision.
+    """
+    d_me, d_o = me.direction, other.direction
+    if d_me is None:
+        return Collision.NONE
+    if not (in_critical_area(me, other, params) or _enters_channel(me, other, params)):
+        return Collision.NONE
+    if d_o is None:
+        return Collision.REAR_END
+    cos = d_me[0] * d_o[0] + d_me[1] * d_o[1]
+    if cos >= _COS_REAR:
+        return Collision.REAR_END
+    if cos <= _COS_HEAD:
+        return Collision.HEAD_ON
+    return Collision.SIDE
+
+
+# -- helpers of the traffic rules -----------------------------------------------------------------
+_ID_PART = re.compile(r"(\d+)")
+
+
+def id_key(robot_id: str) -> tuple:
+    """Natural order of ids ("r2" before "r10"); a smaller key is a higher priority."""
+    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p) for p in _ID_PART.split(robot_id) if p)
+
+
+def low_order(me: RobotView, other: RobotView) -> bool:
+    """The paper's lowOrder: True when I have the lower priority of the two.
+
+    The robot with the shorter remaining distance to its goal station has the higher priority (the
+    robot closest to a crowded station should leave it first); on equal distances the smaller id.
+    """
+    if abs(me.remaining - other.remaining) > 1e-6:
+        return me.remaining > other.remaining
+    return id_key(me.id) > id_key(other.id)
+
+
+def no_other_active(me: RobotView, others_in_front: Sequence[RobotView], partner: RobotView | None = None) -> bool:
+    """The paper's noOtherActive: no robot in my front area besides the partner is moving with an
+    active behaviour (then driving round the partner adds no new conflict)."""
+    skip = {me.id, partner.id if partner else None}
+    return not any(o.behavior.is_active and o.travelling for o in others_in_front if o.id not in skip)
+
+
+def same_goal_station(me: RobotView, other: RobotView) -> bool:
+    """Both robots are headed to the same station."""
+    return me.station is not None and me.station == other.station
+
+
+def proper_active(me: RobotView, other: RobotView, params: BehaviorParams = DEFAULT_PARAMS) -> Behavior:
+    """Interpretation of "drive around the robot with a proper active behavior" (Algorithm 4):
+    Exchange for a head-on collision (both pass on their right), Avoid when the other stands in
+    my drive channel (drive round it), otherwise GoThrough (pass while it keeps waiting)."""
+    if collision_type(me, other, params) is Collision.HEAD_ON:
+        return B.EXCHANGE
+    if in_critical_area(me, other, params):
+        return B.AVOID
+    return B.GO_THROUGH
+
+
+def cooperate(other: RobotView) -> Behavior | None:
+    """Interpretation of "cooperate with the robot with a proper active behavior" (Algorithm 4),
+    when the other robot's active behaviour is about me: Exchange with an exchanging robot,
+    WaitForGoThrough for a robot going through, and hold still (keep the wait) for one that
+    avoids me, since Avoid drives round a standing partner."""
+    if other.behavior is B.EXCHANGE:
+        return B.EXCHANGE
+    if other.behavior is B.GO_THROUGH:
+        return B.WAIT_FOR_GO_THROUGH
+    return None
+
+
+def _engaged(me: RobotView, other: RobotView) -> bool:
+    """We already resolve this collision together: I drive round / through / past the other while
+    it waits for me, or we exchange with each other.
+
+    Interpretation: the paper applies the rules "once a new possible collision is found"; we apply
+    them at every step, so a pair that is already cooperating must keep its behaviours, or e.g.
+    Algorithm 2 (Exchange vs a waiting robot in my channel) would stop a running exchange.
+    """
+    if me.partner != other.id or other.partner != me.id:
+        return False
+    if me.behavior is B.EXCHANGE and other.behavior is B.EXCHANGE:
+        return True
+    return me.behavior in (B.AVOID, B.EXCHANGE, B.GO_THROUGH) and other.behavior.is_wait
+
+
+# -- the traffic rules --------------------------------------------------------------------------
+# In every algorithm the switch is on the behaviour of the OTHER robot (the one in my front area);
+# the result is MY new behaviour, None = keep the current one.
+
+def solve_active_and_wait_collision(me: RobotView, other: RobotView, others_in_front: Sequence[RobotView],
+                                    params: BehaviorParams = DEFAULT_PARAMS) -> Behavior:
+    """SolveActiveAndWaitCollision: I am active, the other waits. Circumnavigation is delayed
+    (WaitKeepDistance) when it has my goal station or stands in my critical area; otherwise it
+    proceeds if no other robot in the front area is active."""
+    if (not same_goal_station(me, other) and not in_critical_area(me, other, params)
+            and no_other_active(me, others_in_front, other)):
+        return proper_active(me, other, params)
+    return B.WAIT_KEEP_DISTANCE
+
+
+def solve_follow_waypoint_collision(me: RobotView, other: RobotView, others_in_front: Sequence[RobotView],
+                                    params: BehaviorParams = DEFAULT_PARAMS) -> Behavior | None:
+    """Algorithm 1 (I follow my waypoints)."""
+    ob = other.behavior
+    if ob in (B.FOLLOW_WAYPOINT, B.AVOID, B.EXCHANGE, B.GO_THROUGH):      # case 1: active, not docking
+        return B.WAIT_KEEP_DISTANCE
+    if ob is B.DOCK:                                                       # case 2: it docks
+        return B.AVOID if collision_type(me, other, params) is not Collision.NONE else B.WAIT_KEEP_DISTANCE
+    return solve_active_and_wait_collision(me, other, others_in_front, params)  # case 3: it waits
+
+
+def solve_avoid_collision(me: RobotView, other: RobotView, others_in_front: Sequence[RobotView],
+                          params: BehaviorParams = DEFAULT_PARAMS) -> Behavior | None:
+    """Algorithm 2 (I avoid or exchange)."""
+    ob, col = other.behavior, collision_type(me, other, params)
+    if ob in (B.FOLLOW_WAYPOINT, B.AVOID, B.EXCHANGE):                     # case 1
+        if col is Collision.REAR_END:
+            return B.WAIT_KEEP_DISTANCE
+        if col in (Collision.HEAD_ON, Collision.SIDE) and low_order(me, other):
+            return B.WAIT_KEEP_DISTANCE
+        return None
+    if ob is B.GO_THROUGH:                                                 # case 2
+        return B.WAIT_KEEP_DISTANCE if col is not Collision.NONE else None
+    if ob is B.DOCK:                                                       # case 3
+        return B.AVOID if col is not Collision.NONE else B.WAIT_KEEP_DISTANCE
+    return solve_active_and_wait_collision(me, other, others_in_front, params)  # case 4
+
+
+def solve_go_through_collision(me: RobotView, other: RobotView, others_in_front: Sequence[RobotView],
+                               params: BehaviorParams = DEFAULT_PARAMS) -> Behavior | None:
+    """Algorithm 3 (I go through an intersection)."""
+    ob, col = other.behavior, collision_type(me, other, params)
+    if ob in (B.FOLLOW_WAYPOINT, B.AVOID, B.EXCHANGE):                     # case 1
+        return B.WAIT_KEEP_DISTANCE if col is Collision.REAR_END else None
+    if ob is B.GO_THROUGH:                                                 # case 2
+        if col is Collision.REAR_END:
+            return B.WAIT_KEEP_DISTANCE
+        if col in (Collision.HEAD_ON, Collision.SIDE) and low_order(me, other):
+            return B.WAIT_KEEP_DISTANCE
+        return None
+    if ob is B.DOCK:                                                       # case 3
+        return B.AVOID if col is not Collision.NONE else B.WAIT_KEEP_DISTANCE
+    return solve_active_and_wait_collision(me, other, others_in_front, params)  # case 4
+
+
+def solve_wait_keep_distance_collision(me: RobotView, other: RobotView, others_in_front: Sequence[RobotView],
+                                       params: BehaviorParams = DEFAULT_PARAMS) -> Behavior | None:
+    """Algorithm 4 (I wait: WaitKeepDistance or WaitForGoThrough)."""
+    ob = other.behavior
+    if ob in (B.AVOID, B.EXCHANGE, B.GO_THROUGH):                          # case 1
+        return cooperate(other) if other.partner == me.id else None        # "Avoid me"
+    if ob is B.DOCK:                                                       # case 2
+        return B.AVOID if collision_type(me, other, params) is not Collision.NONE else None
+    if ob.is_wait:                                                         # case 3
+        if other.partner == me.id:                                         # "Wait for me": 2-robot deadlock
+            return proper_active(me, other, params) if low_order(me, other) else None
+        if (not same_goal_station(me, other) and not in_critical_area(me, other, params)
+                and no_other_active(me, others_in_front, other)):
+            return proper_active(me, other, params)
+        return None
+    return None                                                            # it follows its waypoints
+
+
+def select_behavior(me: RobotView, other: RobotView, others_in_front: Sequence[RobotView] = (),
+                    params: BehaviorParams = DEFAULT_PARAMS) -> Behavior | None:
+    """My new behaviour given the robot ``other`` found by :func:`front_area_check` (None = keep).
+
+    ``others_in_front``: every robot in my front area (the partner among them is ignored where
+    the rules say "other robots"). Dispatch on MY behaviour (IV.B list), then the algorithm's
+    switch on the OTHER's behaviour:
+
+    * FollowWayPoint -> Algorithm 1; Avoid, Exchange -> Algorithm 2; GoThrough -> Algorithm 3;
+      WaitKeepDistance, WaitForGoThrough -> Algorithm 4;
+    * Dock -> keep moving, the others give way (IV.B.5);
+    * WaitForDocking -> keep; it only backs off and gives up by distance (IV.B.8, done by the fleet).
+
+    Interpretation, for robots standing without a path (idle, or parked on their goal): the paper
+    treats an unknown obstacle as an Avoid partner, so a standing robot in my channel is avoided
+    and one beside it is no reason to wait.
+    """
+    mine = me.behavior
+    if mine in (B.DOCK, B.WAIT_FOR_DOCKING) or other.id == me.id:
+        return None
+    if not other.travelling:
+        if in_critical_area(me, other, params):
+            return None if mine is B.AVOID else B.AVOID
+        return B.FOLLOW_WAYPOINT if mine.is_wait else None
+    if _engaged(me, other):
+        return None
+    if mine is B.FOLLOW_WAYPOINT:
+        return solve_follow_waypoint_collision(me, other, others_in_front, params)
+    if mine in (B.AVOID, B.EXCHANGE):
+        return solve_avoid_collision(me, other, others_in_front, params)
+    if mine is B.GO_THROUGH:
+        return solve_go_through_collision(me, other, others_in_front, params)
+    return solve_wait_keep_distance_collision(me, other, others_in_front, params)
+
+
+# -- docking --------------------------------------------------------------------------------
+class DockingArbiter:
+    """One robot docks at a station at a time (IV.A): the first to reach the docking region is
+    served first; robots arriving at the same time go by priority (smaller id first).
+
+    The robots near a station agree on this among themselves in the paper; the arbiter is that
+    agreement written down (it only ever compares robots that reached the same docking region).
+    """
+
+    def __init__(self) -> None:
+        self._holder: dict[str, str] = {}
+        self._queue: dict[str, dict[str, tuple[float, tuple]]] = {}
+
+    def holder(self, station: str) -> str | None:
+        """The robot docking at the station now."""
+        return self._holder.get(station)
+
+    def first_waiting(self, station: str) -> str | None:
+        """The robot next in line at the station."""
+        queue = self._queue.get(station)
+        return min(queue, key=queue.__getitem__) if queue else None
+
+    def request(self, station: str, robot_id: str, time: float) -> bool:
+        """The robot is in the docking region at ``time``; True when it may dock (now or already).
+
+        The first request records the robot's arrival time; later ones only ask again.
+        """
+        if self._holder.get(station) == robot_id:
+            return True
+        queue = self._queue.setdefault(station, {})
+        queue.setdefault(robot_id, (float(time), id_key(robot_id)))
+        if station not in self._holder and self.first_waiting(station) == robot_id:
+            del queue[robot_id]
+            self._holder[station] = robot_id
+            return True
+        return False
+
+    def withdraw(self, station: str, robot_id: str) -> None:
+        """The robot gave up waiting (it will queue again, as a new arrival, when it comes back)."""
+        self._queue.get(station, {}).pop(robot_id, None)
+
+    def release(self, station: str, robot_id: str) -> None:
+        """The docked robot left the docking region."""
+        if self._holder.get(station) == robot_id:
+            del self._holder[station]
+
+
+# -- deadlock detection (IV.C) -------------------------------------------------------------
+@dataclass(frozen=True)
+class WaitMessage:
+    """Sent every ``wait_msg_period`` by a waiting robot to its partner: the ids of the waiting
+    robots the message has passed through, the sender first."""
+
+    waiting: tuple[str, ...]
+
+
+def on_wait_message(me: RobotView, msg: WaitMessage) -> tuple[bool, WaitMessage | None]:
+    """What a robot does with a WaitMessage: ``(deadlock, message to forward to my partner)``.
+
+    A robot that does not wait ignores it; a waiting robot whose id is already in the list has
+    found a wait cycle (a deadlock: it must re-plan); otherwise it appends its id and forwards
+    the message to the robot it waits for.
+    """
+    if not me.behavior.is_wait:
+        return False, None
+    if me.id in msg.waiting:
+        return True, None
+    if me.partner is None:
+        return False, None
+    return False, WaitMessage(msg.waiting + (me.id,))
+
+
+# -- re-planning (IV.C) ---------------------------------------------------------------------
+def virtual_wall_cells(grid: GridMap, position: Point, next_waypoint: Point, goal: Point,
+                       radius: float) -> list[tuple[int, int]]:
+    """The cells the segment from the robot to its next waypoint passes through: the virtual wall
+    A* must not cross when re-planning. Cells closer than ``radius`` to the robot or to its goal
+    are left open (the search must start and end somewhere); diagonal steps of the segment also
+    block both side cells, so the wall has no diagonal gap."""
+    (x0, y0), (x1, y1) = position, next_waypoint
+    res = grid.resolution
+    n = max(1, int(math.ceil(math.hypot(x1 - x0, y1 - y0) / (res / 8))))
+    cells: list[tuple[int, int]] = []
+    prev = None
+    for k in range(n + 1):
+        c = grid.cell_of(x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n)
+        if c == prev:
+            continue
+        if prev is not None and c[0] != prev[0] and c[1] != prev[1]:
+            cells += [(c[0], prev[1]), (prev[0], c[1])]
+        cells.append(c)
+        prev = c
+
+    def near(c: tuple[int, int], p: Point) -> bool:
+        dx = max(c[0] * res - p[0], 0.0, p[0] - (c[0] + 1) * res)
+        dy = max(c[1] * res - p[1], 0.0, p[1] - (c[1] + 1) * res)
+        return math.hypot(dx, dy) < radius + _EPS
+
+    return [c for c in dict.fromkeys(cells)
+            if grid.in_bounds(*c) and not near(c, position) and not near(c, goal)]
+
+
+# -- the fleet ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FleetStats:
+    """Counters of a :class:`BehaviorFleet` run."""
+
+    time: float
+    deadlocks: int            # wait cycles found by WaitMessages
+    replans: int              # successful re-plans (deadlocks and behaviour failures)
+    replan_failures: int      # re-plans that found no path (the robot kept its old one)
+    refused_moves: int        # motions the safety layer refused
+    long_waits: tuple[str, ...]  # robots waiting longer than ``long_wait`` right now
+    longest_wait: float       # longest continuous wait so far (s)
+
+
+@dataclass
+class _Robot:
+    id: str
+    radius: float
+    max_speed: float
+    pos: np.ndarray
+    msg_tick: float
+    path: np.ndarray | None = None      # waypoints still ahead, path[wp] is the next one
+    tail: np.ndarray | None = None      # tail[k] = length of path[k:]
+    wp: int = 0
+    goal: Point | None = None
+    station: str | None = None
+    holds: tuple[str, np.ndarray] | None = None  # (station, its point) while docking there
+    arrived: bool = False
+    behavior: Behavior = B.FOLLOW_WAYPOINT
+    partner: str | None = None
+    since: float = 0.0                  # when the current behaviour began
+    wait_since: float | None = None     # when the current (possibly chained) wait began
+    side: int = 0                       # Avoid/Exchange: +1 pass the partner on the left, -1 right
+    blocked_since: float | None = None  # FollowWayPoint: could not move with nobody in front
+    failed: bool = False                # the current behaviour failed: re-plan
+
+
+class BehaviorFleet:
+    """The whole decentralised BBMRCA fleet, stepped in simulated time.
+
+    Each robot plans its own path (A*, no schedule, other robots ignored), senses only robots
+    within ``comm_range``, runs the front-area check and the traffic rules, and moves by its
+    behaviour. Beneath the behaviours a hard safety layer refuses any motion that would bring two
+    discs closer than the sum of their radii (plus ``safety_margin`` unless moving apart) or a
+    disc into a wall, so a simulated run never overlaps, whatever the rules decide.
+
+    ``robots``: objects with ``id``, ``radius``, ``max_speed`` and ``start`` (e.g.
+    :class:`~fleet_planner.model.RobotSpec`); they stand on their start until assigned a goal.
+    """
+
+    def __init__(self, grid: GridMap, robots: Sequence, params: BehaviorParams = DEFAULT_PARAMS):
+        from .paths import PathFinder
+
+        self.grid = grid
+        self.params = params
+        self.time = 0.0
+        self._robots: list[_Robot] = []
+        self._index: dict[str, int] = {}
+        golden = (math.sqrt(5) - 1) / 2
+        for k, spec in enumerate(robots):
+            rid = str(spec.id)
+            if rid in self._index:
+                raise ValueError(f"robots[{k}].id: duplicate id {rid!r}")
+            for name in ("radius", "max_speed"):
+                value = getattr(spec, name)
+                if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                    raise ValueError(f"robot {rid!r}: {name} must be a finite number > 0, got {value!r}")
+            start = np.asarray(spec.start, dtype=float)
+            if start.shape != (2,) or not np.all(np.isfinite(start)):
+                raise ValueError(f"robot {rid!r}: start must be a finite (x, y), got {spec.start!r}")
+            if not grid.disc_is_free(*start, spec.radius):
+                raise ValueError(f"robot {rid!r}: start {tuple(start)} is not free for radius {spec.radius}")
+            # robots' clocks are not synchronised: each sends WaitMessages at its own phase
+            tick = params.wait_msg_period * ((k * golden) % 1.0)
+            self._index[rid] = k
+            self._robots.append(_Robot(rid, float(spec.radius), float(spec.max_speed), start, tick))
+        for a in self._robots:
+            for b in self._robots:
+                if a.id < b.id and math.dist(a.pos, b.pos) < a.radius + b.radius:
+                    raise ValueError(f"robots {a.id!r} and {b.id!r}: start discs overlap")
+        self._finders = {r: PathFinder(grid, r) for r in {rb.radius for rb in self._robots}}
+        self._arbiter = DockingArbiter()
+        self._inbox: list[tuple[str, str, WaitMessage]] = []   # (sender, receiver, message)
+        self._deadlocks = self._replans = self._replan_failures = self._refused = 0
+        self._longest_wait = 0.0
+
+    # -- public ---------------------------------------------------------------------------
+    @property
+    def ids(self) -> list[str]:
+        return [r.id for r in self._robots]
+
+    def assign(self, robot_id: str, goal: Point, station: str | None = None) -> None:
+        """Send a robot to ``goal`` (at ``station``, if given, which it docks at one robot at a time).
+
+        The robot plans its own path from where it is, ignoring the other robots (paper 002, II).
+        Raises ValueError for a bad id or goal and PlanningError when no path exists.
+        """
+        r = self._robot(robot_id)
+        g = np.asarray(goal, dtype=float)
+        if g.shape != (2,) or not np.all(np.isfinite(g)):
+            raise ValueError(f"robot {robot_id!r}: goal must be a finite (x, y), got {goal!r}")
+        if not self.grid.disc_is_free(*g, r.radius):
+            raise ValueError(f"robot {robot_id!r}: goal {tuple(g)} is not free for radius {r.radius}")
+        path = self._finders[r.radius].find(tuple(r.pos), tuple(g))
+        if path is None:
+            raise PlanningError({robot_id: f"no path from {tuple(r.pos)} to {tuple(g)}"})
+        if r.station is not None and r.holds is None:
+            self._arbiter.withdraw(r.station, r.id)
+        r.goal, r.station, r.arrived = (float(g[0]), float(g[1])), station, False
+        self._set_path(r, path)
+        self._set(r, B.DOCK if r.holds else B.FOLLOW_WAYPOINT, None)
+
+    def step(self, dt: float) -> None:
+        """Advance every robot by ``dt`` seconds: messages, sensing and rules, then safe motion."""
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+            raise ValueError(f"step: dt must be a finite number > 0, got {dt!r}")
+        near = self._neighbours()
+        self._deliver([self._view(r) for r in self._robots], near)
+        views = [self._view(r) for r in self._robots]
+        for k, r in enumerate(self._robots):
+            self._decide(r, views[k], [views[j] for j in near[k]])
+        self._send_wait_messages()
+        self._move(dt, {v.id: v for v in views}, near)
+        self.time += dt
+        for r in self._robots:
+            if r.wait_since is not None:
+                self._longest_wait = max(self._longest_wait, self.time - r.wait_since)
+
+    def positions(self) -> np.ndarray:
+        """``(n, 2)`` robot positions, in the order of :attr:`ids`."""
+        return np.array([r.pos for r in self._robots])
+
+    def behaviors(self) -> dict[str, Behavior]:
+        return {r.id: r.behavior for r in self._robots}
+
+    def arrived(self, robot_id: str) -> bool:
+        """The robot reached the goal of its last assignment."""
+        return self._robot(robot_id).arrived
+
+    def view(self, robot_id: str) -> RobotView:
+        """What the robot broadcasts about itself."""
+        return self._view(self._robot(robot_id))
+
+    def stats(self) -> FleetStats:
+        p = self.params
+        long_waits = tuple(r.id for r in self._robots
+                           if r.wait_since is not None and self.time - r.wait_since > p.long_wait)
+        return FleetStats(self.time, self._deadlocks, self._replans, self._replan_failures,
+                          self._refused, long_waits, self._longest_wait)
+
+    # -- state --------------------------------------------------------------------------------
+    def _robot(self, robot_id: str) -> _Robot:
+        try:
+            return self._robots[self._index[robot_id]]
+        except KeyError:
+            raise ValueError(f"robot_id: unknown robot {robot_id!r}") from None
+
+    def _view(self, r: _Robot) -> RobotView:
+        nxt, remaining = None, 0.0
+        if r.path is not None:
+            nxt = (float(r.path[r.wp, 0]), float(r.path[r.wp, 1]))
+            remaining = math.dist(r.pos, nxt) + float(r.tail[r.wp])
+        return RobotView(r.id, (float(r.pos[0]), float(r.pos[1])), r.radius, r.behavior, nxt,
+                         remaining, r.station, r.partner)
+
+    def _set_path(self, r: _Robot, path: np.ndarray) -> None:
+        path = np.asarray(path, dtype=float)
+        if len(path) and np.allclose(path[0], r.pos, atol=1e-9):
+            path = path[1:]
+        if not len(path):
+            r.path = r.tail = None
+            r.arrived = True
+            return
+        seg = np.hypot(*np.diff(path, axis=0).T)
+        r.path, r.wp = path, 0
+        r.tail = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])
+        r.blocked_since = None
+
+    def _set(self, r: _Robot, behavior: Behavior, partner: str | None) -> None:
+        if behavior is not r.behavior or partner != r.partner:
+            r.side = 0
+        if behavior is not r.behavior:
+            r.since = self.time
+            if behavior.is_wait and r.wait_since is None:
+                r.wait_since = self.time
+            elif not behavior.is_wait:
+                r.wait_since = None
+        r.behavior, r.partner = behavior, partner
+
+    def _neighbours(self) -> list[list[int]]:
+        """For each robot, the robots within communication range (spatial hashing)."""
+        reach = self.params.comm_range
+        cells: dict[tuple[int, int], list[int]] = {}
+        keys = []
+        for k, r in enumerate(self._robots):
+            key = (int(r.pos[0] // reach), int(r.pos[1] // reach))
+            keys.append(key)
+            cells.setdefault(key, []).append(k)
+        out = []
+        for k, (cx, cy) in enumerate(keys):
+            p = self._robots[k].pos
+            out.append([j for dx in (-1, 0, 1) for dy in (-1, 0, 1) for j in cells.get((cx + dx, cy + dy), ())
+                        if j != k and math.dist(p, self._robots[j].pos) <= reach])
+        return out
+
+    # -- messages -----------------------------------------------------------------------------
+    def _deliver(self, views: list[RobotView], near: list[list[int]]) -> None:
+        """Hand over last step's WaitMessages (only within communication range)."""
+        inbox, self._inbox = self._inbox, []
+        for sender, receiver, msg in inbox:
+            k = self._index.get(receiver)
+            if k is None or math.dist(self._robot(sender).pos, self._robots[k].pos) > self.params.comm_range:
+                continue
+            r = self._robots[k]
+            deadlock, forward = on_wait_message(self._view(r), msg)
+            if deadlock:
+                self._deadlocks += 1
+                self._replan(r, [views[j] for j in near[k]])
+            elif forward is not None:
+                self._inbox.append((r.id, r.partner, forward))
+
+    def _send_wait_messages(self) -> None:
+        period = self.params.wait_msg_period
+        for r in self._robots:
+            if self.time + _EPS >= r.msg_tick:
+                r.msg_tick += period * (1 + math.floor((self.time - r.msg_tick) / period))
+                if r.behavior.is_wait and r.partner is not None:
+                    self._inbox.append((r.id, r.partner, WaitMessage((r.id,))))
+
+    # -- decisions ------------------------------------------------------------------------------
+    def _decide(self, r: _Robot, me: RobotView, sensed: list[RobotView]) -> None:
+        """Sensing and behaviour selection of one robot, from the views of this step."""
+        p = self.params
+        if r.path is None:                      # idle, or parked on its goal (docked if it holds)
+            self._set(r, B.DOCK if r.holds else B.FOLLOW_WAYPOINT, None)
+            return
+        if r.holds is not None:                 # IV.B.5: Dock keeps moving, the others give way
+            self._set(r, B.DOCK, None)
+            return
+        if r.station is not None and self._docking(r):
+            return
+        in_front = robots_in_front(me, sensed, p)
+        front_ids = {o.id for o in in_front}
+        b = r.behavior
+        # completion of the running behaviour (IV.A)
+        if b in (B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH):
+            partner = next((o for o in sensed if o.id == r.partner), None)
+            done = partner is None or partner.id not in front_ids
+            if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.behavior is not B.GO_THROUGH:
+                done = True
+            if done:
+                self._set(r, B.FOLLOW_WAYPOINT, None)
+        # traffic rules (IV.B) against the robot the front area check selects
+        other = front_area_check(me, in_front, p)
+        if other is not None:
+            me = replace(me, behavior=r.behavior, partner=r.partner)
+            new = select_behavior(me, other, in_front, p)
+            if new is not None:
+                self._set(r, new, other.id)
+        # failures (IV.C) -> re-plan with a virtual wall
+        if r.behavior in (B.AVOID, B.EXCHANGE):
+            self._choose_side(r, me, sensed, in_front)
+        if r.behavior is B.GO_THROUGH and self.time - r.since > p.go_through_timeout:
+            r.failed = True
+        if r.behavior is B.FOLLOW_WAYPOINT and in_front:
+            r.blocked_since = None
+        if (r.behavior is B.FOLLOW_WAYPOINT and r.blocked_since is not None
+                and self.time - r.blocked_since > p.blocked_timeout):
+            r.failed = True
+        if r.failed:
+            self._replan(r, sensed)
+
+    def _docking(self, r: _Robot) -> bool:
+        """Station rules (IV.A, IV.B.8); True when they decided the robot's behaviour."""
+        p = self.params
+        dist = math.dist(r.pos, r.goal)
+        if dist <= p.dock_region or (r.behavior is B.WAIT_FOR_DOCKING and dist <= p.dock_give_up):
+            if self._arbiter.request(r.station, r.id, self.time):
+                r.holds = (r.station, np.array(r.goal))
+                self._set(r, B.DOCK, None)
+            else:
+                waiting_for = self._arbiter.holder(r.station) or self._arbiter.first_waiting(r.station)
+                self._set(r, B.WAIT_FOR_DOCKING, waiting_for)
+            return True
+        if r.behavior is B.WAIT_FOR_DOCKING:    # pushed too far from the station: give up waiting
+            self._arbiter.withdraw(r.station, r.id)
+            self._set(r, B.FOLLOW_WAYPOINT, None)
+        return False
+
+    def _frame(self, r: _Robot) -> tuple[np.ndarray, np.ndarray] | None:
+        """(u, n) of the robot's front frame."""
+        if r.path is None:
+            return None
+        d = r.path[r.wp] - r.pos
+        length = math.hypot(*d)
+        if length < _EPS:
+            return None
+        u = d / length
+        return u, np.array([-u[1], u[0]])
+
+    def _sidestep(self, r: _Robot, partner: RobotView, side: int) -> float:
+        """Lateral offset (in my frame) that passes the partner on ``side`` with the margin."""
+        u, n = self._frame(r)
+        l_p = float(np.dot(np.asarray(partner.position) - r.pos, n))
+        clear = r.radius + partner.radius + self.params.avoid_margin
+        return min(0.0, l_p - clear) if side < 0 else max(0.0, l_p + clear)
+
+    def _side_is_free(self, r: _Robot, partner: RobotView, side: int) -> bool:
+        """Free space for the sidestep: the disc fits beside me and beside the partner."""
+        u, n = self._frame(r)
+        lat = self._sidestep(r, partner, side)
+        s_p = max(0.0, float(np.dot(np.asarray(partner.position) - r.pos, u)))
+        return all(self.grid.disc_is_free(*(r.pos + u * s + n * lat), r.radius) for s in (0.0, s_p))
+
+    def _choose_side(self, r: _Robot, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> None:
+        """Avoid / Exchange: pick the side to pass on, or handle the failure (IV.C.2-3)."""
+        partner = next((o for o in sensed if o.id == r.partner), None)
+        if partner is None or self._frame(r) is None:
+            return
+        if r.behavior is B.EXCHANGE:
+            sides = [-1]                       # both pass on their right
+        else:
+            c = front_coords(me, partner)
+            away = -1 if c is None or c[1] >= 0 else 1
+            sides = [r.side] if r.side else []
+            sides += [s for s in (away, -away) if s not in sides]
+        for side in sides:
+            if self._side_is_free(r, partner, side):
+                r.side = side
+                return
+        if r.behavior is B.AVOID:
+            if all(o.id == partner.id for o in in_front):
+                r.failed = True                # IV.C.2: no free space, nobody else around
+            else:
+                self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)
+        elif id_key(r.id) < id_key(partner.id):
+            r.failed = True                    # IV.C.3: the lower id re-plans ...
+        else:
+            self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)  # ... the higher id waits
+
+    def _replan(self, r: _Robot, sensed: Sequence[RobotView]) -> None:
+        """IV.C: a new path to the goal with a virtual wall between the robot and its next waypoint.
+
+        Interpretation: the robots standing in range, and those waiting close by, are kept out of
+        the new path as well where possible (they are what the behaviour failed on); without such a path the wall
+        alone is used, and without any the robot keeps its path.
+        """
+        r.failed = False
+        if r.path is None or r.goal is None:
+            return
+        wall = virtual_wall_cells(self.grid, tuple(r.pos), tuple(r.path[r.wp]), r.goal, r.radius)
+        near = self.params.front_length + 2 * r.radius
+        keep_out = [(o.position, r.radius + o.radius + self.params.safety_margin) for o in sensed
+                    if not o.travelling or (o.behavior.is_wait and math.dist(o.position, r.pos) <= near + o.radius)]
+        finder = self._finders[r.radius]
+        path = finder.find(tuple(r.pos), r.goal, avoid=keep_out, blocked_cells=wall)
+        if path is None and keep_out:
+            path = finder.find(tuple(r.pos), r.goal, blocked_cells=wall)
+        if path is None:
+            self._replan_failures += 1
+            return
+        self._replans += 1
+        self._set_path(r, path)
+        self._set(r, B.FOLLOW_WAYPOINT, None)
+
+    # -- motion ---------------------------------------------------------------------------------
+    def _move(self, dt: float, views: dict[str, RobotView], near: list[list[int]]) -> None:
+        """Move every robot by its behaviour through the safety layer (in index order)."""
+        n = len(self._robots)
+        old = np.array([r.pos for r in self._robots]).reshape(n, 2)
+        new = old.copy()
+        radii = np.array([r.radius for r in self._robots])
+        cell = 2 * float(radii.max(initial=0)) + 2 * max((r.max_speed for r in self._robots), default=0) * dt \
+            + self.params.safety_margin + _EPS
+        grid_of: dict[tuple[int, int], list[int]] = {}
+        for k in range(n):
+            grid_of.setdefault((int(old[k, 0] // cell), int(old[k, 1] // cell)), []).append(k)
+        for k, r in enumerate(self._robots):
+            sensed = [views[self._robots[j].id] for j in near[k]]
+            wanted = False
+            for q, wp in self._candidates(r, dt, views, sensed):
+                wanted = True
+                cx, cy = int(q[0] // cell), int(q[1] // cell)
+                close = [j for dx in (-1, 0, 1) for dy in (-1, 0, 1) for j in grid_of.get((cx + dx, cy + dy), ())]
+                if self._safe(k, q, close, old, new, radii):
+                    new[k] = q
+                    r.pos = q
+                    self._advance(r, wp)
+                    break
+            else:
+                if wanted:
+                    self._refused += 1
+                    if r.behavior is B.FOLLOW_WAYPOINT and r.blocked_since is None:
+                        r.blocked_since = self.time
+                continue
+            if r.behavior is B.FOLLOW_WAYPOINT:
+                r.blocked_since = None
+            if r.holds is not None and math.dist(r.pos, r.holds[1]) > self.params.dock_region:
+                self._arbiter.release(r.holds[0], r.id)   # left the docking region
+                r.holds = None
+                self._set(r, B.FOLLOW_WAYPOINT, None)
+
+    def _safe(self, k: int, q: np.ndarray, close: list[int], old: np.ndarray, new: np.ndarray,
+              radii: np.ndarray) -> bool:
+        """The hard safety layer: the disc at ``q`` stays in free space and at least the sum of
+        radii (plus the safety margin, unless the move increases the distance) from every other
+        robot's position at the start of the step and, for robots moved already, its new one."""
+        r = self._robots[k]
+        if not self.grid.disc_is_free(float(q[0]), float(q[1]), r.radius):
+            return False
+        margin = self.params.safety_margin
+        for j in close:
+            if j == k:
+                continue
+            touch = radii[k] + radii[j]
+            for pj in (old[j], new[j]):
+                d_new = math.dist(q, pj)
+                if d_new < touch or (d_new < touch + margin and d_new < math.dist(old[k], pj)):
+                    return False
+        return True
+
+    def _advance(self, r: _Robot, wp: int) -> None:
+        """Commit the waypoint index after a move; arriving at the goal ends the path."""
+        if r.path is None or wp < 0:
+            return
+        r.wp = wp
+        if wp >= len(r.path):
+            r.path = r.tail = None
+            r.arrived = True
+            self._set(r, B.DOCK if r.holds else B.FOLLOW_WAYPOINT, None)
+
+    def _along_path(self, r: _Robot, distance: float) -> tuple[np.ndarray, int]:
+        """The point ``distance`` further along the path and the index of the next waypoint there."""
+        p, wp = r.pos.copy(), r.wp
+        while distance > _EPS and wp < len(r.path):
+            seg = r.path[wp] - p
+            length = math.hypot(*seg)
+            if length <= distance:
+                p, distance, wp = r.path[wp].copy(), distance - length, wp + 1
+            else:
+                p = p + seg * (distance / length)
+                distance = 0.0
+        return p, wp
+
+    def _candidates(self, r: _Robot, dt: float, views: dict[str, RobotView],
+                    sensed: list[RobotView]) -> list[tuple[np.ndarray, int]]:
+        """Motions the behaviour wants this step, preferred first: ``(new position, next waypoint
+        index after it)``, index -1 when the move leaves the path index unchanged."""
+        if r.path is None:
+            return []
+        step = r.max_speed * dt
+        b = r.behavior
+        partner = views.get(r.partner) if r.partner is not None else None
+        if b in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK) or (b in (B.AVOID, B.EXCHANGE) and partner is None):
+            return [self._along_path(r, step), self._along_path(r, step / 2)]
+        if b in (B.AVOID, B.EXCHANGE):
+            if not r.side:
+                return []
+            u, n = self._frame(r)
+            lat = max(-step, min(step, self._sidestep(r, partner, r.side)))
+            fwd = math.sqrt(max(step * step - lat * lat, 0.0))
+            return [(r.pos + u * fwd + n * lat, -1), (r.pos + n * lat, -1), (r.pos + u * fwd / 2 + n * lat / 2, -1)]
+        if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.direction is not None:
+            # make the intersection free: leave the going-through robot's drive channel sideways
+            du = np.asarray(partner.direction)
+            rel = r.pos - np.asarray(partner.position)
+            lateral = float(rel[0] * -du[1] + rel[1] * du[0])
+            half = partner.radius + self.params.critical_margin / 2 + r.radius
+            if float(np.dot(rel, du)) > 0 and abs(lateral) < half:
+                away = np.array([-du[1], du[0]]) * (1.0 if lateral >= 0 else -1.0)
+                return [(r.pos + away * min(step, half - abs(lateral) + _EPS), -1)]
+        # waits: hold, backing off from a robot closer than the kept gap
+        others = [partner] if b is not B.WAIT_FOR_DOCKING and partner is not None else sensed
+        return self._back_off(r, others, step / 2)
+
+    def _back_off(self, r: _Robot, others: Sequence[RobotView], step: float) -> list[tuple[np.ndarray, int]]:
+        """Move away from the nearest of ``others`` if it is closer than ``keep_gap`` (or hold)."""
+        nearest, gap = None, math.inf
+        for o in others:
+            g = math.dist(r.pos, o.position) - r.radius - o.radius
+            if g < gap:
+                nearest, gap = o, g
+        if nearest is None or gap >= self.params.keep_gap:
+            return []
+        away = r.pos - np.asarray(nearest.position)
+        length = math.hypot(*away)
+        if length < _EPS:
+            return []
+        away /= length
+        dist = min(step, self.params.keep_gap - gap)
+        out = []
+        for angle in (0.0, math.pi / 4, -math.pi / 4):
+            c, s = math.cos(angle), math.sin(angle)
+            out.append((r.pos + dist * np.array([c * away[0] - s * away[1], s * away[0] + c * away[1]]), -1))
+        return out

@@ -1,0 +1,761 @@
+"""PRIOR: decoupled prioritized planning in space-time (van den Berg & Overmars, IROS 2005).
+
+Robots are planned one after another. Each one treats the robots planned before it as moving
+obstacles (each parked on its goal for ever after arriving) and the robots not planned yet as discs
+parked on their starts (the "garage" assumption of the paper). One robot is planned with safe-interval
+path planning (SIPP, Phillips & Likhachev 2011) over the 8-connected grid of cell centres its disc
+fits on (no corner cutting: the swept disc of every move is clear of obstacles). It drives from
+centre to centre at its top speed and may wait wherever it is safe; it only accepts its goal at a
+time from which the goal stays free for ever.
+
+Everything is exact in continuous time: every trajectory is piecewise linear, so
+
+* the times at which a disc standing on a point overlaps a linear piece of another trajectory form
+  one interval (a quadratic in t): the complement gives the point's *safe intervals*;
+* the departure times at which a move overlaps a linear piece of another trajectory form one
+  interval as well (the projection of a convex set, :func:`_bad_departures`): the earliest safe
+  departure jumps from interval end to interval end, no time step involved.
+
+The keep-out distance of a pair is ``r_i + r_j + margin`` (less where the scenario itself puts two
+robots closer, e.g. adjacent starts), so rounding never turns a touch into an overlap. Planned
+pieces live in per-cell buckets, padded so that a query looks at one bucket only. Every planned
+path is re-checked against its neighbours with the plain closest-approach formula before it is
+accepted.
+
+When a robot cannot be planned because its way is blocked by a robot parked on its start (not
+planned yet) or on its goal (planned), it is moved just ahead of that robot and planning resumes
+from there; robots ahead of the changed position keep their paths (they depend only on the robots
+before them and on the set of starts after them).
+"""
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import shapely
+from scipy.sparse import csr_matrix, diags
+from scipy.sparse.csgraph import breadth_first_order, dijkstra
+
+from ..grid import GridMap
+from ..model import Plan, PlanningError, RobotSpec, TimedPath
+from .base import Planner, Progress
+
+ORDERS = ("given", "shortest", "longest")
+
+_INF = math.inf
+_DIRS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))
+#: a search that expands this many states without reaching its goal gives up
+_MAX_EXPANSIONS = 200_000
+#: safe intervals shorter than this are dropped (a robot would have to hit them exactly)
+_MIN_INTERVAL = 1e-9
+
+# a piece of a trajectory: (t_a, t_b, x, y, vx, vy, owner); position at t is (x, y) + v (t - t_a),
+# or (x, y) when v == 0 (then t_a may be -inf and t_b +inf)
+Piece = tuple[float, float, float, float, float, float, int]
+
+
+class PriorPlanner(Planner):
+    """Prioritized planning: SIPP per robot around the robots planned before it.
+
+    ``order``: initial priority - "given" (as listed), "shortest" / "longest" (straight-line distance
+    from start to goal, shortest / longest first). ``time_limit_s``: give up after this long (None:
+    no limit). ``max_wait_s``: how much later than on an empty map a robot may arrive; the search of
+    one robot is bounded by it. ``margin`` (m): added to each pair's sum of radii. ``max_reorders``:
+    how often a blocked robot may be moved ahead of its blocker (default 4 N; 0 keeps the order).
+    """
+
+    name = "prior"
+
+    def __init__(self, order: str = "given", time_limit_s: float | None = None, max_wait_s: float = 300.0,
+                 margin: float = 0.02, max_reorders: int | None = None):
+        if order not in ORDERS:
+            raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
+        if time_limit_s is not None and not time_limit_s > 0:
+            raise ValueError(f"time_limit_s: must be > 0 or None (got {time_limit_s!r})")
+        if not (max_wait_s > 0 and math.isfinite(max_wait_s)):
+            raise ValueError(f"max_wait_s: must be a finite number > 0 (got {max_wait_s!r})")
+        if not (margin >= 0 and math.isfinite(margin)):
+            raise ValueError(f"margin: must be a finite number >= 0 (got {margin!r})")
+        if max_reorders is not None and not max_reorders >= 0:
+            raise ValueError(f"max_reorders: must be >= 0 or None (got {max_reorders!r})")
+        self.order = order
+        self.time_limit_s = time_limit_s
+        self.max_wait_s = float(max_wait_s)
+        self.margin = float(margin)
+        self.max_reorders = max_reorders
+        self._roadmaps: dict[tuple, _Roadmap] = {}
+
+    # ------------------------------------------------------------------------------------------
+    def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
+        t_start = time.perf_counter()
+        robots = list(robots)
+        session = _Session(self, grid, robots, [], 0.0, t_start)
+        paths, order, reorders = session.run(self._initial_order(robots), progress)
+        timed = [TimedPath(r.id, r.radius, _compress(paths[x])) for x, r in enumerate(robots)]
+        return Plan("prior", timed, time.perf_counter() - t_start,
+                    {"order": [robots[x].id for x in order], "reorders": reorders})
+
+    def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
+                         t0: float) -> list[TimedPath]:
+        """Timed paths for ``robots``, each leaving its ``start`` (where it stands at ``t0``) no
+        earlier than ``t0``, around the ``fixed`` trajectories (unchanged; each parked on its last
+        waypoint for ever). Paths start with the waypoint ``(start, t0)``; raises
+        :class:`PlanningError` like :meth:`plan`."""
+        t_start = time.perf_counter()
+        if not math.isfinite(t0):
+            raise ValueError(f"t0: must be finite (got {t0!r})")
+        robots = list(robots)
+        clash = {r.id for r in robots} & {p.robot_id for p in fixed}
+        if clash:
+            raise ValueError(f"fixed: robots {sorted(clash)} are both fixed and to be planned")
+        session = _Session(self, grid, robots, list(fixed), float(t0), t_start)
+        paths, _, _ = session.run(self._initial_order(robots), None)
+        return [TimedPath(r.id, r.radius, _compress(paths[x])) for x, r in enumerate(robots)]
+
+    # ------------------------------------------------------------------------------------------
+    def _initial_order(self, robots: list[RobotSpec]) -> list[int]:
+        idx = list(range(len(robots)))
+        if self.order == "given":
+            return idx
+        dist = [math.dist(r.start, r.goal) for r in robots]
+        return sorted(idx, key=lambda x: dist[x], reverse=self.order == "longest")
+
+    def _roadmap(self, grid: GridMap, radius: float) -> "_Roadmap":
+        """Roadmaps are cached by map content and radius (the delivery benchmark calls us often)."""
+        key = (grid.blocked.shape, grid.resolution, hash(grid.blocked.tobytes()), float(radius))
+        rm = self._roadmaps.get(key)
+        if rm is None:
+            if len(self._roadmaps) > 16:
+                self._roadmaps.clear()
+            rm = self._roadmaps[key] = _build_roadmap(grid, radius)
+        return rm
+
+
+# ---------------------------------------------------------------------------------------------
+# the static part: where a disc of one radius may stand and drive
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class _Roadmap:
+    """Cell centres a disc fits on and the moves between them (cell index = row * width + col)."""
+
+    free: np.ndarray                      # bool [row, col]
+    nbrs: list[list[tuple[int, float]]]   # per cell: (neighbour cell, length in m)
+    graph: csr_matrix                     # the same moves, for Dijkstra / BFS
+
+
+def _build_roadmap(grid: GridMap, radius: float) -> _Roadmap:
+    """Exact on the grid: a move is allowed when no blocked cell (or the outside of the map) comes
+    closer than ``radius`` to the moving centre, tested with one template per move direction."""
+    res, h, w = grid.resolution, grid.height, grid.width
+    rc = radius / res
+    k = int(math.ceil(rc)) + 2
+    padded = np.pad(grid.blocked, k, constant_values=True)
+
+    def clear(geom) -> np.ndarray:
+        ok = np.ones((h, w), dtype=bool)
+        for dc in range(-k, k + 1):
+            for dr in range(-k, k + 1):
+                if shapely.distance(geom, shapely.box(dc, dr, dc + 1, dr + 1)) < rc - 1e-9:
+                    ok &= ~padded[k + dr:k + dr + h, k + dc:k + dc + w]
+        return ok
+
+    free = clear(shapely.Point(0.5, 0.5))
+    src, dst, length = [], [], []
+    for dc, dr in _DIRS:
+        ok = free & clear(shapely.LineString([(0.5, 0.5), (0.5 + dc, 0.5 + dr)]))
+        rows, cols = np.nonzero(ok)
+        src.append(rows * w + cols)
+        dst.append((rows + dr) * w + cols + dc)
+        length.append(np.full(len(rows), math.hypot(dc, dr) * res))
+    src_a, dst_a, len_a = np.concatenate(src), np.concatenate(dst), np.concatenate(length)
+    nbrs: list[list[tuple[int, float]]] = [[] for _ in range(h * w)]
+    for s, d, l in zip(src_a.tolist(), dst_a.tolist(), len_a.tolist()):
+        nbrs[s].append((d, l))
+    graph = csr_matrix((len_a, (src_a, dst_a)), shape=(h * w, h * w))
+    return _Roadmap(free, nbrs, graph)
+
+
+# ---------------------------------------------------------------------------------------------
+# the dynamic part: pieces of planned trajectories, bucketed by cell
+# ---------------------------------------------------------------------------------------------
+class _Space:
+    """Pieces of the trajectories planned so far (and of robots parked on their starts).
+
+    A piece is put in the bucket of every cell whose centre lies within ``pad`` of the piece's
+    bounding box, ``pad`` = its radius + the largest radius + margin + one diagonal cell: then any
+    piece that can come within keep-out distance of a move (or a wait) that starts in a cell is in
+    that cell's bucket, as the whole move stays within one diagonal of the cell's centre.
+    """
+
+    def __init__(self, grid: GridMap, radii: Sequence[float], reach: float):
+        self.res, self.width, self.height = grid.resolution, grid.width, grid.height
+        self.radii = list(radii)
+        self.reach = reach
+        self.buckets: list[list[Piece]] = [[] for _ in range(grid.width * grid.height)]
+        self.where: dict[int, set[int]] = {}
+        self.parked: dict[int, tuple[float, float, float]] = {}  # owner -> (x, y, since) parked for ever
+
+    def add(self, piece: Piece) -> None:
+        ta, tb, x, y, vx, vy, owner = piece
+        if vx == 0.0 and vy == 0.0:
+            x0, x1, y0, y1 = x, x, y, y
+            if tb == _INF:
+                self.parked[owner] = (x, y, ta)
+        else:
+            ex, ey = x + vx * (tb - ta), y + vy * (tb - ta)
+            x0, x1, y0, y1 = min(x, ex), max(x, ex), min(y, ey), max(y, ey)
+        pad = self.radii[owner] + self.reach
+        res = self.res
+        c0 = max(0, math.ceil((x0 - pad) / res - 0.5))
+        c1 = min(self.width - 1, math.floor((x1 + pad) / res - 0.5))
+        r0 = max(0, math.ceil((y0 - pad) / res - 0.5))
+        r1 = min(self.height - 1, math.floor((y1 + pad) / res - 0.5))
+        where = self.where.setdefault(owner, set())
+        for row in range(r0, r1 + 1):
+            base = row * self.width
+            for col in range(c0, c1 + 1):
+                self.buckets[base + col].append(piece)
+                where.add(base + col)
+
+    def remove(self, owner: int) -> None:
+        for b in self.where.pop(owner, ()):
+            self.buckets[b] = [p for p in self.buckets[b] if p[6] != owner]
+        self.parked.pop(owner, None)
+
+    def add_path(self, owner: int, wp: np.ndarray, t_from: float = -_INF) -> None:
+        """A trajectory with the contract's meaning, cut into pieces at most one cell long; pieces
+        that end before ``t_from`` are left out."""
+        for piece in _pieces(wp, owner, self.res):
+            if piece[1] >= t_from:
+                self.add(piece)
+
+
+def _pieces(wp: np.ndarray, owner: int, max_len: float) -> list[Piece]:
+    """The parked head, the segments (long ones cut into pieces) and the parked tail of a path."""
+    wp = np.asarray(wp, dtype=float)
+    out: list[Piece] = [(-_INF, float(wp[0, 2]), float(wp[0, 0]), float(wp[0, 1]), 0.0, 0.0, owner)]
+    for (xa, ya, ta), (xb, yb, tb) in zip(wp[:-1].tolist(), wp[1:].tolist()):
+        if tb <= ta:
+            continue
+        if xa == xb and ya == yb:
+            out.append((ta, tb, xa, ya, 0.0, 0.0, owner))
+            continue
+        vx, vy = (xb - xa) / (tb - ta), (yb - ya) / (tb - ta)
+        n = max(1, math.ceil(math.hypot(xb - xa, yb - ya) / max_len))
+        for k in range(n):
+            t1 = ta + (tb - ta) * k / n
+            t2 = tb if k == n - 1 else ta + (tb - ta) * (k + 1) / n
+            out.append((t1, t2, xa + vx * (t1 - ta), ya + vy * (t1 - ta), vx, vy, owner))
+    out.append((float(wp[-1, 2]), _INF, float(wp[-1, 0]), float(wp[-1, 1]), 0.0, 0.0, owner))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# exact conflict geometry
+# ---------------------------------------------------------------------------------------------
+def _roots(a: float, b: float, c: float, lo: float, hi: float) -> tuple[float, float] | None:
+    """The part of [lo, hi] where a x^2 + b x + c < 0 (a > 0), or None."""
+    disc = b * b - 4.0 * a * c
+    if disc <= 0.0:
+        return None
+    sq = math.sqrt(disc)
+    x1 = (-b - sq) / (2.0 * a)
+    x2 = (-b + sq) / (2.0 * a)
+    if x1 < lo:
+        x1 = lo
+    if x2 > hi:
+        x2 = hi
+    return (x1, x2) if x1 < x2 else None
+
+
+def _unsafe_times(px: float, py: float, piece: Piece, reach: float) -> tuple[float, float] | None:
+    """When a disc standing on (px, py) is closer than ``reach`` to the piece (open interval)."""
+    ta, tb, x, y, vx, vy, _ = piece
+    ex, ey = x - px, y - py
+    if vx == 0.0 and vy == 0.0:
+        return (ta, tb) if ex * ex + ey * ey < reach * reach else None
+    span = _roots(vx * vx + vy * vy, 2.0 * (ex * vx + ey * vy), ex * ex + ey * ey - reach * reach, 0.0, tb - ta)
+    return None if span is None else (ta + span[0], ta + span[1])
+
+
+def _bad_departures(ax: float, ay: float, wx: float, wy: float, d: float, piece: Piece,
+                    reach: float) -> tuple[float, float] | None:
+    """Departure times tau for which the move ``(ax, ay) + w (t - tau)``, t in [tau, tau + d], comes
+    closer than ``reach`` to the piece: one open interval (or None).
+
+    With s = t - tau in [0, d] and u = t - t_a in [0, L] the relative position E + s w - u v is affine
+    in (s, u); the set where its norm is <= reach is convex, so is its intersection with the
+    rectangle, and so is the projection onto tau = t_a + u - s: an interval. Its ends are attained at
+    points where the disc boundary meets the rectangle's edges, or at the disc boundary's own
+    extreme points in the tau direction when they fall inside the rectangle.
+    """
+    ta, tb, x, y, vx, vy, _ = piece
+    ex, ey = ax - x, ay - y
+    r2 = reach * reach
+    aw = wx * wx + wy * wy
+    if vx == 0.0 and vy == 0.0:
+        span = _roots(aw, 2.0 * (ex * wx + ey * wy), ex * ex + ey * ey - r2, 0.0, d)
+        return None if span is None else (ta - span[1], tb - span[0])
+    length = tb - ta
+    av = vx * vx + vy * vy
+    lo, hi = _INF, -_INF
+    for s in (0.0, d):                       # edges s = 0 and s = d: an interval of u
+        fx, fy = ex + s * wx, ey + s * wy
+        span = _roots(av, -2.0 * (fx * vx + fy * vy), fx * fx + fy * fy - r2, 0.0, length)
+        if span is not None:
+            lo, hi = min(lo, span[0] - s), max(hi, span[1] - s)
+    for u in (0.0, length):                  # edges u = 0 and u = L: an interval of s
+        fx, fy = ex - u * vx, ey - u * vy
+        span = _roots(aw, 2.0 * (fx * wx + fy * wy), fx * fx + fy * fy - r2, 0.0, d)
+        if span is not None:
+            lo, hi = min(lo, u - span[1]), max(hi, u - span[0])
+    det = vx * wy - wx * vy                  # of M = [w, -v], (s, u) -> s w - u v
+    if abs(det) > 1e-12 * math.sqrt(aw * av):
+        gx, gy = (vy - wy) / det, (wx - vx) / det    # M^-T (-1, 1): gradient of tau in relative position
+        gn = math.hypot(gx, gy)
+        for sign in (reach / gn, -reach / gn):
+            yx, yy = sign * gx - ex, sign * gy - ey
+            s = (-vy * yx + vx * yy) / det
+            u = (-wy * yx + wx * yy) / det
+            if -1e-12 <= s <= d + 1e-12 and -1e-12 <= u <= length + 1e-12:
+                lo, hi = min(lo, u - s), max(hi, u - s)
+    return (ta + lo, ta + hi) if lo < hi else None
+
+
+def _min_gap(a: Piece, b: Piece, ra: float, rb: float) -> float:
+    """Closest distance minus (ra + rb) of two pieces over their common time (inf if none)."""
+    lo, hi = max(a[0], b[0]), min(a[1], b[1])
+    if lo > hi:
+        return _INF
+    t = lo if math.isfinite(lo) else (hi if math.isfinite(hi) else 0.0)
+
+    def at(p: Piece) -> tuple[float, float]:
+        if p[4] == 0.0 and p[5] == 0.0:
+            return p[2], p[3]
+        return p[2] + p[4] * (t - p[0]), p[3] + p[5] * (t - p[0])
+
+    (xa, ya), (xb, yb) = at(a), at(b)
+    dx, dy = xa - xb, ya - yb
+    vx, vy = a[4] - b[4], a[5] - b[5]
+    vv = vx * vx + vy * vy
+    if vv > 0.0:  # both ends finite: a moving piece is finite
+        s = min(max(-(dx * vx + dy * vy) / vv, 0.0), hi - lo)
+        dx, dy = dx + s * vx, dy + s * vy
+    return math.hypot(dx, dy) - ra - rb
+
+
+# ---------------------------------------------------------------------------------------------
+# one planning call: the robots, the fixed trajectories, the order
+# ---------------------------------------------------------------------------------------------
+class _Fail(Exception):
+    """A robot could not be planned: why, and the robots in its way as (owner, kind) where kind is
+    "start" (not planned yet, parked on its start) or "goal" (planned, parked on its goal)."""
+
+    def __init__(self, reason: str, blockers: Sequence[tuple[int, str]] = (), fatal: bool = False):
+        super().__init__(reason)
+        self.reason = reason
+        self.blockers = list(blockers)
+        self.fatal = fatal
+
+
+class _Session:
+    """Owners 0..n-1 are the robots to plan, n.. the fixed trajectories."""
+
+    def __init__(self, planner: PriorPlanner, grid: GridMap, robots: list[RobotSpec],
+                 fixed: list[TimedPath], t0: float, t_start: float):
+        self.p, self.grid, self.robots, self.fixed, self.t0 = planner, grid, robots, fixed, t0
+        self.deadline = _INF if planner.time_limit_s is None else t_start + planner.time_limit_s
+        self.n = n = len(robots)
+        self.names = [r.id for r in robots] + [f.robot_id for f in fixed]
+        self.radii = np.array([r.radius for r in robots] + [f.radius for f in fixed], dtype=float)
+        # where everyone stands at t0 and parks for ever
+        here = [r.start for r in robots] + [f.position(t0) for f in fixed]
+        last = [r.goal for r in robots] + [tuple(f.waypoints[-1, :2]) for f in fixed]
+        self.here = np.array(here, dtype=float).reshape(-1, 2)
+        self.last = np.array(last, dtype=float).reshape(-1, 2)
+        self._check_input()
+        rmax = float(self.radii.max()) if len(self.radii) else 0.0
+        self.space = _Space(grid, self.radii, rmax + planner.margin + math.sqrt(2) * grid.resolution + 1e-6)
+        for k, f in enumerate(fixed):
+            self.space.add_path(n + k, f.waypoints, t0)
+        for i in range(n):
+            self._add_garage(i)
+
+    # -- input -----------------------------------------------------------------------------
+    def _check_input(self) -> None:
+        ids = [r.id for r in self.robots]
+        dup = {x for x in ids if ids.count(x) > 1}
+        if dup:
+            raise ValueError(f"robots: duplicate id(s) {sorted(dup)}")
+        grid, problems = self.grid, {}
+        for r in self.robots:
+            for what in ("start", "goal"):
+                x, y = getattr(r, what)
+                if not grid.disc_is_free(x, y, r.radius):
+                    problems[r.id] = (f"{what} ({x:.6g}, {y:.6g}) is not in free space for radius "
+                                      f"{r.radius:.6g} (clearance {grid.clearance(x, y):.6g} m)")
+        for i in range(self.n):
+            for what, pts, others in (("start", self.here, "position at t0" if self.fixed else "start"),
+                                      ("goal", self.last, "goal")):
+                dist = np.hypot(*(pts - pts[i]).T) - self.radii - self.radii[i]
+                dist[i] = _INF
+                j = int(np.argmin(dist))
+                if dist[j] < -1e-9:
+                    problems.setdefault(self.robots[i].id, f"its {what} disc overlaps the {others} of "
+                                                           f"robot {self.names[j]!r}")
+        if problems:
+            raise PlanningError(problems)
+
+    def keep_out(self, i: int) -> list[float]:
+        """Keep-out distance from robot i to every owner (-1 for itself): r_i + r_j + margin, the
+        margin shrunk to half the gap where the scenario puts the two closer (start or goal)."""
+        gap = np.minimum(np.hypot(*(self.here - self.here[i]).T), np.hypot(*(self.last - self.last[i]).T))
+        gap -= self.radii + self.radii[i]
+        margin = np.minimum(self.p.margin, np.maximum(gap, 0.0) / 2) - 1e-9
+        out = self.radii + self.radii[i] + margin
+        out[i] = -1.0
+        return out.tolist()
+
+    def _add_garage(self, i: int) -> None:
+        x, y = self.robots[i].start
+        self.space.add((-_INF, _INF, float(x), float(y), 0.0, 0.0, i))
+
+    # -- the priority loop -----------------------------------------------------------------
+    def run(self, order: list[int], progress: Progress | None) -> tuple[dict[int, np.ndarray], list[int], int]:
+        n = self.n
+        limit = 4 * n if self.p.max_reorders is None else self.p.max_reorders
+        paths: dict[int, np.ndarray] = {}
+        tried: set[tuple[int, int]] = set()
+        reorders, pos = 0, 0
+        while pos < n:
+            i = order[pos]
+            try:
+                wp = self._search(i)
+            except _Fail as fail:
+                move = self._reorder(i, fail, order, pos, tried, reorders < limit)
+                if move is None:
+                    why = fail.reason
+                    if fail.blockers and not fail.fatal:
+                        why += f" (re-ordering did not help after {reorders} attempt(s))"
+                    failures = {self.robots[i].id: why}
+                    if fail.fatal:
+                        failures.update({self.robots[x].id: "not planned: the planner stopped early"
+                                         for x in order[pos + 1:]})
+                    raise PlanningError(failures) from None
+                reorders += 1
+                for x in order[move:pos]:
+                    if x in paths:  # planned ones behind the new position are planned again
+                        del paths[x]
+                        self.space.remove(x)
+                        self._add_garage(x)
+                pos = move
+                continue
+            paths[i] = wp
+            self.space.remove(i)
+            self.space.add_path(i, wp)
+            pos += 1
+            if progress:
+                progress(pos, n, self.robots[i].id)
+        return paths, order, reorders
+
+    def _reorder(self, i: int, fail: _Fail, order: list[int], pos: int, tried: set[tuple[int, int]],
+                 allowed: bool) -> int | None:
+        """Move i ahead of a planned blocker, or an unplanned blocker ahead of i; the position
+        from which to plan again, or None."""
+        if fail.fatal or not allowed:
+            return None
+        for j, kind in fail.blockers:
+            if j >= self.n or (i, j) in tried:
+                continue
+            tried.add((i, j))
+            if kind == "start":           # j not planned yet: plan it first, it may leave the way
+                order.remove(j)
+                order.insert(pos, j)
+                return pos
+            q = order.index(j)            # j planned: i goes just ahead of it
+            order.remove(i)
+            order.insert(q, i)
+            return q
+        return None
+
+    # -- one robot -------------------------------------------------------------------------
+    def _search(self, i: int) -> np.ndarray:
+        """SIPP for robot i; uncompressed waypoints (x, y, t) from (start, t0) or raises _Fail."""
+        grid, spec, t0 = self.grid, self.robots[i], self.t0
+        rm = self.p._roadmap(grid, spec.radius)
+        res, width = grid.resolution, grid.width
+        speed, radius = spec.max_speed, spec.radius
+        keep = self.keep_out(i)
+        buckets = self.space.buckets
+        n_cells = grid.width * grid.height
+        start_node, goal_node = n_cells, n_cells + 1
+
+        (sx, sy), (gx, gy) = (float(v) for v in spec.start), (float(v) for v in spec.goal)
+        sc, sr = grid.cell_of(sx, sy)
+        gc, gr = grid.cell_of(gx, gy)
+        cs, cg = sr * width + sc, gr * width + gc
+        for what, (col, row), (x, y) in (("start", (sc, sr), (sx, sy)), ("goal", (gc, gr), (gx, gy))):
+            if not rm.free[row, col]:
+                raise _Fail(f"the centre of the cell of its {what} ({x:.6g}, {y:.6g}) is not free for "
+                            f"radius {radius:.6g}", fatal=True)
+            cx, cy = grid.centre(col, row)
+            line = shapely.LineString([(x, y), (cx, cy)])
+            if (cx, cy) != (x, y) and shapely.distance(grid.obstacle_geometry, line) < radius - 1e-9:
+                raise _Fail(f"cannot drive from its {what} ({x:.6g}, {y:.6g}) to its cell's centre "
+                            f"without touching an obstacle", fatal=True)
+        s_off = math.hypot(sx - (sc + 0.5) * res, sy - (sr + 0.5) * res)
+        g_off = math.hypot(gx - (gc + 0.5) * res, gy - (gr + 0.5) * res)
+        start_node = start_node if s_off > 0 else cs
+        goal_node = goal_node if g_off > 0 else cg
+
+        dist, pred = dijkstra(rm.graph, indices=cg, return_predecessors=True)
+        if not math.isfinite(dist[cs]):
+            raise _Fail(f"no way from start to goal on this map for radius {radius:.6g}", fatal=True)
+        h_start = (s_off + float(dist[cs]) + g_off) / speed
+        bound = t0 + h_start + self.p.max_wait_s
+
+        def pos(node: int) -> tuple[float, float]:
+            if node == start_node and node >= n_cells:
+                return sx, sy
+            if node == goal_node and node >= n_cells:
+                return gx, gy
+            return (node % width + 0.5) * res, (node // width + 0.5) * res
+
+        def cell(node: int) -> int:
+            return cs if node == n_cells else cg if node == n_cells + 1 else node
+
+        def heur(node: int) -> float:
+            if node == goal_node:
+                return 0.0
+            if node >= n_cells:
+                return h_start
+            return (float(dist[node]) + g_off) / speed
+
+        def neighbours(node: int) -> list[tuple[int, float]]:
+            if node >= n_cells:
+                return [(cs, s_off)] if node == start_node else [(cg, g_off)]
+            out = rm.nbrs[node]
+            if node == cg and goal_node != cg:
+                out = out + [(goal_node, g_off)]
+            return out
+
+        cache: dict[int, list[tuple[float, float]]] = {}
+
+        def intervals(node: int) -> list[tuple[float, float]]:
+            iv = cache.get(node)
+            if iv is None:
+                px, py = pos(node)
+                unsafe = []
+                for piece in buckets[cell(node)]:
+                    reach = keep[piece[6]]
+                    if reach > 0:
+                        span = _unsafe_times(px, py, piece, reach)
+                        if span is not None:
+                            unsafe.append(span)
+                iv = cache[node] = _complement(unsafe)
+            return iv
+
+        # the start: standing there at t0 must be safe
+        iv0 = intervals(start_node)
+        j0 = next((k for k, (s, e) in enumerate(iv0) if s <= t0 <= e), None)
+        if j0 is None:
+            who = self._culprits(pos(start_node), cell(start_node), keep, t0)
+            raise _Fail(f"standing on its start at t={t0:.6g} it overlaps {_names(self.names, who)}", fatal=True)
+
+        heap = [(t0 + heur(start_node), -t0, 0, start_node, j0, t0)]
+        best = {(start_node, j0): t0}
+        parent: dict[tuple[int, int], tuple[tuple[int, int], float] | None] = {(start_node, j0): None}
+        counter, expansions = 0, 0
+        d_max = max(math.sqrt(2) * res, s_off, g_off) / speed
+        while heap:
+            f, _, _, u, ju, g = heapq.heappop(heap)
+            if g > best[(u, ju)]:
+                continue
+            iv_u = intervals(u)
+            e_u = iv_u[ju][1]
+            if u == goal_node and e_u == _INF:
+                return self._waypoints(i, (u, ju), parent, best, pos)
+            expansions += 1
+            if expansions % 512 == 0:
+                if time.perf_counter() > self.deadline:
+                    raise _Fail(f"time limit of {self.p.time_limit_s:g} s reached", fatal=True)
+                if expansions >= _MAX_EXPANSIONS:
+                    raise self._diagnose(i, f"search gave up after {expansions} expansions", rm, cs, cg, pred,
+                                         keep, intervals(goal_node), bound)
+            ax, ay = pos(u)
+            horizon = e_u + d_max
+            near = [p for p in buckets[cell(u)] if p[1] > g and p[0] < horizon and keep[p[6]] > 0]
+            for v, length in neighbours(u):
+                d = length / speed
+                hv = heur(v)
+                bx, by = pos(v)
+                wx, wy = (bx - ax) / d, (by - ay) / d
+                for jv, (s_v, e_v) in enumerate(intervals(v)):
+                    if e_v < g + d:
+                        continue
+                    lo = max(g, s_v - d)
+                    if lo > e_u or lo + d + hv > bound:
+                        break
+                    hi = min(e_u, e_v - d)
+                    if lo > hi:
+                        continue
+                    tau = _earliest(near, keep, ax, ay, wx, wy, d, lo, hi)
+                    if tau is None:
+                        continue
+                    arrive = tau + d
+                    key = (v, jv)
+                    if arrive >= best.get(key, _INF):
+                        continue
+                    best[key] = arrive
+                    parent[key] = ((u, ju), tau)
+                    counter += 1
+                    heapq.heappush(heap, (arrive + hv, -arrive, counter, v, jv, arrive))
+        raise self._diagnose(i, f"no collision-free timing within max_wait_s={self.p.max_wait_s:g} s",
+                             rm, cs, cg, pred, keep, intervals(goal_node), bound)
+
+    def _waypoints(self, i: int, key: tuple[int, int], parent: dict, best: dict, pos) -> np.ndarray:
+        """Follow the parents back to the start: arrivals, holds where a departure was later."""
+        chain = []
+        at: tuple[int, int] | None = key
+        while at is not None:
+            link = parent[at]
+            chain.append((at[0], best[at], None if link is None else link[1]))
+            at = None if link is None else link[0]
+        chain.reverse()
+        wp = [(*pos(chain[0][0]), chain[0][1])]
+        for (prev, arrived, _), (node, arrive, tau) in zip(chain[:-1], chain[1:]):
+            if tau > arrived:
+                wp.append((*pos(prev), tau))
+            wp.append((*pos(node), arrive))
+        out = np.array(wp, dtype=float)
+        self._verify(i, out)
+        return out
+
+    def _verify(self, i: int, wp: np.ndarray) -> None:
+        """Re-check a new path against its neighbours with the plain closest-approach formula (a
+        guard against a bug in the search's interval geometry, never expected to fire)."""
+        width = self.grid.width
+        for piece in _pieces(wp, i, self.grid.resolution)[1:]:
+            col, row = self.grid.cell_of(piece[2], piece[3])
+            for other in self.space.buckets[row * width + col]:
+                o = other[6]
+                if o != i and _min_gap(piece, other, self.radii[i], self.radii[o]) < -1e-9:
+                    raise AssertionError(f"prior: the path of {self.names[i]!r} overlaps robot "
+                                         f"{self.names[o]!r}; this is a bug")
+
+    def _culprits(self, p: tuple[float, float], bucket: int, keep: list[float], t: float) -> list[int]:
+        """Owners whose discs a disc on p would overlap at time t."""
+        out = set()
+        for piece in self.space.buckets[bucket]:
+            reach = keep[piece[6]]
+            span = _unsafe_times(p[0], p[1], piece, reach) if reach > 0 else None
+            if span is not None and span[0] <= t <= span[1]:
+                out.add(piece[6])
+        return sorted(out)
+
+    def _diagnose(self, i: int, reason: str, rm: _Roadmap, cs: int, cg: int, pred: np.ndarray,
+                  keep: list[float], goal_iv: list[tuple[float, float]], bound: float) -> _Fail:
+        """Why the search failed: robots parked for ever in the way (on their starts or goals), or
+        a robot crossing the goal later than the search may wait."""
+        grid, width, res = self.grid, self.grid.width, self.grid.resolution
+        cx = (np.arange(width) + 0.5) * res
+        cy = (np.arange(grid.height) + 0.5) * res
+        blocked = np.zeros((grid.height, width), dtype=bool)
+        discs = []
+        for o, (x, y, since) in self.space.parked.items():
+            if keep[o] > 0:
+                discs.append((o, x, y, keep[o], "start" if since == -_INF else "goal"))
+                blocked |= (cx[None, :] - x) ** 2 + (cy[:, None] - y) ** 2 < keep[o] ** 2
+        blocked = blocked.ravel()
+        if not blocked[cs] and not blocked[cg]:
+            keep_cells = diags((~blocked).astype(float))
+            sub = (keep_cells @ rm.graph @ keep_cells).tocsr()
+            if cg in set(breadth_first_order(sub, cs, return_predecessors=False).tolist()):
+                last_start = goal_iv[-1][0]
+                if last_start > bound:
+                    g = self.robots[i].goal
+                    who = self._culprits(g, cg, keep, last_start - 1e-6)
+                    return _Fail(f"its goal is crossed by {_names(self.names, who)} until t={last_start:.6g}, "
+                                 f"later than max_wait_s={self.p.max_wait_s:g} s allows",
+                                 [(o, "goal") for o in who])
+                return _Fail(reason)
+        path, node = [cs], cs
+        while node != cg:
+            node = int(pred[node])
+            path.append(node)
+        blockers: list[tuple[int, str]] = []
+        for node in path:
+            px, py = (node % width + 0.5) * res, (node // width + 0.5) * res
+            for o, x, y, reach, kind in discs:
+                if (px - x) ** 2 + (py - y) ** 2 < reach ** 2 and all(o != b for b, _ in blockers):
+                    blockers.append((o, kind))
+        if not blockers:
+            return _Fail(reason)
+        words = [f"the start of robot {self.names[o]!r} (not planned yet)" if kind == "start" else
+                 f"robot {self.names[o]!r} parked on its goal" for o, kind in blockers]
+        return _Fail("its way is blocked by " + ", ".join(words), blockers)
+
+
+# ---------------------------------------------------------------------------------------------
+# small helpers
+# ---------------------------------------------------------------------------------------------
+def _earliest(near: list[Piece], keep: list[float], ax: float, ay: float, wx: float, wy: float, d: float,
+              lo: float, hi: float) -> float | None:
+    """The earliest departure in [lo, hi] of the move from (ax, ay) at velocity w for d seconds that
+    keeps clear of all pieces, or None: jump to the end of every bad interval containing it."""
+    tau = lo
+    moved = True
+    while moved:
+        moved = False
+        end = tau + d
+        for piece in near:
+            if piece[1] <= tau or piece[0] >= end:
+                continue
+            bad = _bad_departures(ax, ay, wx, wy, d, piece, keep[piece[6]])
+            if bad is not None and bad[0] < tau < bad[1]:
+                tau = bad[1]
+                if tau > hi:
+                    return None
+                end = tau + d
+                moved = True
+    return tau
+
+
+def _complement(unsafe: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Safe intervals [s, e] (closed) between the open unsafe ones, from -inf to +inf."""
+    out = []
+    t = -_INF
+    for a, b in sorted(unsafe):
+        if a > t + _MIN_INTERVAL:
+            out.append((t, a))
+        t = max(t, b)
+    if t < _INF:
+        out.append((t, _INF))
+    return out
+
+
+def _compress(wp: np.ndarray) -> np.ndarray:
+    """Merge consecutive segments driven at the same velocity (straight runs) into one."""
+    out = [wp[0]]
+    for k in range(1, len(wp)):
+        p = wp[k]
+        if len(out) >= 2:
+            a, b = out[-2], out[-1]
+            dt1, dt2 = b[2] - a[2], p[2] - b[2]
+            if dt1 > 0 and dt2 > 0:
+                v1, v2 = (b[:2] - a[:2]) / dt1, (p[:2] - b[:2]) / dt2
+                if np.any(v1 != 0) and np.all(np.abs(v1 - v2) <= 1e-9 * (1 + np.abs(v1))):
+                    out[-1] = p
+                    continue
+        out.append(p)
+    return np.array(out, dtype=float)
+
+
+def _names(names: list[str], owners: Sequence[int]) -> str:
+    if not owners:
+        return "another robot"
+    return ("robot " if len(owners) == 1 else "robots ") + ", ".join(repr(names[o]) for o in owners)

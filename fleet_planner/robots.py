@@ -1,0 +1,321 @@
+"""The robots themselves: the four kinds of paper 001 (sec 2.2) and a simulated robot (no rclpy).
+
+* :class:`RobotKind` - what a kind of robot can do: size, speed, acceleration, capabilities
+  (``manipulator``, ``forklift``), payload, pick/place/lift durations and its battery.
+  :func:`load_kinds` reads them from ``config/robot_kinds.yaml``.
+* :class:`RobotModel` - one simulated robot driving a timed path on a clock: it waits on its start
+  until departure, tracks the path's due position under its speed and acceleration limits (never
+  ahead of schedule; ``lateness_s`` says how far behind), picks and places for set durations,
+  drains its battery and charges at a charger. The agent node and the fleet simulation step it.
+
+The timed-path contract (constant speed between waypoints, see :class:`~fleet_planner.model.TimedPath`)
+assumes instant speed changes, so a robot with finite acceleration lags a little after each
+departure; with infinite acceleration it is exactly on schedule at every step.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import yaml
+
+from .model import ROBOT_KINDS, Point, TimedPath
+from .warehouse import config_path
+
+CAPABILITIES = ("manipulator", "forklift")
+MODES = ("idle", "waiting", "driving", "picking", "placing", "charging", "offline", "error")
+ACTIONS = ("pick", "place")
+
+KINDS_FILE = "robot_kinds.yaml"  # the shipped kinds, found by warehouse.config_path
+
+_EPS = 1e-9
+
+
+class KindsError(ValueError):
+    """A robot kind that cannot be used; the message names the kind and the field."""
+
+
+@dataclass(frozen=True)
+class RobotKind:
+    """One kind of robot. Powers in watts, energy in watt-hours, durations in seconds.
+
+    ``lift_s`` is the time a forklift needs to raise or lower its fork; it is added to every pick
+    and place of a kind with the ``forklift`` capability and must be 0 for the others.
+    ``max_accel`` may be ``inf`` (instant speed changes, the planner's own assumption).
+    """
+
+    name: str
+    radius: float
+    max_speed: float
+    max_accel: float
+    capabilities: frozenset[str]
+    payload_kg: float
+    pick_s: float
+    place_s: float
+    battery_wh: float
+    drain_w_moving: float
+    drain_w_idle: float
+    charge_w: float
+    lift_s: float = 0.0
+
+    _POSITIVE = ("radius", "max_speed", "max_accel", "battery_wh", "charge_w")
+
+    def __post_init__(self) -> None:
+        where = f"kind {self.name!r}"
+        if self.name not in ROBOT_KINDS:
+            raise KindsError(f"{where}: unknown kind (known: {', '.join(ROBOT_KINDS)})")
+        for f in fields(self):
+            if f.name in ("name", "capabilities"):
+                continue
+            value = getattr(self, f.name)
+            positive = f.name in self._POSITIVE
+            ok = (isinstance(value, (int, float)) and not isinstance(value, bool) and not math.isnan(value)
+                  and (math.isfinite(value) or f.name == "max_accel")
+                  and (value > 0 if positive else value >= 0))
+            if not ok:
+                want = "> 0" if positive else ">= 0"
+                raise KindsError(f"{where}: {f.name} must be a finite number {want} (got {value!r})")
+            object.__setattr__(self, f.name, float(value))
+        caps = self.capabilities
+        if not isinstance(caps, (list, tuple, set, frozenset)) or not all(c in CAPABILITIES for c in caps):
+            raise KindsError(f"{where}: capabilities must be a list drawn from "
+                             f"{', '.join(CAPABILITIES)} (got {caps!r})")
+        object.__setattr__(self, "capabilities", frozenset(caps))
+        if self.lift_s and "forklift" not in self.capabilities:
+            raise KindsError(f"{where}: lift_s is only for kinds with the forklift capability")
+
+    def action_s(self, action: str) -> float:
+        """How long a pick or a place takes, fork movement included."""
+        if action not in ACTIONS:
+            raise ValueError(f"unknown action {action!r} (known: {', '.join(ACTIONS)})")
+        return (self.pick_s if action == "pick" else self.place_s) + self.lift_s
+
+
+def load_kinds(path: str | Path | None = None) -> dict[str, RobotKind]:
+    """The robot kinds of a YAML file (a mapping ``kind name -> fields``), by name.
+
+    Without ``path``, the shipped ``config/robot_kinds.yaml``. Every field of :class:`RobotKind`
+    but ``name`` is required, ``lift_s`` exactly for the kinds with the ``forklift`` capability.
+    Errors name the file, the kind and the field.
+    """
+    try:
+        path = Path(path) if path is not None else config_path(KINDS_FILE)
+    except FileNotFoundError as exc:
+        raise KindsError(str(exc)) from exc
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise KindsError(f"{path}: cannot read robot kinds ({exc})") from exc
+    if not isinstance(data, dict) or not data:
+        raise KindsError(f"{path}: expected a mapping of kind names to their fields")
+    known = [f.name for f in fields(RobotKind) if f.name != "name"]
+    kinds = {}
+    for name, spec in data.items():
+        where = f"{path}: kind {name!r}"
+        if not isinstance(spec, dict):
+            raise KindsError(f"{where}: expected a mapping of fields (got {spec!r})")
+        unknown = sorted(set(spec) - set(known))
+        if unknown:
+            raise KindsError(f"{where}: unknown field(s) {', '.join(unknown)} (known: {', '.join(known)})")
+        caps = spec.get("capabilities")
+        forklift = isinstance(caps, list) and "forklift" in caps
+        for field_name in known:
+            if field_name not in spec and (field_name != "lift_s" or forklift):
+                raise KindsError(f"{where}: {field_name} is missing")
+        try:
+            kinds[name] = RobotKind(name=name, **spec)
+        except KindsError as exc:
+            raise KindsError(f"{path}: {exc}") from None
+    return kinds
+
+
+class RobotModel:
+    """A simulated robot: it follows one timed path at a time, acts, and keeps its battery.
+
+    Time ``t`` is on the same clock as the ``t0`` handed to :meth:`follow` (the agent uses ROS
+    time in seconds, the simulation its own). Between calls nothing happens; :meth:`step` moves
+    the state from ``t`` to ``t + dt``.
+
+    Tracking: the robot moves along the path's polyline (it never leaves it) to the due arc
+    length ``s_due(t)``; it may go slower than planned (speed and acceleration limits, and it
+    brakes to stop where the schedule stops), never faster than the schedule, so it is never
+    ahead of its due position. That rule wins over the acceleration limit: on the last step into
+    a stop the robot may brake up to about twice ``max_accel``. ``lateness_s`` is how long ago
+    the schedule passed the robot's position (0 when on time or waiting).
+    """
+
+    def __init__(self, robot_id: str, kind: RobotKind, x: float, y: float, yaw: float = 0.0,
+                 battery: float = 1.0, chargers: Sequence[Point] = ()) -> None:
+        if not 0.0 <= battery <= 1.0:
+            raise ValueError(f"robot {robot_id!r}: battery must be in [0, 1], got {battery!r}")
+        self.id = robot_id
+        self.kind = kind
+        self.x, self.y, self.yaw = float(x), float(y), float(yaw)
+        self.vx = self.vy = 0.0
+        self.speed = 0.0
+        self.battery = float(battery)
+        self.chargers = [tuple(map(float, c)) for c in chargers]
+        self.mode = "idle"
+        self.task_id: str | None = None
+        self.path: TimedPath | None = None
+        self.path_t0 = 0.0
+        self.path_id: int | None = None
+        self.lateness_s = 0.0
+        self._s = 0.0                       # arc length driven along the current path
+        self._S = np.zeros(1)               # arc length at each waypoint
+        self._T = np.zeros(1)               # absolute due time of each waypoint
+        self._stops: np.ndarray = np.zeros((0, 2))  # (arc length, absolute departure) of each halt
+        self._action: tuple[str, float] | None = None  # (pick|place, absolute end time)
+        self._charging = False
+
+    # -- commands ---------------------------------------------------------------------------------
+    def follow(self, path: TimedPath, t0: float, path_id: int | None = None) -> None:
+        """Drive ``path``, whose times count from ``t0``. Ends charging.
+
+        The robot must be within its radius of the path's first waypoint; it is put exactly there
+        (the planner plans from reported positions, so the gap is a rounding of the start).
+        """
+        wp = path.waypoints
+        if not np.all(np.isfinite(wp)):
+            raise ValueError(f"robot {self.id!r}: timed path has non-finite waypoints")
+        if np.any(np.diff(wp[:, 2]) < 0):
+            k = int(np.argmax(np.diff(wp[:, 2]) < 0)) + 1
+            raise ValueError(f"robot {self.id!r}: timed path waypoint {k} is earlier than waypoint {k - 1}")
+        gap = math.hypot(wp[0, 0] - self.x, wp[0, 1] - self.y)
+        if gap > self.kind.radius:
+            raise ValueError(f"robot {self.id!r}: timed path starts {gap:.3f} m from the robot "
+                             f"(more than its radius {self.kind.radius:g} m)")
+        seg = np.hypot(*np.diff(wp[:, :2], axis=0).T)
+        self._S = np.concatenate([[0.0], np.cumsum(seg)])
+        self._T = wp[:, 2] + t0
+        # the schedule halts on the first waypoint until its time, on every hold, and at the end
+        holds = np.nonzero(seg <= _EPS)[0]
+        self._stops = np.vstack([[0.0, self._T[0]],
+                                 np.column_stack([self._S[holds], self._T[holds + 1]]),
+                                 [self._S[-1], math.inf]])
+        self.path, self.path_t0, self.path_id = path, float(t0), path_id
+        self._s = 0.0
+        self.x, self.y = float(wp[0, 0]), float(wp[0, 1])
+        self._charging = False
+
+    def start_action(self, action: str, t: float, duration: float | None = None) -> None:
+        """Begin picking or placing at time ``t`` for ``duration`` s (default: the kind's)."""
+        duration = self.kind.action_s(action) if duration is None else float(duration)
+        if not (math.isfinite(duration) and duration >= 0):
+            raise ValueError(f"robot {self.id!r}: action duration must be >= 0, got {duration!r}")
+        if self.speed > 0 or self._action is not None or self.mode == "error":
+            raise ValueError(f"robot {self.id!r}: cannot {action} while {self.mode}")
+        self._action = (action, t + duration)
+        self._charging = False
+        self.mode = "picking" if action == "pick" else "placing"
+
+    def start_charging(self) -> None:
+        """Charge from now on; the robot must stand still within its radius of a charger."""
+        near = min((math.hypot(cx - self.x, cy - self.y) for cx, cy in self.chargers), default=math.inf)
+        if near > self.kind.radius:
+            raise ValueError(f"robot {self.id!r}: not at a charger (nearest is {near:.3f} m away)")
+        if self.speed > 0 or self._action is not None:
+            raise ValueError(f"robot {self.id!r}: cannot charge while {self.mode}")
+        self._charging = True
+        self.mode = "charging"
+
+    def stop_charging(self) -> None:
+        self._charging = False
+
+    # -- simulation -------------------------------------------------------------------------------
+    @property
+    def busy_until(self) -> float | None:
+        """When the current pick or place ends (None when not acting)."""
+        return self._action[1] if self._action else None
+
+    @property
+    def progress(self) -> float:
+        """Fraction of the current path's length driven (1 when there is none or it has no length)."""
+        total = float(self._S[-1])
+        return 1.0 if total <= 0 else min(1.0, self._s / total)
+
+    def step(self, t: float, dt: float) -> None:
+        """Advance the state from time ``t`` to ``t + dt``."""
+        if not dt > 0:
+            raise ValueError(f"robot {self.id!r}: dt must be > 0, got {dt!r}")
+        end = t + dt
+        moved = 0.0
+        if self._charging:
+            self.battery = min(1.0, self.battery + self.kind.charge_w * dt / 3600.0 / self.kind.battery_wh)
+        elif self._action is not None:
+            if end >= self._action[1]:
+                self._action = None
+        elif self.path is not None and self.battery > 0.0:  # an empty robot stands still
+            moved = self._track(end, dt)
+        self.speed = moved / dt
+        if moved > 0:
+            self.yaw = math.atan2(self.vy, self.vx)
+        else:
+            self.vx = self.vy = 0.0
+        if not self._charging:
+            working = moved > 0 or self._action is not None
+            watts = self.kind.drain_w_moving if working else self.kind.drain_w_idle
+            self.battery = max(0.0, self.battery - watts * dt / 3600.0 / self.kind.battery_wh)
+            self.mode = self._mode_now(moved)
+        if self.path is not None:
+            self.lateness_s = self._lateness(end)
+
+    def _track(self, end: float, dt: float) -> float:
+        """Move along the path towards its due position at ``end``; returns the distance driven."""
+        s = self._s
+        s_due = float(np.interp(end, self._T, self._S))
+        v = min(max(0.0, (s_due - s) / dt), self.kind.max_speed * (1 + _EPS))
+        a = self.kind.max_accel
+        if math.isfinite(a):
+            v = min(v, self.speed + a * dt)
+            # brake for the next place where the schedule halts beyond now
+            ahead = self._stops[(self._stops[:, 0] >= s - _EPS) & (self._stops[:, 1] > end)]
+            if len(ahead):
+                gap = max(0.0, float(ahead[:, 0].min()) - s)
+                v = min(v, math.sqrt(2 * a * gap), gap / dt)
+        s_new = min(s + v * dt, s_due, float(self._S[-1]))
+        if s_new <= s:
+            return 0.0
+        x, y = self._point_at(s_new)
+        self.vx, self.vy = (x - self.x) / dt, (y - self.y) / dt
+        self.x, self.y, self._s = x, y, s_new
+        return s_new - s
+
+    def _point_at(self, s: float) -> Point:
+        S, wp = self._S, self.path.waypoints
+        if s >= S[-1]:
+            return float(wp[-1, 0]), float(wp[-1, 1])
+        k = int(np.searchsorted(S, s, side="right")) - 1  # S[k] <= s < S[k + 1]: a real segment
+        p = wp[k, :2] + (s - S[k]) / (S[k + 1] - S[k]) * (wp[k + 1, :2] - wp[k, :2])
+        return float(p[0]), float(p[1])
+
+    def _lateness(self, now: float) -> float:
+        """``now`` minus the last time the schedule was still at or behind the robot's position."""
+        S, T = self._S, self._T
+        k = int(np.searchsorted(S, self._s + _EPS, side="right")) - 1
+        if k >= len(S) - 1:
+            return 0.0
+        due = T[k] + (self._s - S[k]) / (S[k + 1] - S[k]) * (T[k + 1] - T[k])
+        late = now - float(due)
+        return late if late > _EPS else 0.0
+
+    def _mode_now(self, moved: float) -> str:
+        if self.battery <= 0.0:
+            return "error"
+        if self._action is not None:
+            return "picking" if self._action[0] == "pick" else "placing"
+        if moved > 0:
+            return "driving"
+        if self.path is not None and self._s < self._S[-1] - _EPS:
+            return "waiting"
+        return "idle"
+
+    def status(self, stamp: float) -> dict[str, Any]:
+        """The robot's state as the fields of :class:`msg_schemas.records.RobotStatus`."""
+        return {"id": self.id, "kind": self.kind.name, "x": self.x, "y": self.y, "yaw": self.yaw,
+                "vx": self.vx, "vy": self.vy, "battery": self.battery, "mode": self.mode,
+                "progress": self.progress, "stamp": float(stamp), "radius": self.kind.radius,
+                "task_id": self.task_id, "path_id": self.path_id, "lateness_s": self.lateness_s}

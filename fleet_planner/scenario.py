@@ -1,0 +1,341 @@
+"""The scenario file (YAML) and the plan file (JSON) of ARCHITECTURE.md, read strictly.
+
+Everything a user can get wrong in a scenario is reported as a :class:`ScenarioError` whose message
+starts with the path of the offending field (``robots[3].radius: ...``), says why and shows the
+value it got. Unknown keys are errors, not silently ignored, so a typo cannot go unnoticed.
+Benchmarks build scenarios from MovingAI ``.map``/``.scen`` pairs with
+:func:`scenario_from_movingai` and save them with :func:`dump_scenario`.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import yaml
+
+from .grid import GridMap, MapError, load_scen
+from .model import ROBOT_KINDS, Plan, RobotSpec, TimedPath
+
+MAP_KEYS = ("file", "rows", "resolution")
+ROBOT_KEYS = ("id", "kind", "radius", "max_speed", "start", "goal")
+ROBOT_REQUIRED = ("id", "radius", "max_speed", "start", "goal")
+PLAN_KEYS = ("planner", "planning_time_s", "robots", "info")
+PLAN_ROBOT_KEYS = ("id", "radius", "waypoints")
+
+
+class ScenarioError(ValueError):
+    """A scenario or plan file that cannot be used; the message starts with the field path."""
+
+
+@dataclass
+class Scenario:
+    """A map and the robots to plan for. ``map_file`` is set when the map came from a ``.map`` file."""
+
+    grid: GridMap
+    robots: list[RobotSpec]
+    source: Path | None = None
+    map_file: Path | None = None
+
+
+# ---------------------------------------------------------------------------------------------
+# scenario: reading and validating
+# ---------------------------------------------------------------------------------------------
+class _StrictLoader(yaml.SafeLoader):
+    """A safe YAML loader that refuses duplicate keys instead of keeping the last one."""
+
+
+def _no_duplicates(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
+    seen = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise ScenarioError(f"line {key_node.start_mark.line + 1}: duplicate key {key!r}")
+        seen.add(key)
+    return loader.construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _no_duplicates)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file (a relative ``map.file`` is relative to it)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: cannot read scenario file ({exc})") from exc
+    try:
+        data = yaml.load(text, Loader=_StrictLoader)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{path}: {exc}") from None
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"{path}: not valid YAML ({exc})") from exc
+    scenario = parse_scenario(data, path.parent)
+    scenario.source = path
+    return scenario
+
+
+def _keys(data: Any, where: str, allowed: Sequence[str], required: Sequence[str]) -> dict:
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{where or 'scenario'}: must be a mapping (got {type(data).__name__})")
+    prefix = f"{where}." if where else ""
+    for key in data:
+        if key not in allowed:
+            raise ScenarioError(f"{prefix}{key}: unknown key (allowed: {', '.join(allowed)})")
+    for key in required:
+        if key not in data:
+            raise ScenarioError(f"{prefix}{key}: missing (required: {', '.join(required)})")
+    return data
+
+
+def _positive(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ScenarioError(f"{where}: must be a finite number > 0 (got {value!r})")
+    return float(value)
+
+
+def _point(value: Any, where: str) -> tuple[float, float]:
+    if (not isinstance(value, (list, tuple)) or len(value) != 2
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in value)):
+        raise ScenarioError(f"{where}: must be a list of 2 finite numbers [x, y] (got {value!r})")
+    return float(value[0]), float(value[1])
+
+
+def _parse_map(data: Any, base_dir: Path) -> tuple[GridMap, Path | None]:
+    m = _keys(data, "map", MAP_KEYS, ())
+    resolution = _positive(m.get("resolution", 1.0), "map.resolution")
+    if ("file" in m) == ("rows" in m):
+        raise ScenarioError("map: needs exactly one of 'file' (a MovingAI .map) or 'rows' (inline rows)")
+    if "file" in m:
+        if not isinstance(m["file"], str) or not m["file"]:
+            raise ScenarioError(f"map.file: must be a non-empty path string (got {m['file']!r})")
+        map_file = (base_dir / m["file"]).resolve()
+        try:
+            return GridMap.from_movingai(map_file, resolution), map_file
+        except MapError as exc:
+            raise ScenarioError(f"map.file: {exc}") from None
+    rows = m["rows"]
+    if not isinstance(rows, list) or not rows:
+        raise ScenarioError(f"map.rows: must be a non-empty list of strings (got {rows!r})")
+    for i, row in enumerate(rows):
+        if not isinstance(row, str) or not row:
+            raise ScenarioError(f"map.rows[{i}]: must be a non-empty string (got {row!r})")
+        if len(row) != len(rows[0]):
+            raise ScenarioError(f"map.rows[{i}]: has {len(row)} cells, map.rows[0] has {len(rows[0])}")
+    return GridMap.from_rows(rows, resolution, "inline"), None
+
+
+def _parse_robot(data: Any, where: str, grid: GridMap) -> RobotSpec:
+    r = _keys(data, where, ROBOT_KEYS, ROBOT_REQUIRED)
+    rid = r["id"]
+    if not isinstance(rid, str) or not rid.strip():
+        raise ScenarioError(f"{where}.id: must be a non-empty string (got {rid!r}; quote numbers)")
+    kind = r.get("kind", "cargo")
+    if kind not in ROBOT_KINDS:
+        raise ScenarioError(f"{where}.kind: must be one of {', '.join(ROBOT_KINDS)} (got {kind!r})")
+    radius = _positive(r["radius"], f"{where}.radius")
+    max_speed = _positive(r["max_speed"], f"{where}.max_speed")
+    ends = {}
+    w, h = grid.size_m
+    for name in ("start", "goal"):
+        x, y = _point(r[name], f"{where}.{name}")
+        if not (0 <= x <= w and 0 <= y <= h):
+            raise ScenarioError(f"{where}.{name}: ({x:g}, {y:g}) is outside the {w:g} m x {h:g} m map")
+        clearance = grid.clearance(x, y)
+        if clearance < radius - 1e-9:
+            raise ScenarioError(f"{where}.{name}: a disc of radius {radius:g} m at ({x:g}, {y:g}) is not in "
+                                f"free space (clearance {clearance:.3f} m)")
+        ends[name] = (x, y)
+    return RobotSpec(rid, radius, max_speed, ends["start"], ends["goal"], kind)
+
+
+def _check_disjoint(robots: list[RobotSpec], name: str) -> None:
+    """Two start discs (or two goal discs) that overlap make every plan invalid: say so up front."""
+    if len(robots) < 2:
+        return
+    pts = np.array([getattr(r, name) for r in robots])
+    rad = np.array([r.radius for r in robots])
+    order = np.argsort(pts[:, 0])
+    reach = 2 * rad.max()
+    for n, i in enumerate(order):
+        for j in order[n + 1:]:
+            if pts[j, 0] - pts[i, 0] >= reach:
+                break
+            d = float(np.hypot(*(pts[i] - pts[j])))
+            if d < rad[i] + rad[j] - 1e-9:
+                a, b = sorted((int(i), int(j)))
+                raise ScenarioError(f"robots[{b}].{name}: disc overlaps the {name} disc of robots[{a}] "
+                                    f"({robots[a].id!r}): centres {d:.3f} m apart < {rad[a] + rad[b]:g} m")
+
+
+def parse_scenario(data: Any, base_dir: Path) -> Scenario:
+    """Validate a scenario already parsed from YAML (``base_dir`` resolves a relative map file)."""
+    top = _keys(data, "", ("map", "robots"), ("map", "robots"))
+    grid, map_file = _parse_map(top["map"], Path(base_dir))
+    if not isinstance(top["robots"], list) or not top["robots"]:
+        raise ScenarioError(f"robots: must be a non-empty list of robots (got {top['robots']!r})")
+    robots: list[RobotSpec] = []
+    first_index: dict[str, int] = {}
+    for i, item in enumerate(top["robots"]):
+        spec = _parse_robot(item, f"robots[{i}]", grid)
+        if spec.id in first_index:
+            raise ScenarioError(f"robots[{i}].id: duplicate id {spec.id!r} (also robots[{first_index[spec.id]}])")
+        first_index[spec.id] = i
+        robots.append(spec)
+    _check_disjoint(robots, "start")
+    _check_disjoint(robots, "goal")
+    return Scenario(grid, robots, None, map_file)
+
+
+# ---------------------------------------------------------------------------------------------
+# scenario: writing and generating
+# ---------------------------------------------------------------------------------------------
+def _yaml_scalar(value: Any) -> str:
+    # JSON strings and Python float reprs are valid YAML flow scalars and read back exactly
+    return json.dumps(value) if isinstance(value, str) else repr(float(value))
+
+
+def dump_scenario(scenario: Scenario, path: str | Path) -> None:
+    """Write a scenario YAML that :func:`load_scenario` reads back to the same map and robots.
+
+    The map is referenced by file (relative to ``path``) when it came from one, else written inline.
+    """
+    path = Path(path)
+    lines = ["map:"]
+    if scenario.map_file is not None:
+        rel = os.path.relpath(Path(scenario.map_file).resolve(), path.resolve().parent)
+        lines.append(f"  file: {json.dumps(rel)}")
+    else:
+        lines.append("  rows:")
+        lines.extend(f"    - \"{''.join('@' if b else '.' for b in row)}\"" for row in scenario.grid.blocked)
+    lines.append(f"  resolution: {_yaml_scalar(scenario.grid.resolution)}")
+    lines.append("robots:")
+    for r in scenario.robots:
+        fields = [f"id: {_yaml_scalar(r.id)}", f"kind: {r.kind}", f"radius: {_yaml_scalar(r.radius)}",
+                  f"max_speed: {_yaml_scalar(r.max_speed)}",
+                  f"start: [{_yaml_scalar(r.start[0])}, {_yaml_scalar(r.start[1])}]",
+                  f"goal: [{_yaml_scalar(r.goal[0])}, {_yaml_scalar(r.goal[1])}]"]
+        lines.append("  - {" + ", ".join(fields) + "}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def scenario_from_movingai(map_path: str | Path, scen_path: str | Path, n: int, seed: int,
+                           radius: tuple[float, float] = (0.35, 0.45), speed: tuple[float, float] = (0.7, 1.0),
+                           resolution: float = 1.0, kinds: Sequence[str] = ("cargo",)) -> Scenario:
+    """The first ``n`` usable entries of a MovingAI ``.scen`` file as robots, for benchmarks.
+
+    Each entry gets a radius and a top speed drawn uniformly from the given ranges and a kind drawn
+    from ``kinds`` (seeded, so the same arguments give the same scenario). An entry is skipped when
+    its start or goal disc does not fit in free space at the cell centre, or overlaps the start
+    (goal) disc of a robot already taken. Raises :class:`ScenarioError` when fewer than n remain.
+    """
+    if n < 1:
+        raise ScenarioError(f"n: must be >= 1 (got {n})")
+    for k in kinds:
+        if k not in ROBOT_KINDS:
+            raise ScenarioError(f"kinds: {k!r} is not one of {', '.join(ROBOT_KINDS)}")
+    try:
+        grid = GridMap.from_movingai(map_path, resolution)
+        entries = load_scen(scen_path)
+    except MapError as exc:
+        raise ScenarioError(str(exc)) from None
+    rng = np.random.default_rng(seed)
+    robots: list[RobotSpec] = []
+    taken = {"start": [], "goal": []}  # (x, y, r) of accepted discs
+    for (s_cell, g_cell) in entries:
+        r = float(rng.uniform(*radius))
+        v = float(rng.uniform(*speed))
+        kind = str(kinds[int(rng.integers(len(kinds)))])
+        ends = {}
+        for name, cell in (("start", s_cell), ("goal", g_cell)):
+            if not grid.is_free_cell(*cell):
+                break
+            x, y = grid.centre(*cell)
+            if not grid.disc_is_free(x, y, r) or any(math.hypot(x - ox, y - oy) < r + orad - 1e-9
+                                                      for ox, oy, orad in taken[name]):
+                break
+            ends[name] = (x, y)
+        else:
+            for name, (x, y) in ends.items():
+                taken[name].append((x, y, r))
+            robots.append(RobotSpec(f"r{len(robots)}", r, v, ends["start"], ends["goal"], kind))
+            if len(robots) == n:
+                return Scenario(grid, robots, None, Path(map_path).resolve())
+    raise ScenarioError(f"{scen_path}: only {len(robots)} usable entries, {n} asked for")
+
+
+# ---------------------------------------------------------------------------------------------
+# plan file
+# ---------------------------------------------------------------------------------------------
+def _jsonable(value: Any) -> Any:
+    """numpy scalars and arrays (as planners put them in ``Plan.info``) as plain JSON values."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"plan info: {type(value).__name__} is not JSON serialisable")
+
+
+def plan_to_dict(plan: Plan) -> dict[str, Any]:
+    """The plan-file JSON object (``info`` only when the plan has any)."""
+    out: dict[str, Any] = {"planner": plan.planner, "planning_time_s": float(plan.planning_time_s),
+                           "robots": [p.to_dict() for p in plan.paths]}
+    if plan.info:
+        out["info"] = json.loads(json.dumps(plan.info, default=_jsonable))
+    return out
+
+
+def write_plan(plan: Plan, path: str | Path) -> None:
+    Path(path).write_text(json.dumps(plan_to_dict(plan), indent=1, default=_jsonable) + "\n")
+
+
+def plan_from_dict(data: Any) -> Plan:
+    """Validate a plan-file JSON object; errors name the field (``robots[2].waypoints[5]: ...``)."""
+    top = _keys(data, "", PLAN_KEYS, ("planner", "planning_time_s", "robots"))
+    if not isinstance(top["planner"], str):
+        raise ScenarioError(f"planner: must be a string (got {top['planner']!r})")
+    t_plan = top["planning_time_s"]
+    if isinstance(t_plan, bool) or not isinstance(t_plan, (int, float)) or not math.isfinite(t_plan) or t_plan < 0:
+        raise ScenarioError(f"planning_time_s: must be a finite number >= 0 (got {t_plan!r})")
+    info = top.get("info", {})
+    if not isinstance(info, dict):
+        raise ScenarioError(f"info: must be a mapping (got {type(info).__name__})")
+    if not isinstance(top["robots"], list):
+        raise ScenarioError(f"robots: must be a list (got {type(top['robots']).__name__})")
+    paths = []
+    for i, item in enumerate(top["robots"]):
+        where = f"robots[{i}]"
+        r = _keys(item, where, PLAN_ROBOT_KEYS, PLAN_ROBOT_KEYS)
+        if not isinstance(r["id"], str) or not r["id"]:
+            raise ScenarioError(f"{where}.id: must be a non-empty string (got {r['id']!r})")
+        radius = _positive(r["radius"], f"{where}.radius")
+        wps = r["waypoints"]
+        if not isinstance(wps, list) or not wps:
+            raise ScenarioError(f"{where}.waypoints: must be a non-empty list of [x, y, t] (got {wps!r})")
+        for k, wp in enumerate(wps):
+            if (not isinstance(wp, list) or len(wp) != 3
+                    or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in wp)):
+                raise ScenarioError(f"{where}.waypoints[{k}]: must be [x, y, t] of finite numbers (got {wp!r})")
+        paths.append(TimedPath(r["id"], radius, np.array(wps, dtype=float)))
+    return Plan(top["planner"], paths, float(t_plan), info)
+
+
+def read_plan(path: str | Path) -> Plan:
+    """Read a plan JSON file (structure only: whether the plan is valid is :func:`check_plan`'s job)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: cannot read plan file ({exc})") from exc
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid JSON ({exc})") from exc
+    return plan_from_dict(data)
+
+
+__all__ = ["Scenario", "ScenarioError", "dump_scenario", "load_scenario", "parse_scenario", "plan_from_dict",
+           "plan_to_dict", "read_plan", "scenario_from_movingai", "write_plan"]

@@ -1,0 +1,268 @@
+"""PathFinder: valid polylines for a disc robot, checked against geometry built independently here."""
+import math
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import LineString, Point, box
+
+from fleet_planner.grid import GridMap
+from fleet_planner.model import polyline_length
+from fleet_planner.paths import PathFinder
+
+
+def walls_of(grid: GridMap):
+    """Blocked cells and everything outside the map, built cell by cell (not grid.obstacle_geometry)."""
+    res = grid.resolution
+    rows, cols = np.nonzero(grid.blocked)
+    w, h = grid.width * res, grid.height * res
+    outside = box(-10, -10, w + 10, h + 10).difference(box(0, 0, w, h))
+    return shapely.union_all([box(c * res, r * res, (c + 1) * res, (r + 1) * res)
+                              for r, c in zip(rows, cols)] + [outside])
+
+
+def assert_valid(path, grid, radius, start, goal, avoid=()):
+    assert path is not None
+    assert path.shape[1] == 2 and len(path) >= 2
+    assert tuple(path[0]) == tuple(start) and tuple(path[-1]) == tuple(goal)
+    walls = walls_of(grid)
+    for a, b in zip(path[:-1], path[1:]):
+        seg = LineString([a, b]) if tuple(a) != tuple(b) else Point(a)
+        assert seg.distance(walls) >= radius - 1e-7, f"segment {a}->{b} too close to a wall"
+        for centre, keep_out in avoid:
+            assert seg.distance(Point(centre)) > keep_out - 1e-9, f"segment {a}->{b} enters disc {centre}"
+
+
+def random_map(rng, h, w, density):
+    blocked = rng.random((h, w)) < density
+    return GridMap(blocked)
+
+
+def random_free_point(rng, grid, radius):
+    while True:
+        x, y = rng.uniform(0, grid.width), rng.uniform(0, grid.height)
+        if grid.disc_is_free(x, y, radius):
+            return (x, y)
+
+
+def test_open_map_is_one_straight_segment_from_exact_start_to_exact_goal():
+    grid = GridMap.from_rows(["." * 10] * 6)
+    start, goal = (0.73, 0.61), (9.2, 5.37)
+    path = PathFinder(grid, 0.4).find(start, goal)
+    assert_valid(path, grid, 0.4, start, goal)
+    assert len(path) == 2
+
+
+def test_smoothing_pulls_the_staircase_tight_around_a_wall_end():
+    rows = ["..........",
+            "..........",
+            "@@@@@@@...",
+            "..........",
+            ".........."]
+    grid = GridMap.from_rows(rows)
+    start, goal = (0.5, 0.5), (0.5, 4.5)
+    path = PathFinder(grid, 0.4).find(start, goal)
+    assert_valid(path, grid, 0.4, start, goal)
+    # the best 8-connected grid path (no corner cutting) is 2 * (sqrt(2) + 6) + 2 long; pulled
+    # tight through cell centres it is start -> (7.5, 1.5) -> (7.5, 3.5) -> goal
+    grid_length = 2 * (math.sqrt(2) + 6) + 2
+    pulled = 2 * math.hypot(7.0, 1.0) + 2
+    assert len(path) <= 4
+    assert polyline_length(path) <= pulled + 1e-9 < grid_length
+
+
+def test_paths_on_random_maps_keep_the_disc_off_walls():
+    rng = np.random.default_rng(7)
+    for radius in (0.3, 0.45, 0.7):
+        for _ in range(4):
+            grid = random_map(rng, 14, 18, 0.18)
+            finder = PathFinder(grid, radius)
+            found = 0
+            for _ in range(6):
+                start, goal = random_free_point(rng, grid, radius), random_free_point(rng, grid, radius)
+                path = finder.find(start, goal)
+                if path is not None:
+                    found += 1
+                    assert_valid(path, grid, radius, start, goal)
+            assert found or radius == 0.7
+
+
+def test_off_centre_start_and_goal_join_a_neighbour_cell_when_their_own_is_too_tight():
+    # radius 0.6: the centres of the edge columns are 0.5 from the map edge, the points are 0.95
+    grid = GridMap.from_rows([".......",
+                              ".......",
+                              ".......",
+                              "...@...",
+                              ".......",
+                              ".......",
+                              "......."])
+    start, goal = (0.95, 3.5), (6.05, 3.5)
+    path = PathFinder(grid, 0.6).find(start, goal)
+    assert_valid(path, grid, 0.6, start, goal)
+
+
+def test_walled_off_goal_gives_none():
+    rows = ["......",
+            "...@@@",
+            "...@..",
+            "...@.."]
+    finder = PathFinder(GridMap.from_rows(rows), 0.4)
+    assert finder.find((0.5, 0.5), (4.5, 3.5)) is None
+    assert finder.find((0.5, 0.5), (5.5, 0.5)) is not None
+
+
+@pytest.mark.parametrize("res", [1.0, 0.5])
+def test_one_cell_aisle_admits_half_a_cell_but_not_more(res):
+    rows = ["@@@@@@",
+            "......",
+            "@@@@@@"]
+    grid = GridMap.from_rows(rows, resolution=res)
+    start, goal = (0.5 * res, 1.5 * res), (5.5 * res, 1.5 * res)
+    for frac in (0.45, 0.5):
+        path = PathFinder(grid, frac * res).find(start, goal)
+        assert_valid(path, grid, frac * res, start, goal)
+    assert PathFinder(grid, 0.55 * res).find(start, goal) is None
+
+
+def test_one_cell_aisle_with_a_turn():
+    rows = ["@@@@@@",
+            "....@@",
+            "@@@.@@",
+            "@@@...",
+            "@@@@@@"]
+    grid = GridMap.from_rows(rows)
+    start, goal = (0.5, 1.5), (5.5, 3.5)
+    path = PathFinder(grid, 0.5).find(start, goal)
+    assert_valid(path, grid, 0.5, start, goal)
+    assert PathFinder(grid, 0.55).find(start, goal) is None
+
+
+def test_avoid_discs_are_respected_and_forced_around():
+    grid = GridMap.from_rows(["." * 12] * 7)
+    start, goal = (0.5, 3.5), (11.5, 3.5)
+    avoid = [((6.0, 3.5), 1.2), ((3.0, 1.0), 0.8), ((9.0, 5.5), 0.9)]
+    path = PathFinder(grid, 0.4).find(start, goal, avoid=avoid)
+    assert_valid(path, grid, 0.4, start, goal, avoid)
+    assert polyline_length(path) > 11.0 + 0.1  # had to leave the straight line
+
+
+@pytest.mark.parametrize("radius", [0.4, 0.6])
+def test_avoid_discs_and_blocked_cells_on_random_maps(radius):
+    rng = np.random.default_rng(3)
+    found = 0
+    for _ in range(6):
+        grid = random_map(rng, 14, 18, 0.1)
+        finder = PathFinder(grid, radius)
+        for _ in range(5):
+            start, goal = random_free_point(rng, grid, radius), random_free_point(rng, grid, radius)
+            avoid = [(random_free_point(rng, grid, 0.0), float(rng.uniform(0.3, 1.0))) for _ in range(5)]
+            kept = [(c, k) for c, k in avoid
+                    if math.dist(c, start) > k and math.dist(c, goal) > k]
+            virtual = {(int(c), int(r)) for c, r in rng.integers(0, (18, 14), size=(4, 2))}
+            virtual -= {grid.cell_of(*start), grid.cell_of(*goal)}
+            path = finder.find(start, goal, avoid=avoid, blocked_cells=virtual)
+            if path is not None:
+                found += 1
+                walled = grid.blocked.copy()
+                for col, row in virtual:
+                    walled[row, col] = True
+                assert_valid(path, GridMap(walled), radius, start, goal, kept)
+    assert found >= 5
+
+
+def test_discs_in_a_serpentine_aisle():
+    # the path cannot be pulled straight here, so it keeps the grid moves: they must avoid the discs
+    grid = GridMap.from_rows([".........",
+                              "@@@@@@@@.",
+                              ".........",
+                              ".@@@@@@@@",
+                              "........."])
+    finder = PathFinder(grid, 0.45)
+    start, goal = (0.5, 0.5), (8.5, 4.5)
+    rng = np.random.default_rng(11)
+    outcomes = set()
+    for _ in range(60):
+        centre, keep_out = (float(rng.uniform(0, 9)), float(rng.uniform(0, 5))), float(rng.uniform(0.05, 0.7))
+        if math.dist(centre, start) <= keep_out or math.dist(centre, goal) <= keep_out:
+            continue
+        avoid = [(centre, keep_out)]
+        path = finder.find(start, goal, avoid=avoid)
+        outcomes.add(path is None)
+        if path is not None:
+            assert_valid(path, grid, 0.45, start, goal, avoid)
+    assert outcomes == {True, False}
+
+
+def test_disc_between_two_cell_centres_blocks_the_aisle():
+    # no cell centre lies inside the disc, but every move along the aisle passes through it
+    rows = ["@@@@@@",
+            "......",
+            "@@@@@@"]
+    finder = PathFinder(GridMap.from_rows(rows), 0.4)
+    assert finder.find((0.5, 1.5), (5.5, 1.5), avoid=[((3.0, 1.5), 0.45)]) is None
+
+
+def test_disc_containing_start_or_goal_is_ignored():
+    rows = ["@@@@@@",
+            "......",
+            "@@@@@@"]
+    finder = PathFinder(GridMap.from_rows(rows), 0.4)
+    start, goal = (0.5, 1.5), (5.5, 1.5)
+    path = finder.find(start, goal, avoid=[(start, 0.8), ((5.0, 1.5), 0.9)])
+    assert path is not None and tuple(path[-1]) == goal
+    assert finder.find(start, goal, avoid=[((2.5, 1.5), 0.8)]) is None
+
+
+def test_blocked_cells_force_a_detour_and_count_as_walls():
+    rows = ["........",
+            "........",
+            "........"]
+    grid = GridMap.from_rows(rows)
+    finder = PathFinder(grid, 0.4)
+    start, goal = (0.5, 1.5), (7.5, 1.5)
+    assert len(finder.find(start, goal)) == 2
+    virtual = [(4, 1), (4, 2)]
+    path = finder.find(start, goal, blocked_cells=virtual)
+    walled = grid.blocked.copy()
+    for col, row in virtual:
+        walled[row, col] = True
+    assert_valid(path, GridMap(walled), 0.4, start, goal)
+    assert polyline_length(path) > 7.0 + 0.1
+    assert finder.find(start, goal, blocked_cells=[(4, 0), (4, 1), (4, 2)]) is None
+    assert finder.find(start, goal) is not None  # a virtual wall lasts one call
+
+
+def test_blocked_cells_are_inflated_like_walls():
+    grid = GridMap.from_rows(["." * 9] * 5)
+    start, goal = (0.8, 2.5), (8.2, 2.5)
+    posts = [(4, 1), (4, 3)]  # leave a one-cell gap at (4, 2)
+    assert PathFinder(grid, 0.6).find(start, goal) is not None
+    assert PathFinder(grid, 0.6).find(start, goal, blocked_cells=posts) is None
+    path = PathFinder(grid, 0.45).find(start, goal, blocked_cells=posts)
+    walled = grid.blocked.copy()
+    walled[[1, 3], [4, 4]] = True
+    assert_valid(path, GridMap(walled), 0.45, start, goal)
+
+
+def test_segment_free():
+    grid = GridMap.from_rows(["....",
+                              ".@..",
+                              "...."])
+    finder = PathFinder(grid, 0.4)
+    assert finder.segment_free((0.5, 0.5), (3.5, 0.5)) is True  # 0.5 from the block
+    assert not PathFinder(grid, 0.55).segment_free((0.5, 0.5), (3.5, 0.5))
+    assert finder.segment_free((2.5, 0.5), (3.5, 2.5))
+    assert not finder.segment_free((0.5, 2.5), (3.5, 0.5))
+    assert not finder.segment_free((2.5, 0.5), (3.5, 2.5), avoid=[((3.0, 1.5), 0.2)])
+    assert finder.segment_free((2.5, 0.5), (2.5, 0.5))
+
+
+def test_bad_input_is_named():
+    grid = GridMap.from_rows(["...."])
+    with pytest.raises(ValueError, match="radius"):
+        PathFinder(grid, 0.0)
+    finder = PathFinder(grid, 0.3)
+    with pytest.raises(ValueError, match="start"):
+        finder.find((float("nan"), 0.5), (3.5, 0.5))
+    with pytest.raises(ValueError, match="avoid"):
+        finder.find((0.5, 0.5), (3.5, 0.5), avoid=[((1.0, 0.5), -1.0)])
