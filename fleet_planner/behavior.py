@@ -70,6 +70,7 @@ HEAD_ON_MIN_ANGLE_DEG = 135.0
 _COS_REAR = math.cos(math.radians(REAR_END_MAX_ANGLE_DEG))
 _COS_HEAD = math.cos(math.radians(HEAD_ON_MIN_ANGLE_DEG))
 _EPS = 1e-9
+_PROGRESS = 0.05  # m: getting this much closer to the goal counts as progress (stats)
 
 
 @dataclass(frozen=True)
@@ -88,8 +89,9 @@ class BehaviorParams:
     dock_region: float = 1.5        # a robot this close to its station asks to dock
     dock_give_up: float = 3.0       # WaitForDocking ends when pushed this far from the station
     go_through_timeout: float = 30.0  # a GoThrough lasting longer fails (paper IV.C.4)
+    avoid_timeout: float = 15.0     # an Avoid / Exchange lasting longer found no free space
     blocked_timeout: float = 5.0    # FollowWayPoint unable to move with nobody in front fails
-    long_wait: float = 60.0         # stats: waits longer than this count as unresolved
+    long_wait: float = 60.0         # stats: a robot not closer to its goal for this long is stalled
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -121,7 +123,7 @@ class RobotView:
     radius: float
     behavior: Behavior = B.FOLLOW_WAYPOINT
     next_waypoint: Point | None = None
-    remaining: float = 0.0
+    remaining: float = math.inf
     station: str | None = None
     partner: str | None = None
 
@@ -155,12 +157,15 @@ def front_coords(me: RobotView, other: RobotView) -> tuple[float, float] | None:
 
 def in_front_area(me: RobotView, other: RobotView, params: BehaviorParams = DEFAULT_PARAMS) -> bool:
     """The other disc overlaps my front area: a ``front_length`` x ``front_width`` rectangle
-    starting at my position, pointing at my next waypoint (the other's centre must be ahead)."""
+    starting at my position, pointing at my next waypoint (the other's centre must be ahead),
+    cut short where my remaining path ends."""
     c = front_coords(me, other)
     if c is None or other.id == me.id:
         return False
     s, l = c
-    return 0.0 <= s <= params.front_length + other.radius and abs(l) <= params.front_width / 2 + other.radius
+    # Interpretation: the area ends where my path does (plus my radius): nothing beyond my goal is in my way
+    length = min(params.front_length, me.remaining + me.radius)
+    return 0.0 <= s <= length + other.radius and abs(l) <= params.front_width / 2 + other.radius
 
 
 def in_critical_area(me: RobotView, other: RobotView, params: BehaviorParams = DEFAULT_PARAMS) -> bool:
@@ -535,8 +540,8 @@ class FleetStats:
     replans: int              # successful re-plans (deadlocks and behaviour failures)
     replan_failures: int      # re-plans that found no path (the robot kept its old one)
     refused_moves: int        # motions the safety layer refused
-    long_waits: tuple[str, ...]  # robots waiting longer than ``long_wait`` right now
-    longest_wait: float       # longest continuous wait so far (s)
+    stalled: tuple[str, ...]  # robots not closer to their goal for more than ``long_wait`` s, now
+    longest_stall: float      # longest time any robot went without getting closer to its goal (s)
 
 
 @dataclass
@@ -556,10 +561,10 @@ class _Robot:
     behavior: Behavior = B.FOLLOW_WAYPOINT
     partner: str | None = None
     since: float = 0.0                  # when the current behaviour began
-    wait_since: float | None = None     # when the current (possibly chained) wait began
+    best_remaining: float = math.inf    # shortest remaining path length reached on this path
+    progress_at: float = 0.0            # when it was reached (or the path began)
     side: int = 0                       # Avoid/Exchange: +1 pass the partner on the left, -1 right
-    blocked_since: float | None = None  # FollowWayPoint: could not move with nobody in front
-    failed: bool = False                # the current behaviour failed: re-plan
+    blocked_since: float | None = None  # since when the safety layer refuses the wanted motion
 
 
 class BehaviorFleet:
@@ -609,7 +614,7 @@ class BehaviorFleet:
         self._arbiter = DockingArbiter()
         self._inbox: list[tuple[str, str, WaitMessage]] = []   # (sender, receiver, message)
         self._deadlocks = self._replans = self._replan_failures = self._refused = 0
-        self._longest_wait = 0.0
+        self._longest_stall = 0.0
 
     # -- public ---------------------------------------------------------------------------
     @property
@@ -650,8 +655,10 @@ class BehaviorFleet:
         self._move(dt, {v.id: v for v in views}, near)
         self.time += dt
         for r in self._robots:
-            if r.wait_since is not None:
-                self._longest_wait = max(self._longest_wait, self.time - r.wait_since)
+            remaining = self._view(r).remaining if r.path is not None else 0.0
+            if r.path is None or remaining < r.best_remaining - _PROGRESS:
+                r.best_remaining, r.progress_at = remaining, self.time
+            self._longest_stall = max(self._longest_stall, self.time - r.progress_at)
 
     def positions(self) -> np.ndarray:
         """``(n, 2)`` robot positions, in the order of :attr:`ids`."""
@@ -670,10 +677,9 @@ class BehaviorFleet:
 
     def stats(self) -> FleetStats:
         p = self.params
-        long_waits = tuple(r.id for r in self._robots
-                           if r.wait_since is not None and self.time - r.wait_since > p.long_wait)
+        stalled = tuple(r.id for r in self._robots if self.time - r.progress_at > p.long_wait)
         return FleetStats(self.time, self._deadlocks, self._replans, self._replan_failures,
-                          self._refused, long_waits, self._longest_wait)
+                          self._refused, stalled, self._longest_stall)
 
     # -- state --------------------------------------------------------------------------------
     def _robot(self, robot_id: str) -> _Robot:
@@ -702,16 +708,14 @@ class BehaviorFleet:
         r.path, r.wp = path, 0
         r.tail = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])
         r.blocked_since = None
+        r.best_remaining, r.progress_at = math.inf, self.time
 
     def _set(self, r: _Robot, behavior: Behavior, partner: str | None) -> None:
         if behavior is not r.behavior or partner != r.partner:
             r.side = 0
         if behavior is not r.behavior:
             r.since = self.time
-            if behavior.is_wait and r.wait_since is None:
-                r.wait_since = self.time
-            elif not behavior.is_wait:
-                r.wait_since = None
+            r.blocked_since = None
         r.behavior, r.partner = behavior, partner
 
     def _neighbours(self) -> list[list[int]]:
@@ -785,16 +789,16 @@ class BehaviorFleet:
             if new is not None:
                 self._set(r, new, other.id)
         # failures (IV.C) -> re-plan with a virtual wall
+        stalled = r.blocked_since is not None and self.time - r.blocked_since > p.blocked_timeout
+        failed = False
         if r.behavior in (B.AVOID, B.EXCHANGE):
-            self._choose_side(r, me, sensed, in_front)
-        if r.behavior is B.GO_THROUGH and self.time - r.since > p.go_through_timeout:
-            r.failed = True
-        if r.behavior is B.FOLLOW_WAYPOINT and in_front:
-            r.blocked_since = None
-        if (r.behavior is B.FOLLOW_WAYPOINT and r.blocked_since is not None
-                and self.time - r.blocked_since > p.blocked_timeout):
-            r.failed = True
-        if r.failed:
+            stalled = stalled or self.time - r.since > p.avoid_timeout
+            failed = self._pass_or_fail(r, me, sensed, in_front, stalled)
+        elif r.behavior is B.GO_THROUGH:
+            failed = self.time - r.since > p.go_through_timeout            # IV.C.4
+        elif r.behavior is B.FOLLOW_WAYPOINT:
+            failed = stalled and not in_front                               # IV.C.1
+        if failed:
             self._replan(r, sensed)
 
     def _docking(self, r: _Robot) -> bool:
@@ -832,18 +836,30 @@ class BehaviorFleet:
         clear = r.radius + partner.radius + self.params.avoid_margin
         return min(0.0, l_p - clear) if side < 0 else max(0.0, l_p + clear)
 
-    def _side_is_free(self, r: _Robot, partner: RobotView, side: int) -> bool:
-        """Free space for the sidestep: the disc fits beside me and beside the partner."""
+    def _side_is_free(self, r: _Robot, partner: RobotView, side: int, sensed: list[RobotView]) -> bool:
+        """Free space for the sidestep: my disc fits beside me and beside the partner, clear of
+        the walls and of the other robots I sense."""
         u, n = self._frame(r)
         lat = self._sidestep(r, partner, side)
         s_p = max(0.0, float(np.dot(np.asarray(partner.position) - r.pos, u)))
-        return all(self.grid.disc_is_free(*(r.pos + u * s + n * lat), r.radius) for s in (0.0, s_p))
+        for s in (0.0, s_p):
+            q = r.pos + u * s + n * lat
+            if not self.grid.disc_is_free(float(q[0]), float(q[1]), r.radius):
+                return False
+            if any(math.dist(q, o.position) < r.radius + o.radius + self.params.safety_margin
+                   for o in sensed if o.id != partner.id):
+                return False
+        return True
 
-    def _choose_side(self, r: _Robot, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> None:
-        """Avoid / Exchange: pick the side to pass on, or handle the failure (IV.C.2-3)."""
+    def _pass_or_fail(self, r: _Robot, me: RobotView, sensed: list[RobotView], in_front: list[RobotView],
+                      stalled: bool) -> bool:
+        """Avoid / Exchange: pick the side to pass the partner on; True when the behaviour failed
+        and the robot must re-plan (IV.C.2-3). A sidestep refused by the safety layer for
+        ``blocked_timeout``, or a behaviour not completed within ``avoid_timeout``, counts as no
+        free space."""
         partner = next((o for o in sensed if o.id == r.partner), None)
         if partner is None or self._frame(r) is None:
-            return
+            return False
         if r.behavior is B.EXCHANGE:
             sides = [-1]                       # both pass on their right
         else:
@@ -851,19 +867,20 @@ class BehaviorFleet:
             away = -1 if c is None or c[1] >= 0 else 1
             sides = [r.side] if r.side else []
             sides += [s for s in (away, -away) if s not in sides]
-        for side in sides:
-            if self._side_is_free(r, partner, side):
-                r.side = side
-                return
+        if not stalled:
+            for side in sides:
+                if self._side_is_free(r, partner, side, sensed):
+                    r.side = side
+                    return False
         if r.behavior is B.AVOID:
-            if all(o.id == partner.id for o in in_front):
-                r.failed = True                # IV.C.2: no free space, nobody else around
-            else:
-                self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)
-        elif id_key(r.id) < id_key(partner.id):
-            r.failed = True                    # IV.C.3: the lower id re-plans ...
-        else:
-            self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)  # ... the higher id waits
+            if not any(o.id != partner.id and o.travelling and o.behavior.is_active for o in in_front):
+                return True                    # IV.C.2: no free space, no other robot about to move
+            self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)
+            return False
+        if id_key(r.id) < id_key(partner.id):
+            return True                        # IV.C.3: the lower id re-plans ...
+        self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)  # ... the higher id waits
+        return False
 
     def _replan(self, r: _Robot, sensed: Sequence[RobotView]) -> None:
         """IV.C: a new path to the goal with a virtual wall between the robot and its next waypoint.
@@ -872,7 +889,6 @@ class BehaviorFleet:
         the new path as well where possible (they are what the behaviour failed on); without such a path the wall
         alone is used, and without any the robot keeps its path.
         """
-        r.failed = False
         if r.path is None or r.goal is None:
             return
         wall = virtual_wall_cells(self.grid, tuple(r.pos), tuple(r.path[r.wp]), r.goal, r.radius)
@@ -917,11 +933,10 @@ class BehaviorFleet:
             else:
                 if wanted:
                     self._refused += 1
-                    if r.behavior is B.FOLLOW_WAYPOINT and r.blocked_since is None:
+                    if r.blocked_since is None:
                         r.blocked_since = self.time
                 continue
-            if r.behavior is B.FOLLOW_WAYPOINT:
-                r.blocked_since = None
+            r.blocked_since = None
             if r.holds is not None and math.dist(r.pos, r.holds[1]) > self.params.dock_region:
                 self._arbiter.release(r.holds[0], r.id)   # left the docking region
                 r.holds = None
@@ -986,7 +1001,12 @@ class BehaviorFleet:
             u, n = self._frame(r)
             lat = max(-step, min(step, self._sidestep(r, partner, r.side)))
             fwd = math.sqrt(max(step * step - lat * lat, 0.0))
-            return [(r.pos + u * fwd + n * lat, -1), (r.pos + n * lat, -1), (r.pos + u * fwd / 2 + n * lat / 2, -1)]
+            out = []
+            for q in (r.pos + u * fwd + n * lat, r.pos + n * lat, r.pos + u * fwd / 2 + n * lat / 2):
+                # a waypoint passed close by while stepping aside counts as reached (not the goal)
+                passed = r.wp < len(r.path) - 1 and math.dist(q, r.path[r.wp]) <= step
+                out.append((q, r.wp + 1 if passed else -1))
+            return out
         if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.direction is not None:
             # make the intersection free: leave the going-through robot's drive channel sideways
             du = np.asarray(partner.direction)

@@ -180,12 +180,13 @@ class CollisionModel:
         lines = shapely.linestrings(np.stack([p0, p1], axis=1))
         reach = 2 * float(self.radii.max()) + self.margin
         tree = shapely.STRtree(lines)
-        if all_pairs:
-            qi, ti = tree.query(lines, predicate="dwithin", distance=reach)
-        else:
-            mine = np.nonzero(np.isin(owner, robots))[0]
-            qi, ti = tree.query(lines[mine], predicate="dwithin", distance=reach)
-            qi = mine[qi]
+        # candidates by envelopes grown by the reach (the exact test is the capsule computation
+        # below); not the "dwithin" predicate, which misses zero-length segments (parked robots)
+        # in GEOS 3.14
+        lo, hi = np.minimum(p0, p1) - reach, np.maximum(p0, p1) + reach
+        mine = np.arange(len(p0)) if all_pairs else np.nonzero(np.isin(owner, robots))[0]
+        qi, ti = tree.query(shapely.box(lo[mine, 0], lo[mine, 1], hi[mine, 0], hi[mine, 1]))
+        qi = mine[qi]
         # keep each unordered segment pair once, of two different robots
         keep = owner[qi] < owner[ti]
         if not all_pairs:
@@ -211,7 +212,7 @@ class CollisionModel:
         pieces[:, P_B_LO], pieces[:, P_B_HI] = offset[ti] + b_lo[hit], offset[ti] + b_hi[hit]
         pieces[:, P_X_FIRST], pieces[:, P_X_LAST] = first[qi], last[qi]
         pieces[:, P_Y_FIRST], pieces[:, P_Y_LAST] = first[ti], last[ti]
-        pieces = pieces[np.lexsort((pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
+        pieces = pieces[np.lexsort((pieces[:, P_B_LO], pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
         cuts = np.nonzero(np.diff(pair_key))[0] + 1
         for chunk in np.split(pieces, cuts):

@@ -114,13 +114,15 @@ class PathFinder:
 
     # -- public -------------------------------------------------------------------------------
     def find(self, start: Point, goal: Point, avoid: Sequence[Disc] = (),
-             blocked_cells: Iterable[tuple[int, int]] = ()) -> np.ndarray | None:
+             blocked_cells: Iterable[tuple[int, int]] = (), *, smooth: bool = True) -> np.ndarray | None:
         """A polyline ``(n, 2)`` from exactly ``start`` to exactly ``goal``, or None if there is none.
 
         ``avoid``: discs ``(centre, keep_out)`` the robot's centre must stay strictly outside; a disc
         that contains ``start`` or ``goal`` is ignored, since it cannot be avoided.
         ``blocked_cells``: extra ``(col, row)`` cells treated as walls (cells off the map are
         walls already and are skipped).
+        ``smooth=False`` returns the grid path itself (start, the cells where it turns, goal), to
+        inspect or plot what the smoothing started from.
         """
         start = _point("start", start)
         goal = _point("goal", goal)
@@ -137,7 +139,7 @@ class PathFinder:
                                                         (cells[:, 0] + 1) * res, (cells[:, 1] + 1) * res))
             shapely.prepare(extra_walls)
 
-        if self._free_many(start[None], goal[None], discs, extra_walls)[0]:
+        if smooth and self._free_many(start[None], goal[None], discs, extra_walls)[0]:
             return np.array([start, goal])
         moves, walled = self._moves_list, frozenset()
         if len(discs) or len(cells):
@@ -157,7 +159,7 @@ class PathFinder:
             return None
         pts = np.array([start] + [self._centre(i) for i in _corners(cell_path)] + [goal])
         pts = pts[np.concatenate([[True], np.any(pts[1:] != pts[:-1], axis=1)])]  # start/goal on a centre
-        return self._pull_string(pts, discs, extra_walls)
+        return self._pull_string(pts, discs, extra_walls) if smooth else pts
 
     def segment_free(self, a: Point, b: Point, avoid: Sequence[Disc] = ()) -> bool:
         """True when a disc of this radius can sweep from ``a`` to ``b`` in a straight line.
@@ -172,6 +174,10 @@ class PathFinder:
     def _free_many(self, a: np.ndarray, b: np.ndarray, discs: np.ndarray, extra_walls) -> np.ndarray:
         """Vectorised :meth:`segment_free` over segments ``a[i] -> b[i]``."""
         ok = np.ones(len(a), dtype=bool)
+        if len(discs):  # only discs reaching into the segments' bounding box can touch them
+            lo, hi = np.minimum(a, b).min(axis=0), np.maximum(a, b).max(axis=0)
+            reach = discs[:, 2:]
+            discs = discs[np.all((discs[:, :2] >= lo - reach) & (discs[:, :2] <= hi + reach), axis=1)]
         if len(discs):
             dist = _seg_point_dist(a[:, None, :], b[:, None, :], discs[None, :, :2])
             ok &= np.all(dist > discs[None, :, 2], axis=1)
@@ -283,7 +289,8 @@ class PathFinder:
         return {k: (all_flat[bounds[n]:bounds[n + 1]], all_bits[bounds[n]:bounds[n + 1]])
                 for n, k in enumerate(keys)}
 
-    def _connect(self, p: np.ndarray, walled: frozenset[int], discs: np.ndarray, extra_walls) -> dict[int, float]:
+    def _connect(self, p: np.ndarray, walled: frozenset[int], discs: np.ndarray,
+                 extra_walls) -> dict[int, float]:
         """Cells a point joins the grid at, with the connector length in cells.
 
         The point's own cell if the straight piece to its centre is free, else those of the 8

@@ -80,10 +80,11 @@ def test_paths_on_random_maps_keep_the_disc_off_walls():
             found = 0
             for _ in range(6):
                 start, goal = random_free_point(rng, grid, radius), random_free_point(rng, grid, radius)
-                path = finder.find(start, goal)
-                if path is not None:
-                    found += 1
-                    assert_valid(path, grid, radius, start, goal)
+                for smooth in (True, False):
+                    path = finder.find(start, goal, smooth=smooth)
+                    if path is not None:
+                        found += 1
+                        assert_valid(path, grid, radius, start, goal)
             assert found or radius == 0.7
 
 
@@ -160,14 +161,28 @@ def test_avoid_discs_and_blocked_cells_on_random_maps(radius):
                     if math.dist(c, start) > k and math.dist(c, goal) > k]
             virtual = {(int(c), int(r)) for c, r in rng.integers(0, (18, 14), size=(4, 2))}
             virtual -= {grid.cell_of(*start), grid.cell_of(*goal)}
-            path = finder.find(start, goal, avoid=avoid, blocked_cells=virtual)
-            if path is not None:
-                found += 1
-                walled = grid.blocked.copy()
-                for col, row in virtual:
-                    walled[row, col] = True
-                assert_valid(path, GridMap(walled), radius, start, goal, kept)
+            walled = grid.blocked.copy()
+            for col, row in virtual:
+                walled[row, col] = True
+            for smooth in (True, False):  # the grid path itself must be valid, not only its shortcuts
+                path = finder.find(start, goal, avoid=avoid, blocked_cells=virtual, smooth=smooth)
+                if path is not None:
+                    found += 1
+                    assert_valid(path, GridMap(walled), radius, start, goal, kept)
     assert found >= 5
+
+
+def test_grid_paths_around_discs_on_an_open_map():
+    # no walls to lean on: every diagonal and straight move near a disc must be judged exactly
+    grid = GridMap.from_rows(["." * 10] * 10)
+    finder = PathFinder(grid, 0.3)
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        avoid = [((float(rng.uniform(2, 8)), float(rng.uniform(2, 8))), float(rng.uniform(0.3, 1.5)))]
+        start, goal = random_free_point(rng, grid, 0.3), random_free_point(rng, grid, 0.3)
+        kept = [(c, k) for c, k in avoid if math.dist(c, start) > k and math.dist(c, goal) > k]
+        path = finder.find(start, goal, avoid=avoid, smooth=False)
+        assert_valid(path, grid, 0.3, start, goal, kept)
 
 
 def test_discs_in_a_serpentine_aisle():

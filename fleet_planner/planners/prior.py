@@ -352,10 +352,14 @@ def _min_gap(a: Piece, b: Piece, ra: float, rb: float) -> float:
 # one planning call: the robots, the fixed trajectories, the order
 # ---------------------------------------------------------------------------------------------
 class _Fail(Exception):
-    """A robot could not be planned: why, and the robots in its way as (owner, kind) where kind is
-    "start" (not planned yet, parked on its start) or "goal" (planned, parked on its goal)."""
+    """A robot could not be planned: why, and what might be repaired, as (owner, kind, time):
 
-    def __init__(self, reason: str, blockers: Sequence[tuple[int, str]] = (), fatal: bool = False):
+    * "start": robot ``owner``, not planned yet, stands on its start in the way;
+    * "goal": robot ``owner``, planned, parks on its goal in the way or crosses our goal too late;
+    * "runover": robot ``owner``, planned, drives over our start at ``time`` before we can leave.
+    """
+
+    def __init__(self, reason: str, blockers: Sequence[tuple[int, str, float]] = (), fatal: bool = False):
         super().__init__(reason)
         self.reason = reason
         self.blockers = list(blockers)
@@ -363,7 +367,13 @@ class _Fail(Exception):
 
 
 class _Session:
-    """Owners 0..n-1 are the robots to plan, n.. the fixed trajectories."""
+    """One planning call. Owners 0..n-1 are the robots to plan, n.. the fixed trajectories.
+
+    A robot not planned yet is a disc on its start until ``garage_until`` (+inf at first: the
+    garage assumption). When it stands in the way of a robot it drops to t0 (the others may pass,
+    it will have to leave in time); when a robot then runs it over before it can leave, it is raised
+    and the robots that crossed the start too early are planned again.
+    """
 
     def __init__(self, planner: PriorPlanner, grid: GridMap, robots: list[RobotSpec],
                  fixed: list[TimedPath], t0: float, t_start: float):
@@ -372,7 +382,7 @@ class _Session:
         self.n = n = len(robots)
         self.names = [r.id for r in robots] + [f.robot_id for f in fixed]
         self.radii = np.array([r.radius for r in robots] + [f.radius for f in fixed], dtype=float)
-        # where everyone stands at t0 and parks for ever
+        # where everyone stands at t0 and where it parks for ever
         here = [r.start for r in robots] + [f.position(t0) for f in fixed]
         last = [r.goal for r in robots] + [tuple(f.waypoints[-1, :2]) for f in fixed]
         self.here = np.array(here, dtype=float).reshape(-1, 2)
@@ -382,6 +392,7 @@ class _Session:
         self.space = _Space(grid, self.radii, rmax + planner.margin + math.sqrt(2) * grid.resolution + 1e-6)
         for k, f in enumerate(fixed):
             self.space.add_path(n + k, f.waypoints, t0)
+        self.garage_until = [_INF] * n
         for i in range(n):
             self._add_garage(i)
 
@@ -421,38 +432,44 @@ class _Session:
         return out.tolist()
 
     def _add_garage(self, i: int) -> None:
-        x, y = self.robots[i].start
-        self.space.add((-_INF, _INF, float(x), float(y), 0.0, 0.0, i))
+        if self.garage_until[i] > -_INF:
+            x, y = self.robots[i].start
+            self.space.add((-_INF, self.garage_until[i], float(x), float(y), 0.0, 0.0, i))
+
+    def _set_garage(self, i: int, until: float) -> None:
+        self.garage_until[i] = until
+        self.space.remove(i)
+        self._add_garage(i)
 
     # -- the priority loop -----------------------------------------------------------------
     def run(self, order: list[int], progress: Progress | None) -> tuple[dict[int, np.ndarray], list[int], int]:
         n = self.n
-        limit = 4 * n if self.p.max_reorders is None else self.p.max_reorders
+        budget = 4 * n if self.p.max_reorders is None else self.p.max_reorders
         paths: dict[int, np.ndarray] = {}
-        tried: set[tuple[int, int]] = set()
-        reorders, pos = 0, 0
+        tried: dict[tuple[int, int, str], int] = {}
+        repairs, pos = 0, 0
         while pos < n:
             i = order[pos]
             try:
                 wp = self._search(i)
             except _Fail as fail:
-                move = self._reorder(i, fail, order, pos, tried, reorders < limit)
-                if move is None:
+                restart = None if fail.fatal or repairs >= budget else self._repair(i, fail, order, pos, paths, tried)
+                if restart is None:
                     why = fail.reason
                     if fail.blockers and not fail.fatal:
-                        why += f" (re-ordering did not help after {reorders} attempt(s))"
+                        why += f" (gave up after {repairs} re-ordering(s))"
                     failures = {self.robots[i].id: why}
                     if fail.fatal:
                         failures.update({self.robots[x].id: "not planned: the planner stopped early"
                                          for x in order[pos + 1:]})
                     raise PlanningError(failures) from None
-                reorders += 1
-                for x in order[move:pos]:
-                    if x in paths:  # planned ones behind the new position are planned again
+                repairs += 1
+                for x in order[restart:]:
+                    if x in paths:  # robots from the restart position on are planned again
                         del paths[x]
                         self.space.remove(x)
                         self._add_garage(x)
-                pos = move
+                pos = restart
                 continue
             paths[i] = wp
             self.space.remove(i)
@@ -460,26 +477,37 @@ class _Session:
             pos += 1
             if progress:
                 progress(pos, n, self.robots[i].id)
-        return paths, order, reorders
+        return paths, order, repairs
 
-    def _reorder(self, i: int, fail: _Fail, order: list[int], pos: int, tried: set[tuple[int, int]],
-                 allowed: bool) -> int | None:
-        """Move i ahead of a planned blocker, or an unplanned blocker ahead of i; the position
-        from which to plan again, or None."""
-        if fail.fatal or not allowed:
-            return None
-        for j, kind in fail.blockers:
-            if j >= self.n or (i, j) in tried:
+    def _repair(self, i: int, fail: _Fail, order: list[int], pos: int, paths: dict[int, np.ndarray],
+                tried: dict[tuple[int, int, str], int]) -> int | None:
+        """Change the problem so that robot i may succeed; the position to plan again from, or None."""
+        for j, kind, when in fail.blockers:
+            if j >= self.n or tried.get((i, j, kind), 0) >= (3 if kind == "runover" else 1):
                 continue
-            tried.add((i, j))
-            if kind == "start":           # j not planned yet: plan it first, it may leave the way
-                order.remove(j)
-                order.insert(pos, j)
+            tried[(i, j, kind)] = tried.get((i, j, kind), 0) + 1
+            if kind == "start":       # j, not planned yet, will have to get out of i's way
+                self._set_garage(j, self.t0)
                 return pos
-            q = order.index(j)            # j planned: i goes just ahead of it
-            order.remove(i)
-            order.insert(q, i)
-            return q
+            if kind == "goal":        # i goes just ahead of the planned j
+                q = order.index(j)
+                order.remove(i)
+                order.insert(q, i)
+                return q
+            # runover: the others keep off i's start longer; re-plan those that came too early
+            old = self.garage_until[i]
+            until = when + max(when - self.t0, 1.0)
+            self._set_garage(i, until)
+            x, y = self.robots[i].start
+            col, row = self.grid.cell_of(x, y)
+            keep = self.keep_out(i)
+            early = set()
+            for piece in self.space.buckets[row * self.grid.width + col]:
+                o = piece[6]
+                span = _unsafe_times(x, y, piece, keep[o]) if o in paths else None
+                if span is not None and span[0] < until and span[1] > old:
+                    early.add(order.index(o))
+            return min(early, default=pos)
         return None
 
     # -- one robot -------------------------------------------------------------------------
@@ -492,7 +520,6 @@ class _Session:
         keep = self.keep_out(i)
         buckets = self.space.buckets
         n_cells = grid.width * grid.height
-        start_node, goal_node = n_cells, n_cells + 1
 
         (sx, sy), (gx, gy) = (float(v) for v in spec.start), (float(v) for v in spec.goal)
         sc, sr = grid.cell_of(sx, sy)
@@ -509,19 +536,23 @@ class _Session:
                             f"without touching an obstacle", fatal=True)
         s_off = math.hypot(sx - (sc + 0.5) * res, sy - (sr + 0.5) * res)
         g_off = math.hypot(gx - (gc + 0.5) * res, gy - (gr + 0.5) * res)
-        start_node = start_node if s_off > 0 else cs
-        goal_node = goal_node if g_off > 0 else cg
+        start_node = n_cells if s_off > 0 else cs
+        goal_node = n_cells + 1 if g_off > 0 else cg
 
         dist, pred = dijkstra(rm.graph, indices=cg, return_predecessors=True)
         if not math.isfinite(dist[cs]):
             raise _Fail(f"no way from start to goal on this map for radius {radius:.6g}", fatal=True)
+        free_path = [cs]
+        while free_path[-1] != cg:
+            free_path.append(int(pred[free_path[-1]]))
+        self._check_garages(free_path, rm, keep)
         h_start = (s_off + float(dist[cs]) + g_off) / speed
         bound = t0 + h_start + self.p.max_wait_s
 
         def pos(node: int) -> tuple[float, float]:
-            if node == start_node and node >= n_cells:
+            if node == n_cells:
                 return sx, sy
-            if node == goal_node and node >= n_cells:
+            if node == n_cells + 1:
                 return gx, gy
             return (node % width + 0.5) * res, (node // width + 0.5) * res
 
@@ -531,13 +562,13 @@ class _Session:
         def heur(node: int) -> float:
             if node == goal_node:
                 return 0.0
-            if node >= n_cells:
+            if node == n_cells:
                 return h_start
             return (float(dist[node]) + g_off) / speed
 
         def neighbours(node: int) -> list[tuple[int, float]]:
             if node >= n_cells:
-                return [(cs, s_off)] if node == start_node else [(cg, g_off)]
+                return [(cs, s_off)] if node == n_cells else [(cg, g_off)]
             out = rm.nbrs[node]
             if node == cg and goal_node != cg:
                 out = out + [(goal_node, g_off)]
@@ -559,11 +590,11 @@ class _Session:
                 iv = cache[node] = _complement(unsafe)
             return iv
 
-        # the start: standing there at t0 must be safe
+        # standing on the start at t0 must be safe
         iv0 = intervals(start_node)
         j0 = next((k for k, (s, e) in enumerate(iv0) if s <= t0 <= e), None)
         if j0 is None:
-            who = self._culprits(pos(start_node), cell(start_node), keep, t0)
+            who = self._culprits((sx, sy), cs, keep, t0)
             raise _Fail(f"standing on its start at t={t0:.6g} it overlaps {_names(self.names, who)}", fatal=True)
 
         heap = [(t0 + heur(start_node), -t0, 0, start_node, j0, t0)]
@@ -571,12 +602,12 @@ class _Session:
         parent: dict[tuple[int, int], tuple[tuple[int, int], float] | None] = {(start_node, j0): None}
         counter, expansions = 0, 0
         d_max = max(math.sqrt(2) * res, s_off, g_off) / speed
+        reason = f"no collision-free timing within max_wait_s={self.p.max_wait_s:g} s"
         while heap:
-            f, _, _, u, ju, g = heapq.heappop(heap)
+            _, _, _, u, ju, g = heapq.heappop(heap)
             if g > best[(u, ju)]:
                 continue
-            iv_u = intervals(u)
-            e_u = iv_u[ju][1]
+            e_u = intervals(u)[ju][1]
             if u == goal_node and e_u == _INF:
                 return self._waypoints(i, (u, ju), parent, best, pos)
             expansions += 1
@@ -584,8 +615,8 @@ class _Session:
                 if time.perf_counter() > self.deadline:
                     raise _Fail(f"time limit of {self.p.time_limit_s:g} s reached", fatal=True)
                 if expansions >= _MAX_EXPANSIONS:
-                    raise self._diagnose(i, f"search gave up after {expansions} expansions", rm, cs, cg, pred,
-                                         keep, intervals(goal_node), bound)
+                    reason = f"search gave up after {expansions} expansions"
+                    break
             ax, ay = pos(u)
             horizon = e_u + d_max
             near = [p for p in buckets[cell(u)] if p[1] > g and p[0] < horizon and keep[p[6]] > 0]
@@ -614,11 +645,10 @@ class _Session:
                     parent[key] = ((u, ju), tau)
                     counter += 1
                     heapq.heappush(heap, (arrive + hv, -arrive, counter, v, jv, arrive))
-        raise self._diagnose(i, f"no collision-free timing within max_wait_s={self.p.max_wait_s:g} s",
-                             rm, cs, cg, pred, keep, intervals(goal_node), bound)
+        raise self._diagnose(i, reason, rm, free_path, keep, iv0[j0], intervals(goal_node), bound)
 
     def _waypoints(self, i: int, key: tuple[int, int], parent: dict, best: dict, pos) -> np.ndarray:
-        """Follow the parents back to the start: arrivals, holds where a departure was later."""
+        """Follow the parents back to the start: arrivals, and holds where a departure was later."""
         chain = []
         at: tuple[int, int] | None = key
         while at is not None:
@@ -648,7 +678,7 @@ class _Session:
                                          f"{self.names[o]!r}; this is a bug")
 
     def _culprits(self, p: tuple[float, float], bucket: int, keep: list[float], t: float) -> list[int]:
-        """Owners whose discs a disc on p would overlap at time t."""
+        """Owners whose discs a disc on p would overlap at time t (bounds included)."""
         out = set()
         for piece in self.space.buckets[bucket]:
             reach = keep[piece[6]]
@@ -657,47 +687,74 @@ class _Session:
                 out.add(piece[6])
         return sorted(out)
 
-    def _diagnose(self, i: int, reason: str, rm: _Roadmap, cs: int, cg: int, pred: np.ndarray,
-                  keep: list[float], goal_iv: list[tuple[float, float]], bound: float) -> _Fail:
-        """Why the search failed: robots parked for ever in the way (on their starts or goals), or
-        a robot crossing the goal later than the search may wait."""
-        grid, width, res = self.grid, self.grid.width, self.grid.resolution
-        cx = (np.arange(width) + 0.5) * res
-        cy = (np.arange(grid.height) + 0.5) * res
-        blocked = np.zeros((grid.height, width), dtype=bool)
+    def _blocked_cells(self, keep: list[float], kinds: tuple[str, ...]) -> tuple[np.ndarray, list]:
+        """Cells whose centre a disc parked for ever (on a start: "start", on a goal: "goal") keeps
+        out of, and those discs as (owner, x, y, reach, kind)."""
+        grid, res = self.grid, self.grid.resolution
+        blocked = np.zeros((grid.height, grid.width), dtype=bool)
         discs = []
         for o, (x, y, since) in self.space.parked.items():
-            if keep[o] > 0:
-                discs.append((o, x, y, keep[o], "start" if since == -_INF else "goal"))
-                blocked |= (cx[None, :] - x) ** 2 + (cy[:, None] - y) ** 2 < keep[o] ** 2
-        blocked = blocked.ravel()
-        if not blocked[cs] and not blocked[cg]:
-            keep_cells = diags((~blocked).astype(float))
-            sub = (keep_cells @ rm.graph @ keep_cells).tocsr()
-            if cg in set(breadth_first_order(sub, cs, return_predecessors=False).tolist()):
-                last_start = goal_iv[-1][0]
-                if last_start > bound:
-                    g = self.robots[i].goal
-                    who = self._culprits(g, cg, keep, last_start - 1e-6)
-                    return _Fail(f"its goal is crossed by {_names(self.names, who)} until t={last_start:.6g}, "
-                                 f"later than max_wait_s={self.p.max_wait_s:g} s allows",
-                                 [(o, "goal") for o in who])
-                return _Fail(reason)
-        path, node = [cs], cs
-        while node != cg:
-            node = int(pred[node])
-            path.append(node)
-        blockers: list[tuple[int, str]] = []
+            kind = "start" if since == -_INF and o < self.n else "goal"
+            if keep[o] <= 0 or kind not in kinds:
+                continue
+            reach = keep[o]
+            discs.append((o, x, y, reach, kind))
+            c0, c1 = max(0, math.ceil((x - reach) / res - 0.5)), min(grid.width - 1, math.floor((x + reach) / res - 0.5))
+            r0, r1 = max(0, math.ceil((y - reach) / res - 0.5)), min(grid.height - 1, math.floor((y + reach) / res - 0.5))
+            cx = (np.arange(c0, c1 + 1) + 0.5) * res
+            cy = (np.arange(r0, r1 + 1) + 0.5) * res
+            blocked[r0:r1 + 1, c0:c1 + 1] |= (cx[None, :] - x) ** 2 + (cy[:, None] - y) ** 2 < reach ** 2
+        return blocked.ravel(), discs
+
+    def _way_blockers(self, path: list[int], rm: _Roadmap, keep: list[float],
+                      kinds: tuple[str, ...]) -> list[tuple[int, str, float]] | None:
+        """None if the goal can be reached around the discs parked for ever; else the discs on the
+        free shortest path, in path order."""
+        blocked, discs = self._blocked_cells(keep, kinds)
+        width, res = self.grid.width, self.grid.resolution
+        if not any(blocked[c] for c in path):
+            return None
+        if not blocked[path[0]] and not blocked[path[-1]]:
+            open_cells = diags((~blocked).astype(float))
+            sub = (open_cells @ rm.graph @ open_cells).tocsr()
+            if path[-1] in set(breadth_first_order(sub, path[0], return_predecessors=False).tolist()):
+                return None
+        out: list[tuple[int, str, float]] = []
         for node in path:
             px, py = (node % width + 0.5) * res, (node // width + 0.5) * res
             for o, x, y, reach, kind in discs:
-                if (px - x) ** 2 + (py - y) ** 2 < reach ** 2 and all(o != b for b, _ in blockers):
-                    blockers.append((o, kind))
-        if not blockers:
-            return _Fail(reason)
-        words = [f"the start of robot {self.names[o]!r} (not planned yet)" if kind == "start" else
-                 f"robot {self.names[o]!r} parked on its goal" for o, kind in blockers]
-        return _Fail("its way is blocked by " + ", ".join(words), blockers)
+                if (px - x) ** 2 + (py - y) ** 2 < reach ** 2 and all(o != b for b, _, _ in out):
+                    out.append((o, kind, -_INF))
+        return out
+
+    def _check_garages(self, path: list[int], rm: _Roadmap, keep: list[float]) -> None:
+        """Before searching: robots parked on their starts for ever must leave a way open."""
+        blockers = self._way_blockers(path, rm, keep, ("start",))
+        if blockers:
+            raise _Fail("its way is blocked by " + ", ".join(
+                f"the start of robot {self.names[o]!r} (not planned yet)" for o, _, _ in blockers), blockers)
+
+    def _diagnose(self, i: int, reason: str, rm: _Roadmap, path: list[int], keep: list[float],
+                  start_iv: tuple[float, float], goal_iv: list[tuple[float, float]], bound: float) -> _Fail:
+        """Why the search failed: robots parked on their goals in the way, a robot crossing the goal
+        later than the search may wait, a robot running over the start; else just ``reason``."""
+        blockers = self._way_blockers(path, rm, keep, ("goal",))
+        if blockers:
+            return _Fail("its way is blocked by " + ", ".join(
+                f"robot {self.names[o]!r} parked on its goal" for o, _, _ in blockers), blockers)
+        spec = self.robots[i]
+        last_start = goal_iv[-1][0]
+        if last_start > bound:
+            col, row = self.grid.cell_of(*spec.goal)
+            who = self._culprits(spec.goal, row * self.grid.width + col, keep, last_start)
+            return _Fail(f"its goal is crossed by {_names(self.names, who)} until t={last_start:.6g}, later "
+                         f"than max_wait_s={self.p.max_wait_s:g} s allows", [(o, "goal", last_start) for o in who])
+        if start_iv[1] < _INF:
+            col, row = self.grid.cell_of(*spec.start)
+            who = self._culprits(spec.start, row * self.grid.width + col, keep, start_iv[1])
+            return _Fail(f"{reason}; {_names(self.names, who)} drives over its start at t={start_iv[1]:.6g}",
+                         [(o, "runover", start_iv[1]) for o in who])
+        return _Fail(reason)
 
 
 # ---------------------------------------------------------------------------------------------
