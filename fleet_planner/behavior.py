@@ -27,13 +27,15 @@ from __future__ import annotations
 import enum
 import math
 import re
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Iterable, Sequence
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .grid import GridMap
 from .model import Point, PlanningError
+from .paths import PathFinder
 
 
 class Behavior(enum.Enum):
@@ -70,7 +72,8 @@ HEAD_ON_MIN_ANGLE_DEG = 135.0
 _COS_REAR = math.cos(math.radians(REAR_END_MAX_ANGLE_DEG))
 _COS_HEAD = math.cos(math.radians(HEAD_ON_MIN_ANGLE_DEG))
 _EPS = 1e-9
-_PROGRESS = 0.05  # m: getting this much closer to the goal counts as progress (stats)
+_COS_STRAIGHT = math.cos(math.radians(10.0))  # a path bending less than this at a waypoint goes on straight
+_PROGRESS = 0.05  # m: coming this much closer to the goal (straight line) is progress (stats)
 
 
 @dataclass(frozen=True)
@@ -89,9 +92,9 @@ class BehaviorParams:
     dock_region: float = 1.5        # a robot this close to its station asks to dock
     dock_give_up: float = 3.0       # WaitForDocking ends when pushed this far from the station
     go_through_timeout: float = 30.0  # a GoThrough lasting longer fails (paper IV.C.4)
-    avoid_timeout: float = 15.0     # an Avoid / Exchange lasting longer found no free space
+    avoid_timeout: float = 15.0     # an Avoid / Exchange this long without progress found no free space
     blocked_timeout: float = 5.0    # FollowWayPoint unable to move with nobody in front fails
-    long_wait: float = 60.0         # stats: a robot not closer to its goal for this long is stalled
+    stall_time: float = 60.0        # stats: a robot not closer to its goal for this long is stalled
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -113,7 +116,8 @@ class RobotView:
     """What a robot knows of itself or hears from a neighbour: position, path, status.
 
     ``next_waypoint`` is None for a robot without a path (idle, or arrived): it stands still.
-    ``remaining`` is the length of the rest of its path (for :func:`low_order`).
+    ``remaining`` is the length of the rest of its path (for :func:`low_order`), ``straight`` the
+    length of the straight run of it ahead (up to the next turn or the goal).
     ``partner`` is the id of the robot its current behaviour is about (the one it waits for,
     avoids, exchanges with...).
     """
@@ -124,6 +128,7 @@ class RobotView:
     behavior: Behavior = B.FOLLOW_WAYPOINT
     next_waypoint: Point | None = None
     remaining: float = math.inf
+    straight: float = math.inf
     station: str | None = None
     partner: str | None = None
 
@@ -157,14 +162,17 @@ def front_coords(me: RobotView, other: RobotView) -> tuple[float, float] | None:
 
 def in_front_area(me: RobotView, other: RobotView, params: BehaviorParams = DEFAULT_PARAMS) -> bool:
     """The other disc overlaps my front area: a ``front_length`` x ``front_width`` rectangle
-    starting at my position, pointing at my next waypoint (the other's centre must be ahead),
-    cut short where my remaining path ends."""
+    starting at my position, pointing at my next waypoint (the other's centre must be ahead).
+
+    Interpretation: the area is cut short (to my radius beyond it) where my path turns or ends.
+    The paper's A* paths have a waypoint per cell, ours are straightened polylines; a robot
+    beyond my next turn is not in my way, and waiting for it blocked narrow crossings.
+    """
     c = front_coords(me, other)
     if c is None or other.id == me.id:
         return False
     s, l = c
-    # Interpretation: the area ends where my path does (plus my radius): nothing beyond my goal is in my way
-    length = min(params.front_length, me.remaining + me.radius)
+    length = min(params.front_length, me.straight + me.radius)
     return 0.0 <= s <= length + other.radius and abs(l) <= params.front_width / 2 + other.radius
 
 
@@ -501,25 +509,26 @@ def on_wait_message(me: RobotView, msg: WaitMessage) -> tuple[bool, WaitMessage 
 
 
 # -- re-planning (IV.C) ---------------------------------------------------------------------
-def virtual_wall_cells(grid: GridMap, position: Point, next_waypoint: Point, goal: Point,
-                       radius: float) -> list[tuple[int, int]]:
-    """The cells the segment from the robot to its next waypoint passes through: the virtual wall
-    A* must not cross when re-planning. Cells closer than ``radius`` to the robot or to its goal
-    are left open (the search must start and end somewhere); diagonal steps of the segment also
-    block both side cells, so the wall has no diagonal gap."""
-    (x0, y0), (x1, y1) = position, next_waypoint
+def virtual_wall_cells(grid: GridMap, ahead: Sequence[Point], goal: Point, radius: float) -> list[tuple[int, int]]:
+    """The virtual wall A* must not cross when re-planning: the cells the polyline ``ahead`` (the
+    robot's position, then its next waypoint and possibly more of its path) passes through.
+
+    Cells closer than ``radius`` to the robot or to its goal are left open (the search must start
+    and end somewhere); diagonal steps also block both side cells, so the wall has no diagonal gap.
+    """
     res = grid.resolution
-    n = max(1, int(math.ceil(math.hypot(x1 - x0, y1 - y0) / (res / 8))))
     cells: list[tuple[int, int]] = []
     prev = None
-    for k in range(n + 1):
-        c = grid.cell_of(x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n)
-        if c == prev:
-            continue
-        if prev is not None and c[0] != prev[0] and c[1] != prev[1]:
-            cells += [(c[0], prev[1]), (prev[0], c[1])]
-        cells.append(c)
-        prev = c
+    for (x0, y0), (x1, y1) in zip(ahead, ahead[1:]):
+        n = max(1, int(math.ceil(math.hypot(x1 - x0, y1 - y0) / (res / 8))))
+        for k in range(n + 1):
+            c = grid.cell_of(x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n)
+            if c == prev:
+                continue
+            if prev is not None and c[0] != prev[0] and c[1] != prev[1]:
+                cells += [(c[0], prev[1]), (prev[0], c[1])]
+            cells.append(c)
+            prev = c
 
     def near(c: tuple[int, int], p: Point) -> bool:
         dx = max(c[0] * res - p[0], 0.0, p[0] - (c[0] + 1) * res)
@@ -527,7 +536,7 @@ def virtual_wall_cells(grid: GridMap, position: Point, next_waypoint: Point, goa
         return math.hypot(dx, dy) < radius + _EPS
 
     return [c for c in dict.fromkeys(cells)
-            if grid.in_bounds(*c) and not near(c, position) and not near(c, goal)]
+            if grid.in_bounds(*c) and not near(c, ahead[0]) and not near(c, goal)]
 
 
 # -- the fleet ----------------------------------------------------------------------------
@@ -540,7 +549,7 @@ class FleetStats:
     replans: int              # successful re-plans (deadlocks and behaviour failures)
     replan_failures: int      # re-plans that found no path (the robot kept its old one)
     refused_moves: int        # motions the safety layer refused
-    stalled: tuple[str, ...]  # robots not closer to their goal for more than ``long_wait`` s, now
+    stalled: tuple[str, ...]  # robots not closer to their goal for more than ``stall_time`` s, now
     longest_stall: float      # longest time any robot went without getting closer to its goal (s)
 
 
@@ -553,6 +562,7 @@ class _Robot:
     msg_tick: float
     path: np.ndarray | None = None      # waypoints still ahead, path[wp] is the next one
     tail: np.ndarray | None = None      # tail[k] = length of path[k:]
+    run: np.ndarray | None = None       # run[k] = length of the straight run of the path after path[k]
     wp: int = 0
     goal: Point | None = None
     station: str | None = None
@@ -561,10 +571,13 @@ class _Robot:
     behavior: Behavior = B.FOLLOW_WAYPOINT
     partner: str | None = None
     since: float = 0.0                  # when the current behaviour began
-    best_remaining: float = math.inf    # shortest remaining path length reached on this path
-    progress_at: float = 0.0            # when it was reached (or the path began)
+    replan_after: float = -math.inf     # no re-plan before (after a failed one)
+    best_distance: float = math.inf     # closest it came to its goal since assigned
+    progress_at: float = 0.0            # when it last came closer by _PROGRESS (or was assigned)
     side: int = 0                       # Avoid/Exchange: +1 pass the partner on the left, -1 right
     blocked_since: float | None = None  # since when the safety layer refuses the wanted motion
+    off_path: bool = False              # pushed off its path: the way to the next waypoint hits a wall
+    clear_at: tuple[float, float, float] = (0.0, 0.0, -math.inf)  # (x, y, clearance there), a cache
 
 
 class BehaviorFleet:
@@ -581,8 +594,6 @@ class BehaviorFleet:
     """
 
     def __init__(self, grid: GridMap, robots: Sequence, params: BehaviorParams = DEFAULT_PARAMS):
-        from .paths import PathFinder
-
         self.grid = grid
         self.params = params
         self.time = 0.0
@@ -602,13 +613,16 @@ class BehaviorFleet:
                 raise ValueError(f"robot {rid!r}: start must be a finite (x, y), got {spec.start!r}")
             if not grid.disc_is_free(*start, spec.radius):
                 raise ValueError(f"robot {rid!r}: start {tuple(start)} is not free for radius {spec.radius}")
-            # robots' clocks are not synchronised: each sends WaitMessages at its own phase
-            tick = params.wait_msg_period * ((k * golden) % 1.0)
+            # robots' clocks are not synchronised: each sends WaitMessages at its own phase, the
+            # first one within a period (a spread phase, so that waiting robots seldom send at once)
+            tick = params.wait_msg_period * (1.0 - (k * golden) % 1.0)
             self._index[rid] = k
             self._robots.append(_Robot(rid, float(spec.radius), float(spec.max_speed), start, tick))
-        for a in self._robots:
-            for b in self._robots:
-                if a.id < b.id and math.dist(a.pos, b.pos) < a.radius + b.radius:
+        if self._robots:
+            reach = 2 * max(r.radius for r in self._robots)
+            for i, j in sorted(cKDTree(np.array([r.pos for r in self._robots])).query_pairs(reach)):
+                a, b = self._robots[i], self._robots[j]
+                if math.dist(a.pos, b.pos) < a.radius + b.radius:
                     raise ValueError(f"robots {a.id!r} and {b.id!r}: start discs overlap")
         self._finders = {r: PathFinder(grid, r) for r in {rb.radius for rb in self._robots}}
         self._arbiter = DockingArbiter()
@@ -640,6 +654,7 @@ class BehaviorFleet:
             self._arbiter.withdraw(r.station, r.id)
         r.goal, r.station, r.arrived = (float(g[0]), float(g[1])), station, False
         self._set_path(r, path)
+        r.best_distance, r.progress_at = math.dist(r.pos, g), self.time
         self._set(r, B.DOCK if r.holds else B.FOLLOW_WAYPOINT, None)
 
     def step(self, dt: float) -> None:
@@ -647,7 +662,7 @@ class BehaviorFleet:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"step: dt must be a finite number > 0, got {dt!r}")
         near = self._neighbours()
-        self._deliver([self._view(r) for r in self._robots], near)
+        self._deliver(near)
         views = [self._view(r) for r in self._robots]
         for k, r in enumerate(self._robots):
             self._decide(r, views[k], [views[j] for j in near[k]])
@@ -655,9 +670,9 @@ class BehaviorFleet:
         self._move(dt, {v.id: v for v in views}, near)
         self.time += dt
         for r in self._robots:
-            remaining = self._view(r).remaining if r.path is not None else 0.0
-            if r.path is None or remaining < r.best_remaining - _PROGRESS:
-                r.best_remaining, r.progress_at = remaining, self.time
+            distance = math.dist(r.pos, r.goal) if r.path is not None else 0.0
+            if distance < r.best_distance - _PROGRESS or r.path is None:
+                r.best_distance, r.progress_at = distance, self.time
             self._longest_stall = max(self._longest_stall, self.time - r.progress_at)
 
     def positions(self) -> np.ndarray:
@@ -677,7 +692,7 @@ class BehaviorFleet:
 
     def stats(self) -> FleetStats:
         p = self.params
-        stalled = tuple(r.id for r in self._robots if self.time - r.progress_at > p.long_wait)
+        stalled = tuple(r.id for r in self._robots if self.time - r.progress_at > p.stall_time)
         return FleetStats(self.time, self._deadlocks, self._replans, self._replan_failures,
                           self._refused, stalled, self._longest_stall)
 
@@ -689,26 +704,33 @@ class BehaviorFleet:
             raise ValueError(f"robot_id: unknown robot {robot_id!r}") from None
 
     def _view(self, r: _Robot) -> RobotView:
-        nxt, remaining = None, 0.0
+        nxt, remaining, straight = None, 0.0, 0.0
         if r.path is not None:
             nxt = (float(r.path[r.wp, 0]), float(r.path[r.wp, 1]))
-            remaining = math.dist(r.pos, nxt) + float(r.tail[r.wp])
+            ahead = math.dist(r.pos, nxt)
+            remaining, straight = ahead + float(r.tail[r.wp]), ahead + float(r.run[r.wp])
         return RobotView(r.id, (float(r.pos[0]), float(r.pos[1])), r.radius, r.behavior, nxt,
-                         remaining, r.station, r.partner)
+                         remaining, straight, r.station, r.partner)
 
     def _set_path(self, r: _Robot, path: np.ndarray) -> None:
         path = np.asarray(path, dtype=float)
         if len(path) and np.allclose(path[0], r.pos, atol=1e-9):
             path = path[1:]
         if not len(path):
-            r.path = r.tail = None
+            r.path = r.tail = r.run = None
             r.arrived = True
             return
         seg = np.hypot(*np.diff(path, axis=0).T)
         r.path, r.wp = path, 0
         r.tail = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])
+        # run[k]: how far the path goes on straight after waypoint k (0 where it turns)
+        r.run = np.zeros(len(path))
+        d = np.diff(np.vstack([r.pos, path]), axis=0)
+        for k in range(len(path) - 2, -1, -1):
+            a, b = d[k], d[k + 1]
+            cos = float(np.dot(a, b)) / max(math.hypot(*a) * math.hypot(*b), _EPS)
+            r.run[k] = seg[k] + r.run[k + 1] if cos > _COS_STRAIGHT else 0.0
         r.blocked_since = None
-        r.best_remaining, r.progress_at = math.inf, self.time
 
     def _set(self, r: _Robot, behavior: Behavior, partner: str | None) -> None:
         if behavior is not r.behavior or partner != r.partner:
@@ -719,23 +741,16 @@ class BehaviorFleet:
         r.behavior, r.partner = behavior, partner
 
     def _neighbours(self) -> list[list[int]]:
-        """For each robot, the robots within communication range (spatial hashing)."""
-        reach = self.params.comm_range
-        cells: dict[tuple[int, int], list[int]] = {}
-        keys = []
-        for k, r in enumerate(self._robots):
-            key = (int(r.pos[0] // reach), int(r.pos[1] // reach))
-            keys.append(key)
-            cells.setdefault(key, []).append(k)
-        out = []
-        for k, (cx, cy) in enumerate(keys):
-            p = self._robots[k].pos
-            out.append([j for dx in (-1, 0, 1) for dy in (-1, 0, 1) for j in cells.get((cx + dx, cy + dy), ())
-                        if j != k and math.dist(p, self._robots[j].pos) <= reach])
-        return out
+        """For each robot, the robots within communication range (a k-d tree, so the cost grows
+        with the number of neighbours, not with the fleet squared)."""
+        if not self._robots:
+            return []
+        tree = cKDTree(np.array([r.pos for r in self._robots]))
+        return [[j for j in found if j != k]
+                for k, found in enumerate(tree.query_ball_point(tree.data, self.params.comm_range))]
 
     # -- messages -----------------------------------------------------------------------------
-    def _deliver(self, views: list[RobotView], near: list[list[int]]) -> None:
+    def _deliver(self, near: list[list[int]]) -> None:
         """Hand over last step's WaitMessages (only within communication range)."""
         inbox, self._inbox = self._inbox, []
         for sender, receiver, msg in inbox:
@@ -746,7 +761,7 @@ class BehaviorFleet:
             deadlock, forward = on_wait_message(self._view(r), msg)
             if deadlock:
                 self._deadlocks += 1
-                self._replan(r, [views[j] for j in near[k]])
+                self._replan(r, [self._view(self._robots[j]) for j in near[k]])
             elif forward is not None:
                 self._inbox.append((r.id, r.partner, forward))
 
@@ -760,7 +775,18 @@ class BehaviorFleet:
 
     # -- decisions ------------------------------------------------------------------------------
     def _decide(self, r: _Robot, me: RobotView, sensed: list[RobotView]) -> None:
-        """Sensing and behaviour selection of one robot, from the views of this step."""
+        """Sensing and behaviour selection of one robot, from the views of this step.
+
+        A behaviour left and taken up again within the step on the same path (e.g. Avoid completed
+        for one partner and started for the next) keeps its start time, so the timeouts see one
+        behaviour.
+        """
+        before, path, since, blocked_since = r.behavior, r.path, r.since, r.blocked_since
+        self._select(r, me, sensed)
+        if r.behavior is before and r.path is path:
+            r.since, r.blocked_since = since, blocked_since
+
+    def _select(self, r: _Robot, me: RobotView, sensed: list[RobotView]) -> None:
         p = self.params
         if r.path is None:                      # idle, or parked on its goal (docked if it holds)
             self._set(r, B.DOCK if r.holds else B.FOLLOW_WAYPOINT, None)
@@ -770,6 +796,13 @@ class BehaviorFleet:
             return
         if r.station is not None and self._docking(r):
             return
+        path = r.path
+        if r.off_path:
+            self._repair(r)
+            if r.path is None:
+                return
+        if self._skip_covered_waypoints(r, sensed) or r.path is not path:
+            me = self._view(r)
         in_front = robots_in_front(me, sensed, p)
         front_ids = {o.id for o in in_front}
         b = r.behavior
@@ -777,6 +810,8 @@ class BehaviorFleet:
         if b in (B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH):
             partner = next((o for o in sensed if o.id == r.partner), None)
             done = partner is None or partner.id not in front_ids
+            if b is B.AVOID and partner is not None and not partner.travelling:
+                done = not in_critical_area(me, partner, p)   # a standing obstacle: done once my channel is clear
             if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.behavior is not B.GO_THROUGH:
                 done = True
             if done:
@@ -788,11 +823,13 @@ class BehaviorFleet:
             new = select_behavior(me, other, in_front, p)
             if new is not None:
                 self._set(r, new, other.id)
+            elif r.behavior is B.WAIT_KEEP_DISTANCE:
+                r.partner = other.id   # I wait for whoever blocks my front area now (WaitMessages go there)
         # failures (IV.C) -> re-plan with a virtual wall
         stalled = r.blocked_since is not None and self.time - r.blocked_since > p.blocked_timeout
         failed = False
         if r.behavior in (B.AVOID, B.EXCHANGE):
-            stalled = stalled or self.time - r.since > p.avoid_timeout
+            stalled = stalled or self.time - max(r.since, r.progress_at) > p.avoid_timeout
             failed = self._pass_or_fail(r, me, sensed, in_front, stalled)
         elif r.behavior is B.GO_THROUGH:
             failed = self.time - r.since > p.go_through_timeout            # IV.C.4
@@ -800,6 +837,28 @@ class BehaviorFleet:
             failed = stalled and not in_front                               # IV.C.1
         if failed:
             self._replan(r, sensed)
+
+    def _repair(self, r: _Robot) -> None:
+        """A robot pushed off its path (by avoiding or backing off) whose straight way to the next
+        waypoint is walled off plans its path again from where it is (no virtual wall: the map,
+        not a robot, is in the way)."""
+        r.off_path = False
+        path = self._finders[r.radius].find(tuple(r.pos), r.goal)
+        if path is not None:
+            self._set_path(r, path)
+
+    def _skip_covered_waypoints(self, r: _Robot, sensed: list[RobotView]) -> bool:
+        """Interpretation: a waypoint (not the goal) on which a robot stands cannot be reached; the
+        robot heads for the next one instead if the straight way there is free of walls (it will
+        avoid the standing robot on the way); otherwise the behaviours fail and it re-plans."""
+        skipped = False
+        while r.wp < len(r.path) - 1 and any(
+                not o.travelling and math.dist(o.position, r.path[r.wp]) < r.radius + o.radius for o in sensed):
+            if not self._finders[r.radius].segment_free(tuple(r.pos), tuple(r.path[r.wp + 1])):
+                break
+            r.wp += 1
+            skipped = True
+        return skipped
 
     def _docking(self, r: _Robot) -> bool:
         """Station rules (IV.A, IV.B.8); True when they decided the robot's behaviour."""
@@ -855,8 +914,8 @@ class BehaviorFleet:
                       stalled: bool) -> bool:
         """Avoid / Exchange: pick the side to pass the partner on; True when the behaviour failed
         and the robot must re-plan (IV.C.2-3). A sidestep refused by the safety layer for
-        ``blocked_timeout``, or a behaviour not completed within ``avoid_timeout``, counts as no
-        free space."""
+        ``blocked_timeout``, or a behaviour that brought the robot no closer to its goal for
+        ``avoid_timeout``, counts as no free space."""
         partner = next((o for o in sensed if o.id == r.partner), None)
         if partner is None or self._frame(r) is None:
             return False
@@ -885,26 +944,63 @@ class BehaviorFleet:
     def _replan(self, r: _Robot, sensed: Sequence[RobotView]) -> None:
         """IV.C: a new path to the goal with a virtual wall between the robot and its next waypoint.
 
-        Interpretation: the robots standing in range, and those waiting close by, are kept out of
-        the new path as well where possible (they are what the behaviour failed on); without such a path the wall
-        alone is used, and without any the robot keeps its path.
+        Interpretation: the new path also keeps out of the robots standing in range (parked robots
+        do not give way) and, where possible, of those waiting close by (what the behaviour failed
+        on), by enough to keep them out of its critical area. Without such a path the robot keeps
+        its path, waits for its partner if it has one, and does not search again for
+        ``blocked_timeout`` (a wait cycle is then found by WaitMessages, and another robot in it
+        re-plans).
         """
         if r.path is None or r.goal is None:
             return
-        wall = virtual_wall_cells(self.grid, tuple(r.pos), tuple(r.path[r.wp]), r.goal, r.radius)
-        near = self.params.front_length + 2 * r.radius
-        keep_out = [(o.position, r.radius + o.radius + self.params.safety_margin) for o in sensed
-                    if not o.travelling or (o.behavior.is_wait and math.dist(o.position, r.pos) <= near + o.radius)]
-        finder = self._finders[r.radius]
-        path = finder.find(tuple(r.pos), r.goal, avoid=keep_out, blocked_cells=wall)
-        if path is None and keep_out:
-            path = finder.find(tuple(r.pos), r.goal, blocked_cells=wall)
+        path = None
+        if self.time >= r.replan_after:
+            path = self._find_detour(r, sensed)
+            if path is None:
+                r.replan_after = self.time + self.params.blocked_timeout
         if path is None:
-            self._replan_failures += 1
+            if r.partner is not None and r.behavior.is_active:
+                self._set(r, B.WAIT_KEEP_DISTANCE, r.partner)
             return
         self._replans += 1
         self._set_path(r, path)
         self._set(r, B.FOLLOW_WAYPOINT, None)
+
+    def _ahead(self, r: _Robot) -> list[Point]:
+        """Where the virtual wall goes: from the robot to its next waypoint and, when that is
+        closer than a front length, on along the path for a front length (interpretation: our
+        straightened paths have few waypoints, and a wall shorter than the robot's front area
+        leaves the blocked way open)."""
+        points, left = [tuple(r.pos)], self.params.front_length
+        for q in r.path[r.wp:]:
+            step = math.dist(points[-1], q)
+            if step >= left and len(points) > 1:
+                t = left / step
+                points.append((points[-1][0] + (q[0] - points[-1][0]) * t, points[-1][1] + (q[1] - points[-1][1]) * t))
+                break
+            points.append((float(q[0]), float(q[1])))
+            left -= step
+            if left <= 0:
+                break
+        return points
+
+    def _find_detour(self, r: _Robot, sensed: Sequence[RobotView]) -> np.ndarray | None:
+        """The re-planned path, or None (counted as a failed re-plan)."""
+        wall = virtual_wall_cells(self.grid, self._ahead(r), r.goal, r.radius)
+        reach = self.params.front_length + 2 * r.radius
+
+        def keep_out(with_waiting: bool) -> list[tuple[Point, float]]:
+            return [(o.position, r.radius + o.radius + self.params.critical_margin) for o in sensed
+                    if not o.travelling or (with_waiting and o.behavior.is_wait
+                                            and math.dist(o.position, r.pos) <= reach + o.radius)]
+
+        finder = self._finders[r.radius]
+        path = finder.find(tuple(r.pos), r.goal, avoid=keep_out(True), blocked_cells=wall)
+        if path is None:
+            path = finder.find(tuple(r.pos), r.goal, avoid=keep_out(False), blocked_cells=wall)
+        if path is None:
+            self._replan_failures += 1
+        return path
 
     # -- motion ---------------------------------------------------------------------------------
     def _move(self, dt: float, views: dict[str, RobotView], near: list[list[int]]) -> None:
@@ -919,19 +1015,20 @@ class BehaviorFleet:
         for k in range(n):
             grid_of.setdefault((int(old[k, 0] // cell), int(old[k, 1] // cell)), []).append(k)
         for k, r in enumerate(self._robots):
-            sensed = [views[self._robots[j].id] for j in near[k]]
-            wanted = False
-            for q, wp in self._candidates(r, dt, views, sensed):
-                wanted = True
+            candidates = self._candidates(r, dt, views, [self._robots[j].id for j in near[k]])
+            for n_tried, (q, wp) in enumerate(candidates):
                 cx, cy = int(q[0] // cell), int(q[1] // cell)
                 close = [j for dx in (-1, 0, 1) for dy in (-1, 0, 1) for j in grid_of.get((cx + dx, cy + dy), ())]
-                if self._safe(k, q, close, old, new, radii):
+                why = self._refusal(k, q, close, old, new, radii)
+                if why == "map" and n_tried == 0 and r.behavior in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK):
+                    r.off_path = True     # the straight way to the next waypoint hits a wall
+                if why is None:
                     new[k] = q
                     r.pos = q
                     self._advance(r, wp)
                     break
             else:
-                if wanted:
+                if candidates:
                     self._refused += 1
                     if r.blocked_since is None:
                         r.blocked_since = self.time
@@ -942,14 +1039,19 @@ class BehaviorFleet:
                 r.holds = None
                 self._set(r, B.FOLLOW_WAYPOINT, None)
 
-    def _safe(self, k: int, q: np.ndarray, close: list[int], old: np.ndarray, new: np.ndarray,
-              radii: np.ndarray) -> bool:
-        """The hard safety layer: the disc at ``q`` stays in free space and at least the sum of
-        radii (plus the safety margin, unless the move increases the distance) from every other
-        robot's position at the start of the step and, for robots moved already, its new one."""
+    def _refusal(self, k: int, q: np.ndarray, close: list[int], old: np.ndarray, new: np.ndarray,
+                 radii: np.ndarray) -> str | None:
+        """The hard safety layer: why the disc may not move to ``q`` ("map" or "robot"), or None.
+
+        The disc must stay in free space and at least the sum of radii (plus the safety margin,
+        unless the move increases the distance) from every other robot's position at the start of
+        the step and, for robots moved already, its new one.
+        """
         r = self._robots[k]
-        if not self.grid.disc_is_free(float(q[0]), float(q[1]), r.radius):
-            return False
+        if r.clear_at[2] - math.dist(q, r.clear_at[:2]) < r.radius:   # not sure from the last measurement
+            r.clear_at = (float(q[0]), float(q[1]), self.grid.clearance(float(q[0]), float(q[1])))
+            if r.clear_at[2] < r.radius - _EPS:
+                return "map"
         margin = self.params.safety_margin
         for j in close:
             if j == k:
@@ -958,8 +1060,8 @@ class BehaviorFleet:
             for pj in (old[j], new[j]):
                 d_new = math.dist(q, pj)
                 if d_new < touch or (d_new < touch + margin and d_new < math.dist(old[k], pj)):
-                    return False
-        return True
+                    return "robot"
+        return None
 
     def _advance(self, r: _Robot, wp: int) -> None:
         """Commit the waypoint index after a move; arriving at the goal ends the path."""
@@ -967,7 +1069,7 @@ class BehaviorFleet:
             return
         r.wp = wp
         if wp >= len(r.path):
-            r.path = r.tail = None
+            r.path = r.tail = r.run = None
             r.arrived = True
             self._set(r, B.DOCK if r.holds else B.FOLLOW_WAYPOINT, None)
 
@@ -985,7 +1087,7 @@ class BehaviorFleet:
         return p, wp
 
     def _candidates(self, r: _Robot, dt: float, views: dict[str, RobotView],
-                    sensed: list[RobotView]) -> list[tuple[np.ndarray, int]]:
+                    sensed: list[str]) -> list[tuple[np.ndarray, int]]:
         """Motions the behaviour wants this step, preferred first: ``(new position, next waypoint
         index after it)``, index -1 when the move leaves the path index unchanged."""
         if r.path is None:
@@ -1017,7 +1119,7 @@ class BehaviorFleet:
                 away = np.array([-du[1], du[0]]) * (1.0 if lateral >= 0 else -1.0)
                 return [(r.pos + away * min(step, half - abs(lateral) + _EPS), -1)]
         # waits: hold, backing off from a robot closer than the kept gap
-        others = [partner] if b is not B.WAIT_FOR_DOCKING and partner is not None else sensed
+        others = [partner] if b is not B.WAIT_FOR_DOCKING and partner is not None else [views[i] for i in sensed]
         return self._back_off(r, others, step / 2)
 
     def _back_off(self, r: _Robot, others: Sequence[RobotView], step: float) -> list[tuple[np.ndarray, int]]:

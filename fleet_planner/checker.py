@@ -261,7 +261,10 @@ def _check_obstacles(grid: GridMap, specs: Sequence[RobotSpec], paths: Sequence[
     geoms_arr = np.array(geoms, dtype=object)
     owner_arr = np.array(owner)
     reach = np.array([specs[i].radius for i in owner_arr]) - tol
-    hit = shapely.dwithin(grid.obstacle_geometry, geoms_arr, np.maximum(reach, 0.0))
+    # plain distance, not the faster "dwithin" predicate: GEOS 3.14's dwithin misses zero-length
+    # segments (holds), and the oracle must not share that blind spot
+    dist = shapely.distance(grid.obstacle_geometry, geoms_arr)
+    hit = dist < reach
     out: list[Violation] = []
     reported: set[int] = set()
     for g in np.nonzero(hit)[0]:
@@ -270,11 +273,10 @@ def _check_obstacles(grid: GridMap, specs: Sequence[RobotSpec], paths: Sequence[
             continue
         reported.add(idx)
         spec, wp, k = specs[idx], paths[idx].waypoints, first_wp[g]
-        dist = float(shapely.distance(grid.obstacle_geometry, geoms_arr[g]))
         where = (f"waypoint {k} ({wp[k, 0]:.6g}, {wp[k, 1]:.6g})" if len(wp) == 1 else
                  f"segment {k}->{k + 1} ({wp[k, 0]:.6g}, {wp[k, 1]:.6g})->({wp[k + 1, 0]:.6g}, {wp[k + 1, 1]:.6g})")
         out.append(Violation("obstacle", (spec.id,), float(wp[k, 2]),
-                             f"{where} passes {dist:.6g} m from an obstacle or the map edge, "
+                             f"{where} passes {dist[g]:.6g} m from an obstacle or the map edge, "
                              f"radius is {spec.radius:.6g} m"))
     return out
 

@@ -4,7 +4,8 @@ Left: the map drawn like the ``.map`` file (row 0 on top, y downwards), one colo
 hollow start discs, filled goal discs, ids at the starts. Right (when the plan carries the md
 planner's ``network``): for the most constrained lower-priority robot(s), the travelled length
 versus time curve (TLVSTC) and the collision boxes ``[ks, ke] x [ls, le]`` of their inlet links
-``(i, j, k)``: a valid departure delay steers the curve around every box.
+``(i, j, k)``. A box bounds a collision region: a planner working with boxes steers the curve around
+every box, one working with the exact regions may cut a box's corner where the region leaves room.
 """
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ from .model import Plan, RobotSpec, TimedPath
 MAX_TLVSTC_PANELS = 2
 #: above this many robots, ids are not written on the map (they would only be noise)
 MAX_LABELS = 60
+#: at most this many collision boxes are named (i, j, k) in a TLVSTC panel
+MAX_BOX_LABELS = 10
 
 
 def _colours(n: int) -> list:
@@ -55,8 +58,10 @@ def most_constrained(network: dict[str, Any], count: int = MAX_TLVSTC_PANELS) ->
 
 
 def _draw_map(ax, grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, colour: dict, focus: set[str]) -> None:
+    from matplotlib import patheffects
     from matplotlib.patches import Circle
 
+    halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
     w, h = grid.size_m
     ax.imshow(np.where(grid.blocked, 0.25, 0.97), cmap="gray", vmin=0, vmax=1, extent=(0, w, h, 0),
               origin="upper", interpolation="nearest")
@@ -64,7 +69,10 @@ def _draw_map(ax, grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, colour
     ax.set_ylim(h, 0)
     ax.set_aspect("equal")
     paths = plan.by_id()
-    scale = max(0.4, min(2.0, 30.0 / max(1, len(robots)) ** 0.5))
+    # line widths and fonts follow the drawn size of a metre (points per metre of the map)
+    bbox = ax.get_window_extent()
+    pt_per_m = bbox.width * 72.0 / ax.figure.dpi / w
+    scale = float(np.clip(0.35 * pt_per_m, 0.5, 2.0))
     for spec in robots:
         c = colour[spec.id]
         path = paths.get(spec.id)
@@ -76,14 +84,26 @@ def _draw_map(ax, grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, colour
         ax.add_patch(Circle(spec.start, spec.radius, fill=False, ec=c, lw=scale * 1.2, zorder=4))
         ax.add_patch(Circle(spec.goal, spec.radius, fc=c, ec="black" if strong else c, lw=0.6, alpha=0.9, zorder=4))
         if len(robots) <= MAX_LABELS or strong:
-            ax.annotate(spec.id, spec.start, xytext=(0, -1.15 * spec.radius), textcoords="offset fontsize",
-                        ha="center", va="bottom", fontsize=max(5.0, 8 * scale ** 0.5), color=c,
-                        fontweight="bold" if strong else "normal", zorder=5)
+            # in the hollow start disc, with a white halo so the path under it does not hide it
+            ax.annotate(spec.id, spec.start, ha="center", va="center", fontsize=max(5.0, 8 * scale ** 0.5),
+                        color=c, fontweight="bold", zorder=5, path_effects=halo)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m] (downwards, as in the map file)")
 
 
+def _box_slack(times: np.ndarray, length: np.ndarray, box: tuple[float, float, float, float]) -> float:
+    """How far in time the curve passes from a box: >= 0 when it passes before (above-left: leaves
+    ``le`` before ``ks``) or after it (below-right: reaches ``ls`` after ``ke``), < 0 when it crosses."""
+    ks, ke, ls, le = box
+    up = np.concatenate([[True], np.diff(length) > 0])        # first instant at each length
+    down = np.concatenate([np.diff(length) > 0, [True]])      # last instant at each length
+    first_at_ls = float(np.interp(ls, length[up], times[up]))
+    last_at_le = float(np.interp(le, length[down], times[down]))
+    return max(first_at_ls - ke, ks - last_at_le)
+
+
 def _draw_tlvstc(ax, rid: str, path: TimedPath, network: dict[str, Any], colour: dict) -> None:
+    from matplotlib import patheffects
     from matplotlib.patches import Rectangle
 
     links = [lk for lk in network.get("links", []) if lk["j"] == rid]
@@ -91,13 +111,19 @@ def _draw_tlvstc(ax, rid: str, path: TimedPath, network: dict[str, Any], colour:
     times, length = travelled_length(path)
     t_end = max([times[-1]] + [float(lk["ke"]) for lk in links]) * 1.08 + 0.5
     times_ext, length_ext = np.append(times, t_end), np.append(length, length[-1])
-    for lk in links:
+    boxes = [tuple(float(lk[key]) for key in ("ks", "ke", "ls", "le")) for lk in links]
+    # with many boxes, name only the ones the curve passes closest to (those that set the delay)
+    slack = [_box_slack(times, length, b) for b in boxes]
+    named = set(np.argsort(slack)[:MAX_BOX_LABELS].tolist())
+    for n, (lk, (ks, ke, ls, le)) in enumerate(zip(links, boxes)):
         c = colour.get(lk["i"], "grey")
-        ks, ke, ls, le = (float(lk[key]) for key in ("ks", "ke", "ls", "le"))
-        ax.add_patch(Rectangle((ks, ls), max(ke - ks, 1e-3), max(le - ls, 1e-3), fc=c, ec=c, alpha=0.28, lw=1.2))
-        ax.add_patch(Rectangle((ks, ls), max(ke - ks, 1e-3), max(le - ls, 1e-3), fill=False, ec=c, lw=1.2))
-        ax.annotate(f"({lk['i']},{lk['j']},{lk.get('k', 1)})", ((ks + ke) / 2, le), xytext=(0, 2),
-                    textcoords="offset points", ha="center", va="bottom", fontsize=7, color=c)
+        size = (max(ke - ks, 1e-3), max(le - ls, 1e-3))
+        ax.add_patch(Rectangle((ks, ls), *size, fc=c, ec="none", alpha=0.25))
+        ax.add_patch(Rectangle((ks, ls), *size, fill=False, ec=c, lw=1.2))
+        if n in named:
+            ax.annotate(f"({lk['i']},{lk['j']},{lk.get('k', 1)})", ((ks + ke) / 2, le), xytext=(0, 2),
+                        textcoords="offset points", ha="center", va="bottom", fontsize=7, color=c,
+                        path_effects=[patheffects.withStroke(linewidth=2, foreground="white")])
     if delay > 0:
         moving = times >= delay
         ax.plot(np.concatenate([[0.0], times[moving] - delay, [t_end]]),
@@ -105,12 +131,13 @@ def _draw_tlvstc(ax, rid: str, path: TimedPath, network: dict[str, Any], colour:
                 label="without delay")
     ax.plot(times_ext, length_ext, color=colour[rid], lw=2.2, label=f"{rid} (delay {delay:.2f} s)")
     ax.set_xlim(0, t_end)
-    ax.set_ylim(0, max(length[-1], max([float(lk["le"]) for lk in links], default=0.0)) * 1.1 + 0.1)
+    ax.set_ylim(0, max(length[-1], max([b[3] for b in boxes], default=0.0)) * 1.1 + 0.1)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"travelled length of {rid} [m]")
-    ax.set_title(f"TLVSTC of {rid}: {len(links)} inlet collision box(es)", fontsize=10)
+    shown = "" if len(links) <= MAX_BOX_LABELS else f", the {MAX_BOX_LABELS} nearest named"
+    ax.set_title(f"TLVSTC of {rid}: {len(links)} inlet collision box(es){shown}", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="best", fontsize=8)
 
 
 def plot_plan(grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, path_png: str | Path,

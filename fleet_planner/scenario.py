@@ -208,8 +208,10 @@ def dump_scenario(scenario: Scenario, path: str | Path) -> None:
     path = Path(path)
     lines = ["map:"]
     if scenario.map_file is not None:
-        rel = os.path.relpath(Path(scenario.map_file).resolve(), path.resolve().parent)
-        lines.append(f"  file: {json.dumps(rel)}")
+        map_file, here = Path(scenario.map_file).resolve(), path.resolve().parent
+        # relative when both share a directory below the root, so the pair can be moved together
+        shared = os.path.commonpath([map_file, here]) != map_file.anchor
+        lines.append(f"  file: {json.dumps(os.path.relpath(map_file, here) if shared else str(map_file))}")
     else:
         lines.append("  rows:")
         lines.extend(f"    - \"{''.join('@' if b else '.' for b in row)}\"" for row in scenario.grid.blocked)
@@ -291,7 +293,12 @@ def plan_to_dict(plan: Plan) -> dict[str, Any]:
 
 
 def write_plan(plan: Plan, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(plan_to_dict(plan), indent=1, default=_jsonable) + "\n")
+    """Write the plan file: one line per top-level key and one line per robot (diff- and grep-friendly)."""
+    data = plan_to_dict(plan)
+    robots = ",\n".join("  " + json.dumps(r) for r in data.pop("robots"))
+    head = "".join(f" {json.dumps(k)}: {json.dumps(data[k])},\n" for k in ("planner", "planning_time_s"))
+    tail = f",\n \"info\": {json.dumps(data['info'])}" if "info" in data else ""
+    Path(path).write_text("{\n" + head + f' "robots": [\n{robots}\n ]' + tail + "\n}\n")
 
 
 def plan_from_dict(data: Any) -> Plan:

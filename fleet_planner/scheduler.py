@@ -89,6 +89,7 @@ class Blocked:
     j: int
     blocker: int
     why: str
+    kind: str = "goal"   # "goal": blocker parks in j's way; "start": blocker passes j's start too early
 
 
 def _num(x: float) -> float | None:
@@ -111,6 +112,7 @@ class DelayScheduler:
         self.speeds = np.asarray(speeds, dtype=float)
         self.delays = np.zeros(len(speeds))
         self.mode = mode
+        self._done: set[int] = set()   # robots whose delay is up to date
 
     def travel(self, x: int) -> float:
         return float(self.model.lengths[x] / self.speeds[x])
@@ -161,77 +163,89 @@ class DelayScheduler:
                     why = ("parks on its goal in the way" if np.isinf(t4[n])
                            else "drives through its start disc before it can leave")
                     self.delays[j] = d
-                    return Blocked(j, who[n], why)
+                    return Blocked(j, who[n], why, "goal" if np.isinf(t4[n]) else "start")
                 d += float(D[danger].max())
         self.delays[j] = d
         return None
 
     def _schedule_exact(self, j: int, rank: dict[int, int]) -> Blocked | None:
         """Smallest delay of j outside every forbidden interval of its higher-priority neighbours."""
-        lo_parts, hi_parts, who_parts, kind_parts = [], [], [], []
-        vj, Lj = self.speeds[j], self.model.lengths[j]
-        for i in self.model.neighbours(j):
-            if rank.get(i, INF) >= rank[j]:
-                continue
-            P = self.model.pieces(i, j)
-            di, vi, Li = self.delays[i], self.speeds[i], self.model.lengths[i]
-            if i < j:   # i is the table's x
-                phi_lo, phi_hi = di + P[:, C.P_PHI_LO], di + P[:, C.P_PHI_HI]
-                i_first, i_start = P[:, C.P_X_FIRST] > 0, P[:, [C.P_XS_LO, C.P_XS_HI]]
-                i_last, i_end = P[:, C.P_X_LAST] > 0, P[:, [C.P_XE_LO, C.P_XE_HI]]
-                j_first, j_start = P[:, C.P_Y_FIRST] > 0, P[:, [C.P_YS_LO, C.P_YS_HI]]
-                j_last, j_end = P[:, C.P_Y_LAST] > 0, P[:, [C.P_YE_LO, C.P_YE_HI]]
-            else:
-                phi_lo, phi_hi = di - P[:, C.P_PHI_HI], di - P[:, C.P_PHI_LO]
-                i_first, i_start = P[:, C.P_Y_FIRST] > 0, P[:, [C.P_YS_LO, C.P_YS_HI]]
-                i_last, i_end = P[:, C.P_Y_LAST] > 0, P[:, [C.P_YE_LO, C.P_YE_HI]]
-                j_first, j_start = P[:, C.P_X_FIRST] > 0, P[:, [C.P_XS_LO, C.P_XS_HI]]
-                j_last, j_end = P[:, C.P_X_LAST] > 0, P[:, [C.P_XE_LO, C.P_XE_HI]]
-            t_i_first = np.where(j_start[:, 0] <= EPS, 0.0, di + j_start[:, 0] / vi)
-            t_i_last = np.where(j_end[:, 1] >= Li - EPS, INF, di + j_end[:, 1] / vi)
-            with np.errstate(invalid="ignore"):
-                cand = [  # (mask, lo, hi, kind) - kind names the reason if it ends up blocking j
-                    (np.isfinite(phi_lo), phi_lo, phi_hi, "move"),
-                    (i_first & (i_start[:, 0] <= i_start[:, 1]), -i_start[:, 1] / vj, di - i_start[:, 0] / vj, "move"),
-                    (i_last & (i_end[:, 0] <= i_end[:, 1]), di + Li / vi - i_end[:, 1] / vj, np.full(len(P), INF), "goal"),
-                    (j_first & (j_start[:, 0] <= j_start[:, 1]), t_i_first, np.full(len(P), INF), "start"),
-                    (j_last & (j_end[:, 0] <= j_end[:, 1]), np.full(len(P), -INF), t_i_last - Lj / vj, "move"),
-                ]
-            for mask, lo, hi, kind in cand:
-                if mask.any():
-                    lo_parts.append(lo[mask])
-                    hi_parts.append(hi[mask])
-                    who_parts.append(np.full(int(mask.sum()), i))
-                    kind_parts.append(np.full(int(mask.sum()), kind))
-        if not lo_parts:
+        higher = [i for i in self.model.neighbours(j) if rank.get(i, INF) < rank[j]]
+        if not higher:
             self.delays[j] = 0.0
             return None
-        lo, hi = np.concatenate(lo_parts), np.concatenate(hi_parts)
+        tables = [self.model.pieces(i, j) for i in higher]
+        P = np.vstack(tables)
+        who = np.repeat(higher, [len(t) for t in tables])
+        di, vi, Li = self.delays[who], self.speeds[who], self.model.lengths[who]
+        vj, Lj = self.speeds[j], self.model.lengths[j]
+        sw = who > j   # the piece table lists the smaller index first: is i the table's y?
+
+        def col(x_col: int, y_col: int) -> np.ndarray:
+            return np.where(sw, P[:, y_col], P[:, x_col])
+
+        phi_lo = np.where(sw, di - P[:, C.P_PHI_HI], di + P[:, C.P_PHI_LO])
+        phi_hi = np.where(sw, di - P[:, C.P_PHI_LO], di + P[:, C.P_PHI_HI])
+        i_first, i_last = col(C.P_X_FIRST, C.P_Y_FIRST) > 0, col(C.P_X_LAST, C.P_Y_LAST) > 0
+        j_first, j_last = col(C.P_Y_FIRST, C.P_X_FIRST) > 0, col(C.P_Y_LAST, C.P_X_LAST) > 0
+        is_lo, is_hi = col(C.P_XS_LO, C.P_YS_LO), col(C.P_XS_HI, C.P_YS_HI)   # j's range, i at a segment start
+        ie_lo, ie_hi = col(C.P_XE_LO, C.P_YE_LO), col(C.P_XE_HI, C.P_YE_HI)   # j's range, i at a segment end
+        js_lo, js_hi = col(C.P_YS_LO, C.P_XS_LO), col(C.P_YS_HI, C.P_XS_HI)   # i's range, j at a segment start
+        je_hi = col(C.P_YE_HI, C.P_XE_HI)                                     # i's range, j at a segment end
+        je_lo = col(C.P_YE_LO, C.P_XE_LO)
+        with np.errstate(invalid="ignore"):
+            t_i_first = np.where(js_lo <= EPS, 0.0, di + js_lo / vi)          # i there from t = 0 if at its start
+            t_i_last = np.where(je_hi >= Li - EPS, INF, di + je_hi / vi)      # ... for ever if at its goal
+            cand = [  # (mask, lo, hi, kind): open intervals of forbidden delays of j
+                (np.isfinite(phi_lo), phi_lo, phi_hi, "move"),                             # both moving
+                (i_first & (is_lo <= is_hi), -is_hi / vj, di - is_lo / vj, "move"),          # i parked at start
+                (i_last & (ie_lo <= ie_hi), di + Li / vi - ie_hi / vj, INF, "goal"),         # i parked at goal
+                (j_first & (js_lo <= js_hi), t_i_first, INF, "start"),                       # j parked at start
+                (j_last & (je_lo <= je_hi), -INF, t_i_last - Lj / vj, "move"),               # j parked at goal
+            ]
+        lo = np.concatenate([np.broadcast_to(c[1], len(P))[c[0]] for c in cand])
+        hi = np.concatenate([np.broadcast_to(c[2], len(P))[c[0]] for c in cand])
+        src = np.concatenate([np.nonzero(c[0])[0] for c in cand])
+        kind = np.concatenate([np.full(int(c[0].sum()), k) for k, c in enumerate(cand)])
+        if len(lo) == 0:
+            self.delays[j] = 0.0
+            return None
         order = np.argsort(lo, kind="stable")
-        lo, hi = lo[order], hi[order]
-        reach = np.maximum(np.maximum.accumulate(hi), 0.0)
+        reach = np.maximum(np.maximum.accumulate(hi[order]), 0.0)
         before = np.concatenate([[0.0], reach[:-1]])
-        gap = np.nonzero(lo >= before)[0]      # first interval that starts at or after the reach
+        gap = np.nonzero(lo[order] >= before)[0]   # first interval starting at or after the reach
         d = float(before[gap[0]]) if len(gap) else float(reach[-1])
         if math.isinf(d):
             # the culprit: of the unbounded intervals, the one the sweep reached first
-            lo_all, hi_all = np.concatenate(lo_parts), np.concatenate(hi_parts)
-            unbounded = np.nonzero(np.isinf(hi_all))[0]
-            n = int(unbounded[np.argmin(lo_all[unbounded])])
-            kind = np.concatenate(kind_parts)[n]
-            why = {"goal": "parks on its goal in the way",
-                   "start": "drives through its start disc before it can leave"}.get(kind, "is in the way")
+            unbounded = np.nonzero(np.isinf(hi))[0]
+            n = int(unbounded[np.argmin(lo[unbounded])])
+            start = int(kind[n]) == 3
+            why = "drives through its start disc before it can leave" if start else "parks on its goal in the way"
             self.delays[j] = 0.0
-            return Blocked(j, int(np.concatenate(who_parts)[n]), why)
+            return Blocked(j, int(who[src[n]]), why, "start" if start else "goal")
         self.delays[j] = d
         return None
 
-    def schedule(self, order: Sequence[int], start_at: int = 0) -> Blocked | None:
+    def schedule(self, order: Sequence[int], start_at: int = 0, dirty: set[int] | None = None) -> Blocked | None:
+        """Schedule ``order[start_at:]``, highest first. With ``dirty`` (robots whose paths or rank
+        changed since the last call, plus their neighbours), a robot is recomputed only if it is
+        dirty, was not scheduled last time, or a higher neighbour's delay changed: a re-ordering
+        then costs what it changes, not the whole fleet."""
         rank = {x: n for n, x in enumerate(order)}
+        changed: set[int] = set()
         for n in range(start_at, len(order)):
-            blocked = self.schedule_robot(order[n], rank)
-            if blocked:
-                return blocked
+            x = order[n]
+            if (dirty is None or x in dirty or x not in self._done
+                    or any(h in changed for h in self.model.neighbours(x) if rank[h] < n)):
+                before = self.delays[x]
+                blocked = self.schedule_robot(x, rank)
+                if blocked:
+                    self._done.discard(x)
+                    self._done.difference_update(order[n + 1:])
+                    return blocked
+                self._done.add(x)
+                if self.delays[x] != before:
+                    changed.add(x)
         return None
 
     def network(self, order: Sequence[int], ids: Sequence[str]) -> Network:

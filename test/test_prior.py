@@ -74,7 +74,7 @@ def solo_arrival(grid: GridMap, robot: RobotSpec) -> float:
 # ---------------------------------------------------------------------------------------------
 POCKET = ["#########",
           "#.......#",
-          "#####.###",
+          "####.####",
           "#########"]
 
 
@@ -87,7 +87,7 @@ def test_swap_through_a_corridor_with_a_side_pocket():
     assert_valid(grid, robots, plan)
     # one of them must have stepped into the pocket to let the other pass
     visited = np.vstack([p.waypoints[:, :2] for p in plan.paths])
-    assert np.any(np.all(np.isclose(visited, grid.centre(5, 2)), axis=1))
+    assert np.any(np.all(np.isclose(visited, grid.centre(4, 2)), axis=1))
 
 
 def test_the_lower_robot_waits_at_a_crossing():
@@ -118,6 +118,7 @@ def test_a_start_in_the_only_way_fails_without_reordering():
         PriorPlanner(max_reorders=0).plan(grid, robots)
     assert set(err.value.failures) == {"a"}
     assert "'c'" in err.value.failures["a"] and "start" in err.value.failures["a"]
+    assert err.value.blockers == {"a": "c"}
 
 
 def test_a_start_in_the_only_way_is_left_in_time_with_reordering():
@@ -127,6 +128,16 @@ def test_a_start_in_the_only_way_is_left_in_time_with_reordering():
     plan = PriorPlanner().plan(grid, robots)
     assert_valid(grid, robots, plan)
     assert plan.info["reorders"] >= 1
+
+
+def test_a_robot_staying_put_steps_aside_and_comes_back():
+    grid = GridMap.from_rows(BRANCH)
+    robots = [RobotSpec("a", 0.4, 1.0, grid.centre(0, 0), grid.centre(7, 0)),
+              RobotSpec("idle", 0.4, 1.0, grid.centre(5, 0), grid.centre(5, 0))]
+    plan = PriorPlanner().plan(grid, robots)
+    assert_valid(grid, robots, plan)
+    idle = plan.by_id()["idle"].waypoints
+    assert np.any(np.all(np.isclose(idle[:, :2], grid.centre(4, 1)), axis=1))
 
 
 def test_no_way_at_all_names_the_robot_and_the_reason():
@@ -157,8 +168,10 @@ def _random_robots(grid: GridMap, n: int, seed: int, radii=(0.3, 0.45), speeds=(
 def test_twenty_random_robots_on_an_open_map():
     grid = GridMap.from_rows(["." * 20] * 20)
     robots = _random_robots(grid, 20, seed=3)
-    plan = PriorPlanner().plan(grid, robots)
+    calls = []
+    plan = PriorPlanner().plan(grid, robots, progress=lambda done, total, what: calls.append((done, total)))
     assert_valid(grid, robots, plan)
+    assert calls[-1] == (20, 20)
     # straight runs are one segment, not one per cell
     assert max(len(p.waypoints) for p in plan.paths) < 20
 
@@ -206,6 +219,15 @@ def test_incremental_rejects_a_robot_standing_in_a_fixed_robots_way():
     with pytest.raises(PlanningError) as err:
         PriorPlanner().plan_incremental(grid, new, fixed, 2.0)
     assert "'f'" in err.value.failures["n"]
+
+
+def test_incremental_names_a_fixed_robot_parked_in_the_only_way():
+    grid = GridMap.from_rows(["......"])
+    fixed = [TimedPath("f", 0.4, np.array([[3.5, 0.5, 0.0]]))]   # standing, for ever
+    new = [RobotSpec("n", 0.4, 1.0, (0.5, 0.5), (5.5, 0.5))]
+    with pytest.raises(PlanningError) as err:
+        PriorPlanner().plan_incremental(grid, new, fixed, 1.0)
+    assert "'f' parked" in err.value.failures["n"] and err.value.blockers == {"n": "f"}
 
 
 def test_bad_options_are_named():

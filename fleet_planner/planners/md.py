@@ -10,6 +10,7 @@
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Sequence
@@ -22,7 +23,7 @@ from ..model import Plan, PlanningError, RobotSpec, TimedPath, timed_path_from_p
 from ..scheduler import MODES, Blocked, DelayScheduler, Network
 from .base import Planner, Progress
 
-ORDERS = ("given", "shortest", "longest")
+ORDERS = ("parking", "given", "shortest", "longest")
 
 
 @dataclass
@@ -52,14 +53,16 @@ def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Seque
 class MDPlanner(Planner):
     """Central planner: safe paths, (M,D) network, departure delays, re-ordering on deadlock.
 
-    ``margin`` (m) is added to every pair's sum of radii; ``order`` is the initial priority
-    ("given": as listed; "shortest"/"longest": by straight-line distance to the goal);
+    ``margin`` (m) is added to every pair's sum of radii; ``order`` is the initial priority:
+    "parking" (default) puts first the robots whose start lies on many others' shortest paths
+    (they should leave early) and last those whose goal does (they should arrive late), "given"
+    keeps the list order, "shortest"/"longest" sort by straight-line distance to the goal;
     ``max_reorders`` bounds the re-ordering attempts (default 4 N); ``mode`` picks the collision
     test: "exact" (default; robots may follow each other) or "box" (paper 001 as written)."""
 
     name = "md"
 
-    def __init__(self, margin: float = 0.02, order: str = "given", max_reorders: int | None = None,
+    def __init__(self, margin: float = 0.02, order: str = "parking", max_reorders: int | None = None,
                  mode: str = "exact"):
         if mode not in MODES:
             raise ValueError(f"mode: must be one of {', '.join(MODES)} (got {mode!r})")
@@ -76,139 +79,214 @@ class MDPlanner(Planner):
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         t_start = time.perf_counter()
         robots = list(robots)
-        n = len(robots)
         _check_endpoints(robots, self.margin)
-        order = self._initial_order(robots)
-        rank = {x: k for k, x in enumerate(order)}
-        finder = _Finders(grid)
+        shortest: dict[int, np.ndarray] = {}
+        session = _Session(self, grid, robots, self._initial_order(grid, robots, shortest), fixed=0)
+        session.hints = shortest
+        session.route(progress)
+        session.resolve(progress)
+        network = session.sched.network(session.order, [r.id for r in robots])
+        return Plan("md", session.timed_paths(), time.perf_counter() - t_start,
+                    {"network": network.to_dict(), "mode": self.mode, "reorders": session.reorders,
+                     "reroutes": session.reroutes, "regions": session.model.region_count})
 
-        paths: list[np.ndarray | None] = [None] * n
-        for k, x in enumerate(order):
-            paths[x] = self._safe_path(finder, robots, x, rank)
-            if progress:
-                progress(k + 1, n, "paths")
-        missing = {robots[x].id: "no path from start to goal on this map for its radius"
-                   for x in range(n) if paths[x] is None}
-        if missing:
-            raise PlanningError(missing)
-
-        speeds = [r.max_speed for r in robots]
-        model = CollisionModel(paths, [r.radius for r in robots], self.margin, speeds)
-        sched = DelayScheduler(model, speeds, self.mode)
-        blocked = sched.schedule(order)
-        reorders = 0
-        swaps: dict[tuple[int, int], int] = {}
-        limit = 4 * n if self.max_reorders is None else self.max_reorders
-        while blocked is not None:
-            j, i = blocked.j, blocked.blocker
-            swaps[(j, i)] = swaps.get((j, i), 0) + 1
-            if reorders >= limit or swaps[(j, i)] > 2:
-                raise PlanningError({robots[j].id: f"blocked by {robots[i].id}, which {blocked.why}; "
-                                                   f"re-ordering did not help after {reorders} attempt(s)"})
-            reorders += 1
-            old_j, pos_i = rank[j], rank[i]
-            order.pop(old_j)
-            order.insert(pos_i, j)
-            rank = {x: k for k, x in enumerate(order)}
-            # robots between the blocker and j now have j above them: those crossing j's goal re-plan
-            replan = [j] + [x for x in order[pos_i + 1:old_j + 1]
-                            if _passes_near(paths[x], robots[j].goal,
-                                            robots[j].radius + robots[x].radius + self.margin)]
-            changed = {}
-            for x in replan:
-                new = self._safe_path(finder, robots, x, rank)
-                if new is None:
-                    raise PlanningError({robots[x].id: "no path from start to goal on this map for its radius"})
-                paths[x] = changed[x] = new
-            model.set_paths(changed)
-            blocked = sched.schedule(order, start_at=pos_i)
-            if progress:
-                progress(reorders, limit, "re-ordering")
-
-        network = sched.network(order, [r.id for r in robots])
-        timed = [timed_path_from_polyline(r.id, r.radius, paths[x], r.max_speed, float(sched.delays[x]))
-                 for x, r in enumerate(robots)]
-        return Plan("md", timed, time.perf_counter() - t_start,
-                    {"network": network.to_dict(), "mode": self.mode, "reorders": reorders,
-                     "regions": model.region_count})
-
-    # ------------------------------------------------------------------------------------------
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
                          t0: float) -> list[TimedPath]:
         """Plan new legs for ``robots`` (starting at ``t0`` from their ``start``) around trajectories
         that are already being driven and stay as they are (``fixed``, absolute times; a robot on
         its last waypoint stays there). The fixed robots rank above the new ones, so only the new
-        ones are delayed; new robots are re-ordered among themselves if needed. Returns timed paths
-        in absolute time, or raises PlanningError (with ``blockers``) naming who is in the way."""
+        ones are delayed, re-routed or re-ordered among themselves. Returns timed paths in absolute
+        time, or raises PlanningError (with ``blockers``) naming who is in the way."""
         robots = list(robots)
         kept = [_remaining(tp, t0) for tp in fixed]
-        nf, n = len(kept), len(kept) + len(robots)
+        nf = len(kept)
         specs = [RobotSpec(tp.robot_id, tp.radius, speed, tuple(poly[0]), tuple(poly[-1]))
                  for tp, (poly, _, speed) in zip(fixed, kept)] + robots
         _check_endpoints(specs[nf:], self.margin)
-        order = list(range(nf)) + [nf + x for x in self._initial_order(robots)]
-        rank = {x: k for k, x in enumerate(order)}
-        finder = _Finders(grid)
-        paths: list[np.ndarray | None] = [poly for poly, _, _ in kept] + [None] * len(robots)
-        for x in order[nf:]:
-            paths[x] = self._safe_path(finder, specs, x, rank)
-            if paths[x] is None:
-                raise PlanningError({specs[x].id: "no path from start to goal on this map for its radius"})
-        speeds = [s.max_speed for s in specs]
-        model = CollisionModel(paths, [s.radius for s in specs], self.margin, speeds)
-        sched = DelayScheduler(model, speeds, self.mode)
-        sched.delays[:nf] = [delay for _, delay, _ in kept]
-        blocked = sched.schedule(order, start_at=nf)
-        swaps: dict[tuple[int, int], int] = {}
-        while blocked is not None:
-            j, i = blocked.j, blocked.blocker
-            swaps[(j, i)] = swaps.get((j, i), 0) + 1
-            if i < nf or swaps[(j, i)] > 2 or sum(swaps.values()) > 4 * n:
-                raise PlanningError({specs[j].id: f"blocked by {specs[i].id}, which {blocked.why}"},
-                                    {specs[j].id: specs[i].id})
-            old_j, pos_i = rank[j], rank[i]
-            order.insert(pos_i, order.pop(old_j))
-            rank = {x: k for k, x in enumerate(order)}
-            changed = {}
-            for x in [j] + [x for x in order[pos_i + 1:old_j + 1]
-                            if _passes_near(paths[x], specs[j].goal, specs[j].radius + specs[x].radius + self.margin)]:
-                paths[x] = changed[x] = self._safe_path(finder, specs, x, rank)
-                if paths[x] is None:
-                    raise PlanningError({specs[x].id: "no path from start to goal on this map for its radius"})
-            model.set_paths(changed)
-            blocked = sched.schedule(order, start_at=pos_i)
-        out = []
-        for x in range(nf, n):
-            tp = timed_path_from_polyline(specs[x].id, specs[x].radius, paths[x], speeds[x], float(sched.delays[x]))
+        shortest: dict[int, np.ndarray] = {}
+        order = list(range(nf)) + [nf + x for x in self._initial_order(grid, robots, shortest)]
+        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[poly for poly, _, _ in kept])
+        session.hints = {nf + x: path for x, path in shortest.items()}
+        session.route()
+        session.sched.delays[:nf] = [delay for _, delay, _ in kept]
+        session.resolve()
+        out = session.timed_paths()[nf:]
+        for tp in out:
             tp.waypoints[:, 2] += t0
-            out.append(tp)
         return out
 
-    def _initial_order(self, robots: list[RobotSpec]) -> list[int]:
+    def _initial_order(self, grid: GridMap, robots: list[RobotSpec],
+                       shortest: dict[int, np.ndarray] | None = None) -> list[int]:
+        """The initial priority order; with ``shortest``, the "parking" order also leaves there
+        each robot's shortest path (a first guess the safe-path search can keep)."""
         idx = list(range(len(robots)))
-        if self.order == "given":
+        if self.order == "given" or len(robots) < 2:
             return idx
+        if self.order == "parking":
+            return _parking_order(grid, robots, self.margin, shortest)
         dist = [float(np.hypot(r.goal[0] - r.start[0], r.goal[1] - r.start[1])) for r in robots]
         return sorted(idx, key=lambda x: dist[x], reverse=self.order == "longest")
 
-    def _safe_path(self, finder: "_Finders", robots: list[RobotSpec], x: int, rank: dict[int, int]):
-        """FINDINGS 1: avoid lower robots' starts and higher robots' goals; else goals only; else none."""
-        me = robots[x]
-        starts, goals = [], []
-        for y, other in enumerate(robots):
-            if y == x:
-                continue
-            keep_out = me.radius + other.radius + self.margin
-            if rank[y] > rank[x]:
-                starts.append((other.start, keep_out))
-            else:
-                goals.append((other.goal, keep_out))
-        pf = finder.get(me.radius)
-        for avoid in (starts + goals, goals, []):
-            path = pf.find(me.start, me.goal, avoid=avoid)
-            if path is not None:
-                return path
+
+def _parking_order(grid: GridMap, robots: list[RobotSpec], margin: float,
+                   shortest: dict[int, np.ndarray] | None = None) -> list[int]:
+    """Priority from where robots park (FINDINGS 1 turned into an order): score = how many other
+    robots' shortest paths pass a robot's start disc minus how many pass its goal disc; the
+    highest score goes first, ties keep the list order. Robots standing in busy aisles then
+    leave before the others come through, and robots parking in them arrive after."""
+    import shapely
+
+    finders = _Finders(grid)
+    lines, owner = [], []
+    for x, r in enumerate(robots):
+        path = finders.get(r.radius).find(r.start, r.goal)
+        if shortest is not None and path is not None:
+            shortest[x] = path
+        if path is not None and len(path) > 1:
+            lines.append(shapely.LineString(path))
+            owner.append(x)
+    if not lines:
+        return list(range(len(robots)))
+    owner = np.array(owner)
+    tree = shapely.STRtree(lines)
+    reach = 2 * max(r.radius for r in robots) + margin
+    radii = np.array([r.radius for r in robots])
+    score = np.zeros(len(robots))
+    for what, sign in (("start", 1.0), ("goal", -1.0)):
+        pts = np.array([getattr(r, what) for r in robots], dtype=float)
+        qi, ti = tree.query(shapely.box(pts[:, 0] - reach, pts[:, 1] - reach, pts[:, 0] + reach, pts[:, 1] + reach))
+        other = owner[ti]
+        keep = other != qi
+        qi, ti, other = qi[keep], ti[keep], other[keep]
+        near = shapely.distance(shapely.points(pts[qi]), np.asarray(lines, dtype=object)[ti]) < radii[qi] + radii[other] + margin
+        np.add.at(score, qi[near], sign)
+    return sorted(range(len(robots)), key=lambda x: -score[x])
+
+
+class _Session:
+    """One planning problem being solved: robots (the first ``fixed`` of them keep their paths and
+    delays), their paths, the priority order, the collision model and the scheduler."""
+
+    def __init__(self, planner: MDPlanner, grid: GridMap, robots: list[RobotSpec], order: list[int],
+                 fixed: int, fixed_paths: Sequence[np.ndarray] = ()):
+        self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
+        self.margin = planner.margin
+        self.rank = {x: k for k, x in enumerate(order)}
+        self.finder = _Finders(grid)
+        self.paths: list[np.ndarray | None] = list(fixed_paths) + [None] * (len(robots) - fixed)
+        #: per robot, discs it was found to block and must keep off, by the robot whose start or
+        #: goal they are
+        self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {}
+        self.reorders = self.reroutes = 0
+        #: shortest paths already known (robot -> path): kept when they avoid what they must
+        self.hints: dict[int, np.ndarray] = {}
+
+    def keep_out(self, x: int, y: int) -> float:
+        return self.robots[x].radius + self.robots[y].radius + self.margin
+
+    def route(self, progress: Progress | None = None) -> None:
+        """Safe paths for every robot that is not fixed, then the collision model and scheduler."""
+        free = self.order[self.fixed:]
+        for k, x in enumerate(free):
+            self.paths[x] = self.safe_path(x)
+            if progress:
+                progress(k + 1, len(free), "paths")
+        missing = {self.robots[x].id: "no path from start to goal on this map for its radius"
+                   for x in free if self.paths[x] is None}
+        if missing:
+            raise PlanningError(missing)
+        speeds = [r.max_speed for r in self.robots]
+        self.model = CollisionModel(self.paths, [r.radius for r in self.robots], self.margin, speeds)
+        self.sched = DelayScheduler(self.model, speeds, self.planner.mode)
+
+    def safe_path(self, x: int, partner: int | None = None) -> np.ndarray | None:
+        """FINDINGS 1: avoid lower robots' starts and higher robots' goals; else goals only; else
+        none. Discs that x was found to block (``must``) are kept in every attempt but the last;
+        when those are too many to avoid together, the ones of ``partner`` (the robot of the
+        conflict being resolved) are tried alone."""
+        me, rank = self.robots[x], self.rank
+        starts = [(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
+                  if y != x and rank[y] > rank[x]]
+        goals = [(self.robots[y].goal, self.keep_out(x, y)) for y in range(len(self.robots))
+                 if y != x and rank[y] < rank[x]]
+        by_owner = self.must.get(x, {})
+        must = [d for discs in by_owner.values() for d in discs]
+        finders = [self.finder.get(me.radius), self.finder.get(me.radius, exact=True)]
+        if finders[0] is finders[1]:
+            finders.pop()
+        levels = [starts + goals + must, goals + must]
+        if must:
+            levels.append(must)
+        if partner in by_owner and len(by_owner) > 1:
+            levels.append(by_owner[partner])
+        levels.append([])
+        hint = self.hints.pop(x, None)
+        if hint is not None and _keeps_off(hint, levels[0], me.start, me.goal):
+            return hint
+        for avoid in levels:
+            for pf in finders:
+                path = pf.find(me.start, me.goal, avoid=avoid)
+                if path is not None:
+                    return path
         return None
+
+    def resolve(self, progress: Progress | None = None) -> None:
+        """Schedule; where a delay cannot help, first re-route around the disc in the way, then
+        move the blocked robot just ahead of its blocker (FINDINGS 2), re-planning only the paths
+        whose avoidance changed and re-scheduling only what that changes."""
+        robots, n = self.robots, len(self.robots)
+        limit = 4 * n if self.planner.max_reorders is None else self.planner.max_reorders
+        tries: dict[tuple[int, int], int] = {}
+        blocked = self.sched.schedule(self.order, start_at=self.fixed)
+        while blocked is not None:
+            j, i = blocked.j, blocked.blocker
+            tries[(j, i)] = tries.get((j, i), 0) + 1
+            why = f"blocked by {robots[i].id}, which {blocked.why}"
+            if tries[(j, i)] > 3 or self.reorders >= limit:
+                raise PlanningError({robots[j].id: f"{why}; re-routing and re-ordering did not help"},
+                                    {robots[j].id: robots[i].id})
+            # 1. re-route: the robot that moves keeps off the disc where the other one is parked
+            mover, disc = (i, robots[j].start) if blocked.kind == "start" else (j, robots[i].goal)
+            other = j if mover == i else i
+            if tries[(j, i)] == 1 and mover >= self.fixed and self._reroute(mover, other, (disc, self.keep_out(i, j))):
+                blocked = self.sched.schedule(self.order, start_at=self.rank[mover],
+                                              dirty=_apply(self.model, {mover: self.paths[mover]}, mover))
+                continue
+            # 2. re-order: j goes just ahead of i (never ahead of a fixed robot)
+            if i < self.fixed:
+                raise PlanningError({robots[j].id: why}, {robots[j].id: robots[i].id})
+            self.reorders += 1
+            old_j, pos_i = self.rank[j], self.rank[i]
+            if tries[(j, i)] == 3:   # moving just ahead did not stick: try j ahead of everyone
+                pos_i = self.fixed
+            self.order.insert(pos_i, self.order.pop(old_j))
+            self.rank = {x: k for k, x in enumerate(self.order)}
+            # robots between the blocker and j now have j above them: those crossing j's goal re-plan
+            replan = [j] + [x for x in self.order[pos_i + 1:old_j + 1]
+                            if _passes_near(self.paths[x], robots[j].goal, self.keep_out(x, j))]
+            changed = {}
+            for x in replan:
+                path = self.safe_path(x)
+                if path is None:
+                    raise PlanningError({robots[x].id: "no path from start to goal on this map for its radius"})
+                self.paths[x] = changed[x] = path
+            blocked = self.sched.schedule(self.order, start_at=pos_i, dirty=_apply(self.model, changed, j))
+            if progress:
+                progress(self.reorders, limit, "re-ordering")
+
+    def _reroute(self, x: int, owner: int, disc: tuple[tuple[float, float], float]) -> bool:
+        """Re-plan x to keep off ``disc`` (the start or goal of ``owner``); True if x's path changed."""
+        self.must.setdefault(x, {}).setdefault(owner, []).append(disc)
+        path = self.safe_path(x, partner=owner)
+        if path is None or _passes_near(path, disc[0], disc[1]):
+            return False
+        self.paths[x] = path
+        self.reroutes += 1
+        return True
+
+    def timed_paths(self) -> list[TimedPath]:
+        return [timed_path_from_polyline(r.id, r.radius, self.paths[x], r.max_speed, float(self.sched.delays[x]))
+                for x, r in enumerate(self.robots)]
 
 
 class _Finders:
@@ -218,12 +296,28 @@ class _Finders:
         self.grid = grid
         self._by_radius: dict[float, object] = {}
 
-    def get(self, radius: float):
+    def get(self, radius: float, exact: bool = False):
+        """A finder for a disc of ``radius`` or a slightly larger one (radii rounded up to the
+        centimetre share one inflated map, which stays valid for the smaller disc); ``exact``
+        gives the robot's own radius, for when the rounding closes a passage."""
         from ..paths import PathFinder
 
-        if radius not in self._by_radius:
-            self._by_radius[radius] = PathFinder(self.grid, radius)
-        return self._by_radius[radius]
+        key = radius if exact else math.ceil(radius * 100 - 1e-9) / 100
+        if key not in self._by_radius:
+            self._by_radius[key] = PathFinder(self.grid, key)
+        return self._by_radius[key]
+
+
+def _apply(model: CollisionModel, changed: dict[int, np.ndarray], moved: int) -> set[int]:
+    """Give the model the re-planned paths; return the robots whose constraints changed: the moved
+    robot, the re-planned ones, and everyone who was or is now their neighbour."""
+    dirty = {moved, *changed}
+    for x in (moved, *changed):
+        dirty.update(model.neighbours(x))
+    model.set_paths(changed)
+    for x in (moved, *changed):
+        dirty.update(model.neighbours(x))
+    return dirty
 
 
 def _remaining(tp: TimedPath, t0: float) -> tuple[np.ndarray, float, float]:
@@ -253,6 +347,28 @@ def _remaining(tp: TimedPath, t0: float) -> tuple[np.ndarray, float, float]:
     return np.vstack([here, wp[k:last + 2, :2]]), 0.0, speed
 
 
+def _keeps_off(path: np.ndarray, discs: list, start, goal) -> bool:
+    """True if the polyline keeps off every disc (centre, keep-out), except discs containing the
+    start or the goal, which no path can avoid (the path finder ignores them too)."""
+    if not discs:
+        return True
+    c = np.array([d[0] for d in discs], dtype=float)
+    r = np.array([d[1] for d in discs], dtype=float)
+    ends = np.array([start, goal], dtype=float)
+    unavoidable = (np.hypot(*(c[:, None, :] - ends[None, :, :]).transpose(2, 0, 1)) < r[:, None]).any(1)
+    c, r = c[~unavoidable], r[~unavoidable]
+    if len(c) == 0:
+        return True
+    a, b = path[:-1], path[1:]
+    if len(a) == 0:
+        a = b = path
+    ab = b - a
+    denom = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("kij,ij->ki", c[:, None, :] - a[None], ab) / np.where(denom > 0, denom, 1.0), 0, 1)
+    closest = a[None] + t[..., None] * ab[None]
+    return bool((np.hypot(*(closest - c[:, None, :]).transpose(2, 0, 1)) > r[:, None]).all())
+
+
 def _passes_near(path: np.ndarray, point: tuple[float, float], dist: float) -> bool:
     """True if some point of the polyline is closer than ``dist`` to ``point``."""
     p = np.asarray(point, dtype=float)
@@ -274,14 +390,12 @@ def _check_endpoints(robots: list[RobotSpec], margin: float) -> None:
     radii = np.array([r.radius for r in robots])
     for what in ("start", "goal"):
         pts = np.array([getattr(r, what) for r in robots], dtype=float).reshape(-1, 2)
-        if len(pts) < 2:
-            continue
-        from scipy.spatial import cKDTree
-
-        tree = cKDTree(pts)
         failures = {}
-        for a, b in tree.query_pairs(2 * radii.max() + margin):
-            if np.hypot(*(pts[a] - pts[b])) < radii[a] + radii[b]:
-                failures[ids[b]] = f"its {what} disc overlaps the {what} disc of {ids[a]}"
+        for a in range(0, len(pts), 512):   # blocks of rows keep memory small for big fleets
+            d = np.hypot(*(pts[a:a + 512, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+            rows, cols = np.nonzero(d < radii[a:a + 512, None] + radii[None, :])
+            for r, c in zip(rows + a, cols):
+                if r < c:
+                    failures[ids[c]] = f"its {what} disc overlaps the {what} disc of {ids[r]}"
         if failures:
             raise PlanningError(failures)

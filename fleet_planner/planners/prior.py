@@ -22,10 +22,15 @@ pieces live in per-cell buckets, padded so that a query looks at one bucket only
 path is re-checked against its neighbours with the plain closest-approach formula before it is
 accepted.
 
-When a robot cannot be planned because its way is blocked by a robot parked on its start (not
-planned yet) or on its goal (planned), it is moved just ahead of that robot and planning resumes
-from there; robots ahead of the changed position keep their paths (they depend only on the robots
-before them and on the set of starts after them).
+SIPP leaves every node as early as it can, so it waits right before each conflict, often in an
+aisle; the found path is then re-timed backwards so that each wait moves as far back along the path
+as it can (to the start, mostly) without a later arrival.
+
+Repairs, when a robot cannot be planned: a robot not planned yet whose start blocks the way stops
+being an obstacle (it will have to leave in time); a planned robot that then drives over that start
+before its owner can leave has to keep off it longer (and is planned again); a planned robot parked
+on its goal in the way (or crossing our goal too late) gets the blocked robot just ahead of it.
+Planning resumes from the earliest changed position; the robots ahead of it keep their paths.
 """
 from __future__ import annotations
 
@@ -37,8 +42,8 @@ from typing import Sequence
 
 import numpy as np
 import shapely
-from scipy.sparse import csr_matrix, diags
-from scipy.sparse.csgraph import breadth_first_order, dijkstra
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import breadth_first_order, connected_components, dijkstra
 
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
@@ -53,9 +58,17 @@ _MAX_EXPANSIONS = 200_000
 #: safe intervals shorter than this are dropped (a robot would have to hit them exactly)
 _MIN_INTERVAL = 1e-9
 
-# a piece of a trajectory: (t_a, t_b, x, y, vx, vy, owner); position at t is (x, y) + v (t - t_a),
-# or (x, y) when v == 0 (then t_a may be -inf and t_b +inf)
-Piece = tuple[float, float, float, float, float, float, int]
+# a piece of a trajectory: (t_a, t_b, x, y, vx, vy, owner, x_min, y_min, x_max, y_max); position at
+# t is (x, y) + v (t - t_a), or (x, y) when v == 0 (then t_a may be -inf and t_b +inf); the last four
+# bound the positions
+Piece = tuple[float, float, float, float, float, float, int, float, float, float, float]
+
+
+def _piece(ta: float, tb: float, x: float, y: float, vx: float, vy: float, owner: int) -> Piece:
+    if vx == 0.0 and vy == 0.0:
+        return ta, tb, x, y, 0.0, 0.0, owner, x, y, x, y
+    ex, ey = x + vx * (tb - ta), y + vy * (tb - ta)
+    return ta, tb, x, y, vx, vy, owner, min(x, ex), min(y, ey), max(x, ex), max(y, ey)
 
 
 class PriorPlanner(Planner):
@@ -145,6 +158,7 @@ class _Roadmap:
     free: np.ndarray                      # bool [row, col]
     nbrs: list[list[tuple[int, float]]]   # per cell: (neighbour cell, length in m)
     graph: csr_matrix                     # the same moves, for Dijkstra / BFS
+    component: np.ndarray                 # per cell: label of its connected component
 
 
 def _build_roadmap(grid: GridMap, radius: float) -> _Roadmap:
@@ -176,7 +190,7 @@ def _build_roadmap(grid: GridMap, radius: float) -> _Roadmap:
     for s, d, l in zip(src_a.tolist(), dst_a.tolist(), len_a.tolist()):
         nbrs[s].append((d, l))
     graph = csr_matrix((len_a, (src_a, dst_a)), shape=(h * w, h * w))
-    return _Roadmap(free, nbrs, graph)
+    return _Roadmap(free, nbrs, graph, connected_components(graph, directed=False)[1])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -200,14 +214,9 @@ class _Space:
         self.parked: dict[int, tuple[float, float, float]] = {}  # owner -> (x, y, since) parked for ever
 
     def add(self, piece: Piece) -> None:
-        ta, tb, x, y, vx, vy, owner = piece
-        if vx == 0.0 and vy == 0.0:
-            x0, x1, y0, y1 = x, x, y, y
-            if tb == _INF:
-                self.parked[owner] = (x, y, ta)
-        else:
-            ex, ey = x + vx * (tb - ta), y + vy * (tb - ta)
-            x0, x1, y0, y1 = min(x, ex), max(x, ex), min(y, ey), max(y, ey)
+        ta, tb, x, y, vx, vy, owner, x0, y0, x1, y1 = piece
+        if vx == 0.0 and vy == 0.0 and tb == _INF:
+            self.parked[owner] = (x, y, ta)
         pad = self.radii[owner] + self.reach
         res = self.res
         c0 = max(0, math.ceil((x0 - pad) / res - 0.5))
@@ -237,20 +246,20 @@ class _Space:
 def _pieces(wp: np.ndarray, owner: int, max_len: float) -> list[Piece]:
     """The parked head, the segments (long ones cut into pieces) and the parked tail of a path."""
     wp = np.asarray(wp, dtype=float)
-    out: list[Piece] = [(-_INF, float(wp[0, 2]), float(wp[0, 0]), float(wp[0, 1]), 0.0, 0.0, owner)]
+    out: list[Piece] = [_piece(-_INF, float(wp[0, 2]), float(wp[0, 0]), float(wp[0, 1]), 0.0, 0.0, owner)]
     for (xa, ya, ta), (xb, yb, tb) in zip(wp[:-1].tolist(), wp[1:].tolist()):
         if tb <= ta:
             continue
         if xa == xb and ya == yb:
-            out.append((ta, tb, xa, ya, 0.0, 0.0, owner))
+            out.append(_piece(ta, tb, xa, ya, 0.0, 0.0, owner))
             continue
         vx, vy = (xb - xa) / (tb - ta), (yb - ya) / (tb - ta)
         n = max(1, math.ceil(math.hypot(xb - xa, yb - ya) / max_len))
         for k in range(n):
             t1 = ta + (tb - ta) * k / n
             t2 = tb if k == n - 1 else ta + (tb - ta) * (k + 1) / n
-            out.append((t1, t2, xa + vx * (t1 - ta), ya + vy * (t1 - ta), vx, vy, owner))
-    out.append((float(wp[-1, 2]), _INF, float(wp[-1, 0]), float(wp[-1, 1]), 0.0, 0.0, owner))
+            out.append(_piece(t1, t2, xa + vx * (t1 - ta), ya + vy * (t1 - ta), vx, vy, owner))
+    out.append(_piece(float(wp[-1, 2]), _INF, float(wp[-1, 0]), float(wp[-1, 1]), 0.0, 0.0, owner))
     return out
 
 
@@ -274,7 +283,7 @@ def _roots(a: float, b: float, c: float, lo: float, hi: float) -> tuple[float, f
 
 def _unsafe_times(px: float, py: float, piece: Piece, reach: float) -> tuple[float, float] | None:
     """When a disc standing on (px, py) is closer than ``reach`` to the piece (open interval)."""
-    ta, tb, x, y, vx, vy, _ = piece
+    ta, tb, x, y, vx, vy = piece[:6]
     ex, ey = x - px, y - py
     if vx == 0.0 and vy == 0.0:
         return (ta, tb) if ex * ex + ey * ey < reach * reach else None
@@ -293,7 +302,7 @@ def _bad_departures(ax: float, ay: float, wx: float, wy: float, d: float, piece:
     points where the disc boundary meets the rectangle's edges, or at the disc boundary's own
     extreme points in the tau direction when they fall inside the rectangle.
     """
-    ta, tb, x, y, vx, vy, _ = piece
+    ta, tb, x, y, vx, vy = piece[:6]
     ex, ey = ax - x, ay - y
     r2 = reach * reach
     aw = wx * wx + wy * wy
@@ -402,7 +411,7 @@ class _Session:
         dup = {x for x in ids if ids.count(x) > 1}
         if dup:
             raise ValueError(f"robots: duplicate id(s) {sorted(dup)}")
-        grid, problems = self.grid, {}
+        grid, problems, in_way = self.grid, {}, {}
         for r in self.robots:
             for what in ("start", "goal"):
                 x, y = getattr(r, what)
@@ -415,11 +424,34 @@ class _Session:
                 dist = np.hypot(*(pts - pts[i]).T) - self.radii - self.radii[i]
                 dist[i] = _INF
                 j = int(np.argmin(dist))
-                if dist[j] < -1e-9:
-                    problems.setdefault(self.robots[i].id, f"its {what} disc overlaps the {others} of "
-                                                           f"robot {self.names[j]!r}")
+                if dist[j] < -1e-9 and self.robots[i].id not in problems:
+                    problems[self.robots[i].id] = f"its {what} disc overlaps the {others} of robot {self.names[j]!r}"
+                    in_way[self.robots[i].id] = self.names[j]
+        for r in self.robots:
+            if r.id not in problems:
+                why = self._static_problem(r)
+                if why:
+                    problems[r.id] = why
         if problems:
-            raise PlanningError(problems)
+            raise PlanningError(problems, in_way)
+
+    def _static_problem(self, robot: RobotSpec) -> str | None:
+        """Why the robot cannot reach its goal even alone on the map (None if it can)."""
+        grid, radius = self.grid, robot.radius
+        rm = self.p._roadmap(grid, radius)
+        cells = []
+        for what, (x, y) in (("start", robot.start), ("goal", robot.goal)):
+            col, row = grid.cell_of(x, y)
+            if not rm.free[row, col]:
+                return f"the centre of the cell of its {what} ({x:.6g}, {y:.6g}) is not free for radius {radius:.6g}"
+            cx, cy = grid.centre(col, row)
+            if (cx, cy) != (x, y) and shapely.distance(grid.obstacle_geometry,
+                                                       shapely.LineString([(x, y), (cx, cy)])) < radius - 1e-9:
+                return f"cannot drive from its {what} ({x:.6g}, {y:.6g}) to its cell's centre without touching an obstacle"
+            cells.append(row * grid.width + col)
+        if rm.component[cells[0]] != rm.component[cells[1]]:
+            return f"no way from start to goal on this map for radius {radius:.6g}"
+        return None
 
     def keep_out(self, i: int) -> list[float]:
         """Keep-out distance from robot i to every owner (-1 for itself): r_i + r_j + margin, the
@@ -432,9 +464,9 @@ class _Session:
         return out.tolist()
 
     def _add_garage(self, i: int) -> None:
-        if self.garage_until[i] > -_INF:
+        if self.garage_until[i] > self.t0:
             x, y = self.robots[i].start
-            self.space.add((-_INF, self.garage_until[i], float(x), float(y), 0.0, 0.0, i))
+            self.space.add(_piece(-_INF, self.garage_until[i], float(x), float(y), 0.0, 0.0, i))
 
     def _set_garage(self, i: int, until: float) -> None:
         self.garage_until[i] = until
@@ -462,7 +494,8 @@ class _Session:
                     if fail.fatal:
                         failures.update({self.robots[x].id: "not planned: the planner stopped early"
                                          for x in order[pos + 1:]})
-                    raise PlanningError(failures) from None
+                    blockers = {self.robots[i].id: self.names[fail.blockers[0][0]]} if fail.blockers else {}
+                    raise PlanningError(failures, blockers) from None
                 repairs += 1
                 for x in order[restart:]:
                     if x in paths:  # robots from the restart position on are planned again
@@ -516,7 +549,7 @@ class _Session:
         grid, spec, t0 = self.grid, self.robots[i], self.t0
         rm = self.p._roadmap(grid, spec.radius)
         res, width = grid.resolution, grid.width
-        speed, radius = spec.max_speed, spec.radius
+        speed = spec.max_speed
         keep = self.keep_out(i)
         buckets = self.space.buckets
         n_cells = grid.width * grid.height
@@ -525,27 +558,16 @@ class _Session:
         sc, sr = grid.cell_of(sx, sy)
         gc, gr = grid.cell_of(gx, gy)
         cs, cg = sr * width + sc, gr * width + gc
-        for what, (col, row), (x, y) in (("start", (sc, sr), (sx, sy)), ("goal", (gc, gr), (gx, gy))):
-            if not rm.free[row, col]:
-                raise _Fail(f"the centre of the cell of its {what} ({x:.6g}, {y:.6g}) is not free for "
-                            f"radius {radius:.6g}", fatal=True)
-            cx, cy = grid.centre(col, row)
-            line = shapely.LineString([(x, y), (cx, cy)])
-            if (cx, cy) != (x, y) and shapely.distance(grid.obstacle_geometry, line) < radius - 1e-9:
-                raise _Fail(f"cannot drive from its {what} ({x:.6g}, {y:.6g}) to its cell's centre "
-                            f"without touching an obstacle", fatal=True)
         s_off = math.hypot(sx - (sc + 0.5) * res, sy - (sr + 0.5) * res)
         g_off = math.hypot(gx - (gc + 0.5) * res, gy - (gr + 0.5) * res)
         start_node = n_cells if s_off > 0 else cs
-        goal_node = n_cells + 1 if g_off > 0 else cg
+        goal_node = start_node if (gx, gy) == (sx, sy) else n_cells + 1 if g_off > 0 else cg
 
-        dist, pred = dijkstra(rm.graph, indices=cg, return_predecessors=True)
-        if not math.isfinite(dist[cs]):
-            raise _Fail(f"no way from start to goal on this map for radius {radius:.6g}", fatal=True)
+        dist, pred = dijkstra(rm.graph, indices=cg, return_predecessors=True)   # reachable: checked up front
         free_path = [cs]
         while free_path[-1] != cg:
             free_path.append(int(pred[free_path[-1]]))
-        self._check_garages(free_path, rm, keep)
+        self._check_garages(i, free_path, rm, keep)
         h_start = (s_off + float(dist[cs]) + g_off) / speed
         bound = t0 + h_start + self.p.max_wait_s
 
@@ -583,7 +605,8 @@ class _Session:
                 unsafe = []
                 for piece in buckets[cell(node)]:
                     reach = keep[piece[6]]
-                    if reach > 0:
+                    if (reach > 0 and piece[7] - reach < px < piece[9] + reach
+                            and piece[8] - reach < py < piece[10] + reach):
                         span = _unsafe_times(px, py, piece, reach)
                         if span is not None:
                             unsafe.append(span)
@@ -602,6 +625,7 @@ class _Session:
         parent: dict[tuple[int, int], tuple[tuple[int, int], float] | None] = {(start_node, j0): None}
         counter, expansions = 0, 0
         d_max = max(math.sqrt(2) * res, s_off, g_off) / speed
+        lim = max(keep) + d_max * speed   # pieces farther than this from a node cannot meet a move from it
         reason = f"no collision-free timing within max_wait_s={self.p.max_wait_s:g} s"
         while heap:
             _, _, _, u, ju, g = heapq.heappop(heap)
@@ -609,7 +633,7 @@ class _Session:
                 continue
             e_u = intervals(u)[ju][1]
             if u == goal_node and e_u == _INF:
-                return self._waypoints(i, (u, ju), parent, best, pos)
+                return self._waypoints(i, (u, ju), parent, best, pos, cell, intervals, keep, speed)
             expansions += 1
             if expansions % 512 == 0:
                 if time.perf_counter() > self.deadline:
@@ -619,7 +643,9 @@ class _Session:
                     break
             ax, ay = pos(u)
             horizon = e_u + d_max
-            near = [p for p in buckets[cell(u)] if p[1] > g and p[0] < horizon and keep[p[6]] > 0]
+            x0, x1, y0, y1 = ax - lim, ax + lim, ay - lim, ay + lim
+            near = [p for p in buckets[cell(u)] if p[1] > g and p[0] < horizon and keep[p[6]] > 0
+                    and p[7] < x1 and p[9] > x0 and p[8] < y1 and p[10] > y0]
             for v, length in neighbours(u):
                 d = length / speed
                 hv = heur(v)
@@ -647,23 +673,70 @@ class _Session:
                     heapq.heappush(heap, (arrive + hv, -arrive, counter, v, jv, arrive))
         raise self._diagnose(i, reason, rm, free_path, keep, iv0[j0], intervals(goal_node), bound)
 
-    def _waypoints(self, i: int, key: tuple[int, int], parent: dict, best: dict, pos) -> np.ndarray:
-        """Follow the parents back to the start: arrivals, and holds where a departure was later."""
-        chain = []
+    def _waypoints(self, i: int, key: tuple[int, int], parent: dict, best: dict, pos, cell, intervals,
+                   keep: list[float], speed: float) -> np.ndarray:
+        """The found path as waypoints, its waits moved as early along it as they can go."""
+        nodes, taus = [], []
         at: tuple[int, int] | None = key
         while at is not None:
+            nodes.append(at[0])
             link = parent[at]
-            chain.append((at[0], best[at], None if link is None else link[1]))
+            if link is not None:
+                taus.append(link[1])
             at = None if link is None else link[0]
-        chain.reverse()
-        wp = [(*pos(chain[0][0]), chain[0][1])]
-        for (prev, arrived, _), (node, arrive, tau) in zip(chain[:-1], chain[1:]):
-            if tau > arrived:
+        nodes.reverse()
+        taus.reverse()
+        taus = self._postpone(nodes, best[key], pos, cell, intervals, keep, speed) or taus
+        t = self.t0
+        wp = [(*pos(nodes[0]), t)]
+        for prev, node, tau in zip(nodes[:-1], nodes[1:], taus):
+            if tau > t:
                 wp.append((*pos(prev), tau))
-            wp.append((*pos(node), arrive))
+            t = tau + math.dist(pos(prev), pos(node)) / speed
+            wp.append((*pos(node), t))
         out = np.array(wp, dtype=float)
         self._verify(i, out)
         return out
+
+    def _postpone(self, nodes: list[int], arrival: float, pos, cell, intervals, keep: list[float],
+                  speed: float) -> list[float] | None:
+        """Departure times along ``nodes``, each as late as possible for the same arrival, or None.
+
+        SIPP leaves every node as early as it can and so waits just before each conflict, often in
+        an aisle where it blocks the robots planned after it. Going backwards over the same nodes
+        (latest departure from each safe interval that still makes the arrival) moves the waiting
+        to where the robot already stands, its start first of all.
+        """
+        t0 = self.t0
+        latest = {len(intervals(nodes[-1])) - 1: arrival}   # safe interval -> latest time to leave it
+        choices: list[dict[int, tuple[int, float]]] = []
+        for u, v in zip(nodes[-2::-1], nodes[:0:-1]):
+            (ax, ay), (bx, by) = pos(u), pos(v)
+            d = math.hypot(bx - ax, by - ay) / speed
+            wx, wy = (bx - ax) / d, (by - ay) / d
+            near = [p for p in self.space.buckets[cell(u)] if p[1] > t0 and p[0] < arrival and keep[p[6]] > 0]
+            iv_v = intervals(v)
+            new: dict[int, float] = {}
+            pick: dict[int, tuple[int, float]] = {}
+            for iu, (s_u, e_u) in enumerate(intervals(u)):
+                if e_u < t0 or s_u > arrival:
+                    continue
+                for jv, leave in latest.items():
+                    lo, hi = max(s_u, iv_v[jv][0] - d, t0), min(e_u, leave - d)
+                    tau = _latest(near, keep, ax, ay, wx, wy, d, lo, hi) if lo <= hi else None
+                    if tau is not None and tau > new.get(iu, -_INF):
+                        new[iu], pick[iu] = tau, (jv, tau)
+            latest = new
+            choices.append(pick)
+        choices.reverse()
+        iu = next((k for k, (s, e) in enumerate(intervals(nodes[0])) if s <= t0 <= e), None)
+        taus = []
+        for pick in choices:
+            if iu not in pick:
+                return None
+            iu, tau = pick[iu]
+            taus.append(tau)
+        return taus
 
     def _verify(self, i: int, wp: np.ndarray) -> None:
         """Re-check a new path against its neighbours with the plain closest-approach formula (a
@@ -687,61 +760,63 @@ class _Session:
                 out.add(piece[6])
         return sorted(out)
 
-    def _blocked_cells(self, keep: list[float], kinds: tuple[str, ...]) -> tuple[np.ndarray, list]:
-        """Cells whose centre a disc parked for ever (on a start: "start", on a goal: "goal") keeps
-        out of, and those discs as (owner, x, y, reach, kind)."""
-        grid, res = self.grid, self.grid.resolution
-        blocked = np.zeros((grid.height, grid.width), dtype=bool)
-        discs = []
-        for o, (x, y, since) in self.space.parked.items():
-            kind = "start" if since == -_INF and o < self.n else "goal"
-            if keep[o] <= 0 or kind not in kinds:
-                continue
-            reach = keep[o]
-            discs.append((o, x, y, reach, kind))
-            c0, c1 = max(0, math.ceil((x - reach) / res - 0.5)), min(grid.width - 1, math.floor((x + reach) / res - 0.5))
-            r0, r1 = max(0, math.ceil((y - reach) / res - 0.5)), min(grid.height - 1, math.floor((y + reach) / res - 0.5))
-            cx = (np.arange(c0, c1 + 1) + 0.5) * res
-            cy = (np.arange(r0, r1 + 1) + 0.5) * res
-            blocked[r0:r1 + 1, c0:c1 + 1] |= (cx[None, :] - x) ** 2 + (cy[:, None] - y) ** 2 < reach ** 2
-        return blocked.ravel(), discs
-
-    def _way_blockers(self, path: list[int], rm: _Roadmap, keep: list[float],
+    def _way_blockers(self, i: int, path: list[int], rm: _Roadmap, keep: list[float],
                       kinds: tuple[str, ...]) -> list[tuple[int, str, float]] | None:
-        """None if the goal can be reached around the discs parked for ever; else the discs on the
-        free shortest path, in path order."""
-        blocked, discs = self._blocked_cells(keep, kinds)
+        """None if robot i can reach its goal around the discs parked for ever (on starts: "start",
+        on goals: "goal"); else those of them that meet its free shortest path ``path`` (cells), in
+        path order. A disc over robot i's own start is left out: that one runs it over."""
         width, res = self.grid.width, self.grid.resolution
-        if not any(blocked[c] for c in path):
+        start = self.robots[i].start
+        discs = [(o, x, y, keep[o]) for o, (x, y, since) in self.space.parked.items()
+                 if keep[o] > 0 and ("start" if since == -_INF and o < self.n else "goal") in kinds
+                 and math.dist((x, y), start) >= keep[o]]
+        if not discs:
             return None
-        if not blocked[path[0]] and not blocked[path[-1]]:
-            open_cells = diags((~blocked).astype(float))
-            sub = (open_cells @ rm.graph @ open_cells).tocsr()
-            if path[-1] in set(breadth_first_order(sub, path[0], return_predecessors=False).tolist()):
-                return None
-        out: list[tuple[int, str, float]] = []
-        for node in path:
-            px, py = (node % width + 0.5) * res, (node // width + 0.5) * res
-            for o, x, y, reach, kind in discs:
-                if (px - x) ** 2 + (py - y) ** 2 < reach ** 2 and all(o != b for b, _, _ in out):
-                    out.append((o, kind, -_INF))
-        return out
+        cells = np.array(path)
+        centres = np.column_stack([(cells % width + 0.5) * res, (cells // width + 0.5) * res])
+        where = np.array([(x, y) for _, x, y, _ in discs])
+        near = np.hypot(centres[:, None, 0] - where[None, :, 0], centres[:, None, 1] - where[None, :, 1])
+        if not np.any(near < np.array([r for *_, r in discs]) + res):   # a move is within res/sqrt(2) of an end
+            return None
+        blocked: dict[tuple[int, int], list[int]] = {}   # move (cell, cell) -> discs on it
+        for o, x, y, reach in discs:
+            pad = reach + math.sqrt(2) * res
+            c0, c1 = max(0, math.ceil((x - pad) / res - 0.5)), min(width - 1, math.floor((x + pad) / res - 0.5))
+            r0, r1 = max(0, math.ceil((y - pad) / res - 0.5)), min(self.grid.height - 1, math.floor((y + pad) / res - 0.5))
+            for row in range(r0, r1 + 1):
+                for col in range(c0, c1 + 1):
+                    ax, ay = (col + 0.5) * res, (row + 0.5) * res
+                    for nb, _ in rm.nbrs[row * width + col]:
+                        bx, by = (nb % width + 0.5) * res, (nb // width + 0.5) * res
+                        if _segment_distance(ax, ay, bx, by, x, y) < reach:
+                            blocked.setdefault((row * width + col, nb), []).append(o)
+        on_path = [o for move in zip(path[:-1], path[1:]) for o in blocked.get(move, ())]
+        if not on_path:
+            return None
+        graph = rm.graph.copy()
+        for src, dst in blocked:
+            row = slice(graph.indptr[src], graph.indptr[src + 1])
+            graph.data[row][graph.indices[row] == dst] = 0.0
+        graph.eliminate_zeros()
+        if path[-1] in set(breadth_first_order(graph, path[0], return_predecessors=False).tolist()):
+            return None
+        kind_of = {o: "start" if self.space.parked[o][2] == -_INF and o < self.n else "goal" for o in on_path}
+        return [(o, kind_of[o], -_INF) for o in dict.fromkeys(on_path)]
 
-    def _check_garages(self, path: list[int], rm: _Roadmap, keep: list[float]) -> None:
+    def _check_garages(self, i: int, path: list[int], rm: _Roadmap, keep: list[float]) -> None:
         """Before searching: robots parked on their starts for ever must leave a way open."""
-        blockers = self._way_blockers(path, rm, keep, ("start",))
+        blockers = self._way_blockers(i, path, rm, keep, ("start",))
         if blockers:
-            raise _Fail("its way is blocked by " + ", ".join(
-                f"the start of robot {self.names[o]!r} (not planned yet)" for o, _, _ in blockers), blockers)
+            raise _Fail("its way is blocked by " + _blocker_words(self.names, blockers), blockers)
 
     def _diagnose(self, i: int, reason: str, rm: _Roadmap, path: list[int], keep: list[float],
                   start_iv: tuple[float, float], goal_iv: list[tuple[float, float]], bound: float) -> _Fail:
-        """Why the search failed: robots parked on their goals in the way, a robot crossing the goal
-        later than the search may wait, a robot running over the start; else just ``reason``."""
-        blockers = self._way_blockers(path, rm, keep, ("goal",))
+        """Why the search failed: robots parked for ever in the way (on their starts or goals), a
+        robot crossing the goal later than the search may wait, a robot running over the start;
+        else just ``reason``."""
+        blockers = self._way_blockers(i, path, rm, keep, ("start", "goal"))
         if blockers:
-            return _Fail("its way is blocked by " + ", ".join(
-                f"robot {self.names[o]!r} parked on its goal" for o, _, _ in blockers), blockers)
+            return _Fail("its way is blocked by " + _blocker_words(self.names, blockers), blockers)
         spec = self.robots[i]
         last_start = goal_iv[-1][0]
         if last_start > bound:
@@ -765,6 +840,8 @@ def _earliest(near: list[Piece], keep: list[float], ax: float, ay: float, wx: fl
     """The earliest departure in [lo, hi] of the move from (ax, ay) at velocity w for d seconds that
     keeps clear of all pieces, or None: jump to the end of every bad interval containing it."""
     tau = lo
+    bx, by = ax + wx * d, ay + wy * d
+    x0, x1, y0, y1 = min(ax, bx), max(ax, bx), min(ay, by), max(ay, by)
     moved = True
     while moved:
         moved = False
@@ -772,7 +849,10 @@ def _earliest(near: list[Piece], keep: list[float], ax: float, ay: float, wx: fl
         for piece in near:
             if piece[1] <= tau or piece[0] >= end:
                 continue
-            bad = _bad_departures(ax, ay, wx, wy, d, piece, keep[piece[6]])
+            reach = keep[piece[6]]
+            if piece[7] >= x1 + reach or piece[9] <= x0 - reach or piece[8] >= y1 + reach or piece[10] <= y0 - reach:
+                continue
+            bad = _bad_departures(ax, ay, wx, wy, d, piece, reach)
             if bad is not None and bad[0] < tau < bad[1]:
                 tau = bad[1]
                 if tau > hi:
@@ -780,6 +860,38 @@ def _earliest(near: list[Piece], keep: list[float], ax: float, ay: float, wx: fl
                 end = tau + d
                 moved = True
     return tau
+
+
+def _latest(near: list[Piece], keep: list[float], ax: float, ay: float, wx: float, wy: float, d: float,
+            lo: float, hi: float) -> float | None:
+    """The latest departure in [lo, hi] of the move (see :func:`_earliest`) that keeps clear, or None."""
+    tau = hi
+    bx, by = ax + wx * d, ay + wy * d
+    x0, x1, y0, y1 = min(ax, bx), max(ax, bx), min(ay, by), max(ay, by)
+    moved = True
+    while moved:
+        moved = False
+        for piece in near:
+            if piece[1] <= tau or piece[0] >= tau + d:
+                continue
+            reach = keep[piece[6]]
+            if piece[7] >= x1 + reach or piece[9] <= x0 - reach or piece[8] >= y1 + reach or piece[10] <= y0 - reach:
+                continue
+            bad = _bad_departures(ax, ay, wx, wy, d, piece, reach)
+            if bad is not None and bad[0] < tau < bad[1]:
+                tau = bad[0]
+                if tau < lo:
+                    return None
+                moved = True
+    return tau
+
+
+def _segment_distance(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
+    """Distance from point p to the segment a-b."""
+    dx, dy = bx - ax, by - ay
+    dd = dx * dx + dy * dy
+    s = 0.0 if dd == 0.0 else min(max(((px - ax) * dx + (py - ay) * dy) / dd, 0.0), 1.0)
+    return math.hypot(ax + s * dx - px, ay + s * dy - py)
 
 
 def _complement(unsafe: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -810,6 +922,11 @@ def _compress(wp: np.ndarray) -> np.ndarray:
                     continue
         out.append(p)
     return np.array(out, dtype=float)
+
+
+def _blocker_words(names: list[str], blockers: list[tuple[int, str, float]]) -> str:
+    return ", ".join(f"the start of robot {names[o]!r} (not planned yet)" if kind == "start" else
+                     f"robot {names[o]!r} parked on its goal" for o, kind, _ in blockers)
 
 
 def _names(names: list[str], owners: Sequence[int]) -> str:

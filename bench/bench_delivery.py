@@ -1,0 +1,255 @@
+#!/usr/bin/env python3
+"""Delivery benchmark in the style of paper 002 (issue 4): md, prior and behavior on the same tasks.
+
+N robots (0.5 m x 0.5 m, a disc of radius 0.354 m, top speed 0.8 m/s) serve one seeded sequence of
+#Del = N x --deliveries-per-robot tasks: drive to station k, dock (--dock s), drive to station l,
+dock; each robot takes the next task when it has finished one. Simulated faster than real time by
+:func:`fleet_planner.sim.simulate`; see its module for the methods and the station discipline.
+
+Maps: ``warehouse`` (the default warehouse of config/: load at chutes, unload at storing sites),
+``large`` (a generated 74 m x 31.5 m warehouse whose rack aisles fit one robot only), and MovingAI
+maps from --maps-dir by name (--stations stations spread over the free space, seeded).
+
+Columns: CTime (s, completion of the last delivery; with a ``!`` when the run stopped unfinished,
+then it is the stop time), the lower bound (each robot's own task sequence driven alone, maximum
+over robots) and CTime / bound, average velocity over robots (m/s), planning time per planned leg
+(md, prior) or decision time per fleet step of --dt (behavior) in ms, overlapping disc pairs
+(exact, must be 0), robots left deadlocked (no progress for 120 s at the end), why the run stopped
+and its wall time. Exit status 1 when any run had a collision (or an invalid trajectory).
+
+    .venv/bin/python bench/bench_delivery.py [--quick] [--maps warehouse,large,warehouse-10-20-10-2-1]
+        [--sizes 20,40,50,100] [--methods md,prior,behavior] [--deliveries-per-robot 3] [--seed 0]
+        [--csv out/bench_delivery.csv] [--plot out/bench_delivery.png]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from fleet_planner.grid import GridMap  # noqa: E402
+from fleet_planner.sim import METHODS, DeliveryProblem, DeliveryResult, delivery_problem, simulate, \
+    spread_stations, warehouse_problem  # noqa: E402
+from fleet_planner.warehouse import generate_warehouse, load_warehouse  # noqa: E402
+
+BUILTIN_MAPS = ("warehouse", "large")
+QUICK = {"maps": "warehouse", "sizes": "20", "methods": ",".join(m for m in METHODS if m != "md-box"), "per_robot": 2}
+
+
+@dataclass
+class Row:
+    map: str
+    n: int
+    method: str
+    deliveries: int
+    completed: int
+    ctime: float
+    lower_bound: float
+    avg_velocity: float
+    decision_ms: float
+    decision_unit: str
+    collisions: int
+    deadlocks: int
+    stop: str
+    wall_s: float
+    failed_plans: int
+    min_gap: float
+    violations: int      # central: other breaches of the plan contract on the driven trajectories
+
+
+def _args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true",
+                   help=f"a small subset, under 2 minutes: {QUICK['maps']}, N={QUICK['sizes']}, "
+                        f"{QUICK['per_robot']} deliveries per robot, {QUICK['methods']} (options given win)")
+    p.add_argument("--maps", default=None,
+                   help="comma-separated: warehouse, large, or MovingAI map names in --maps-dir "
+                        "(default: warehouse,large,warehouse-10-20-10-2-1 - the last if --maps-dir exists)")
+    p.add_argument("--maps-dir", type=Path, default=REPO.parent / "shared" / "data" / "maps",
+                   help="MovingAI maps (default: %(default)s)")
+    p.add_argument("--sizes", default="20,40,50,100", help="numbers of robots (default: %(default)s)")
+    p.add_argument("--methods", default="md,prior,behavior", help=f"of {', '.join(METHODS)} (default: %(default)s)")
+    p.add_argument("--deliveries-per-robot", dest="per_robot", type=int, default=3,
+                   help="#Del = N x this (default: %(default)s; paper 002: 2.5-10)")
+    p.add_argument("--stations", type=int, default=8, help="stations on a MovingAI map (default: %(default)s)")
+    p.add_argument("--dock", type=float, default=5.0, help="docking time at a station, s (default: %(default)s)")
+    p.add_argument("--dt", type=float, default=0.1, help="behavior time step, s (default: %(default)s)")
+    p.add_argument("--cap", type=float, default=4 * 3600.0, help="simulated-time cap per run, s (default: 4 h)")
+    p.add_argument("--wall-cap", type=float, default=900.0, help="wall-clock cap per run, s (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="tasks, homes, stations (default: %(default)s)")
+    p.add_argument("--csv", type=Path, help="also write the table as CSV")
+    p.add_argument("--plot", type=Path, help="also draw CTime per method and N to this PNG")
+    args = p.parse_args(argv)
+    if args.quick:   # what the command line leaves at its default
+        args.maps = args.maps or QUICK["maps"]
+        for name in ("sizes", "methods", "per_robot"):
+            if getattr(args, name) == p.get_default(name):
+                setattr(args, name, QUICK[name])
+    if args.maps is None:
+        args.maps = "warehouse,large" + (",warehouse-10-20-10-2-1" if args.maps_dir.is_dir() else "")
+    args.maps = [m.strip() for m in args.maps.split(",") if m.strip()]
+    try:
+        args.sizes = sorted({int(s) for s in args.sizes.split(",") if s.strip()})
+    except ValueError:
+        p.error(f"--sizes: expected comma-separated integers, got {args.sizes!r}")
+    if not args.sizes or args.sizes[0] < 1:
+        p.error("--sizes: numbers of robots must be >= 1")
+    args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    unknown = [m for m in args.methods if m not in METHODS]
+    if unknown or not args.methods:
+        p.error(f"--methods: unknown {unknown}; choose from {', '.join(METHODS)}")
+    if args.per_robot < 1:
+        p.error("--deliveries-per-robot: must be >= 1")
+    if args.stations < 2:
+        p.error("--stations: must be >= 2")
+    for name in ("dock", "dt", "cap", "wall_cap"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value >= (0 if name == "dock" else 1e-9)):
+            p.error(f"--{name.replace('_', '-')}: must be a finite number {'>= 0' if name == 'dock' else '> 0'}")
+    for m in args.maps:
+        if m not in BUILTIN_MAPS and not (args.maps_dir / f"{m}.map").is_file():
+            p.error(f"--maps: {m!r} is neither {' nor '.join(BUILTIN_MAPS)} nor a map in {args.maps_dir}")
+    return args
+
+
+def make_problem(name: str, n: int, args: argparse.Namespace) -> DeliveryProblem:
+    deliveries = n * args.per_robot
+    common = {"dock_s": args.dock}
+    if name == "warehouse":
+        return warehouse_problem(load_warehouse(), n, deliveries, args.seed, **common)
+    if name == "large":
+        return warehouse_problem(generate_warehouse(5, 10, 24, 2, 3, 0.5, "large"), n, deliveries, args.seed,
+                                 **common)
+    grid = GridMap.from_movingai(args.maps_dir / f"{name}.map")
+    stations = spread_stations(grid, args.stations, args.seed)
+    return delivery_problem(grid, stations, n, deliveries, args.seed, name=name, **common)
+
+
+def to_row(name: str, res: DeliveryResult) -> Row:
+    return Row(name, res.n_robots, res.method, res.n_deliveries, res.completed, res.ctime, res.lower_bound,
+               res.avg_velocity, 1000 * res.decision_s, res.decision_unit, res.collisions, res.deadlocks, res.stop,
+               res.wall_s, res.failed_plans, res.min_gap, len(res.violations))
+
+
+def table(rows: list[Row]) -> str:
+    w = max([3] + [len(r.map) for r in rows])
+    head = (f"{'map':<{w}} {'N':>4} {'method':<8} {'#Del':>5} {'done':>5} {'CTime':>9} {'bound':>7} "
+            f"{'ratio':>6} {'avg v':>6} {'plan ms':>12} {'coll':>4} {'dead':>4} {'stop':<5} {'wall s':>7}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        mark = " " if r.stop == "done" else "!"
+        lines.append(f"{r.map:<{w}} {r.n:>4} {r.method:<8} {r.deliveries:>5} {r.completed:>5} {r.ctime:>8.0f}{mark} "
+                     f"{r.lower_bound:>7.0f} {r.ctime / r.lower_bound:>6.2f} {r.avg_velocity:>6.3f} "
+                     f"{r.decision_ms:>7.2f}/{r.decision_unit:<4} {r.collisions:>4} {r.deadlocks:>4} {r.stop:<5} "
+                     f"{r.wall_s:>7.1f}")
+    lines.append("")
+    lines.append("CTime with '!': the run stopped unfinished (stop: cap = simulated-time cap, stall = nothing "
+                 "moved for 600 s, wall = wall-clock cap) and CTime is the stop time.")
+    lines.append("plan ms: wall time per planned leg (md, prior: central, one call of plan_incremental) or per "
+                 "fleet step of dt (behavior: every robot's decisions and motion).")
+    return "\n".join(lines)
+
+
+def write_csv(rows: list[Row], path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as f:
+        out = csv.DictWriter(f, fieldnames=list(asdict(rows[0])))
+        out.writeheader()
+        for r in rows:
+            out.writerow(asdict(r))
+
+
+def plot(rows: list[Row], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    maps = list(dict.fromkeys(r.map for r in rows))
+    fig, axes = plt.subplots(1, len(maps), figsize=(5 * len(maps), 4.2), squeeze=False)
+    for ax, m in zip(axes[0], maps):
+        for method in dict.fromkeys(r.method for r in rows):
+            mine = sorted((r for r in rows if r.map == m and r.method == method), key=lambda r: r.n)
+            if not mine:
+                continue
+            line, = ax.plot([r.n for r in mine], [r.ctime for r in mine], "o-", label=method)
+            bad = [r for r in mine if r.stop != "done"]
+            ax.plot([r.n for r in bad], [r.ctime for r in bad], "x", ms=12, mew=2, color=line.get_color())
+        bound = sorted({(r.n, r.lower_bound) for r in rows if r.map == m and r.method == "md"} or
+                       {(r.n, r.lower_bound) for r in rows if r.map == m})
+        ax.plot([b[0] for b in bound], [b[1] for b in bound], "_:", ms=14, color="grey", label="bound (md run)")
+        ax.set(title=m, xlabel="robots", ylabel="CTime (s)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("completion time of all deliveries (x: unfinished, stop time)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+
+
+def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace, bar) -> Row:
+    """One simulation, its progress on the bar and a loud line if it went wrong."""
+    label = f"{m} N={problem.n_robots} {method}"
+    bar.set_postfix_str(label)
+    shown = [0.0]
+
+    def progress(done: int, total: int, t: float) -> None:
+        now = time.monotonic()
+        if now - shown[0] > 0.5:
+            shown[0] = now
+            bar.set_postfix_str(f"{label}: {done}/{total} deliveries, t={t:.0f} s")
+
+    res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress)
+    if res.collisions or res.violations:
+        bar.write(f"!!! FAIL: {label} seed={args.seed}: {res.collisions} overlapping pair(s), min gap "
+                  f"{res.min_gap:.4f} m; {'; '.join(res.violations[:3])}")
+    elif res.stop != "done":
+        bar.write(f"{label}: unfinished ({res.stop}) after {res.ctime:.0f} s simulated: "
+                  f"{res.completed}/{res.n_deliveries} deliveries, {res.deadlocks} robot(s) deadlocked")
+    return to_row(m, res)
+
+
+def main(argv=None) -> int:
+    from tqdm import tqdm
+
+    args = _args(argv)
+    if not args.maps_dir.is_dir() and any(m not in BUILTIN_MAPS for m in args.maps):
+        sys.exit(f"bench_delivery: no maps directory {args.maps_dir}")
+    rows: list[Row] = []
+    with tqdm(total=len(args.maps) * len(args.sizes) * len(args.methods), unit="run", file=sys.stderr) as bar:
+        for m in args.maps:
+            for n in args.sizes:
+                try:
+                    problem = make_problem(m, n, args)   # the same problem for every method
+                except ValueError as exc:
+                    bar.write(f"{m} N={n}: skipped: {exc}")
+                    bar.update(len(args.methods))
+                    continue
+                for method in args.methods:
+                    rows.append(run(problem, m, method, args, bar))
+                    bar.update()
+    if not rows:
+        print("bench_delivery: nothing ran", file=sys.stderr)
+        return 1
+    print(table(rows))
+    if args.csv:
+        write_csv(rows, args.csv)
+    if args.plot:
+        plot(rows, args.plot)
+    bad = [r for r in rows if r.collisions or r.violations]
+    if bad:
+        print(f"\n!!! {len(bad)} RUN(S) WITH COLLISIONS OR INVALID TRAJECTORIES (seed {args.seed}): "
+              + ", ".join(f"{r.map} N={r.n} {r.method}" for r in bad), file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,310 @@
+#!/usr/bin/env python3
+"""Planning time and plan quality of the md planner against the number of robots (issue 2).
+
+For each MovingAI warehouse map and each N, the first N usable start/goal pairs of the map's
+``.scen`` file become robots (radius 0.35-0.45 m, top speed 0.7-1.0 m/s, drawn with --seed); each
+planner plans them in a child process (killed after --timeout s) and the independent checker
+validates every plan. Quality is measured against the no-interference bound: each robot's own
+shortest path driven alone (the path finder without avoid discs, length / top speed).
+
+Columns: planning time (s); sum of arrival times / sum of no-interference arrival times; makespan /
+longest no-interference arrival time; re-orderings; collision regions (md); and the verdict:
+``ok``, ``FAIL (k)`` (the plan breaks the contract: k violations, printed), ``no plan`` (the planner
+refused, with a PlanningError), ``timeout`` or ``error``. Exit status 1 when any plan was invalid.
+
+    .venv/bin/python bench/bench_md.py [--sizes 10,50,100,200,500] [--planners md,md-box,prior]
+        [--maps warehouse-10-20-10-2-1,...] [--maps-dir DIR] [--seed 0] [--timeout 600]
+        [--csv out/bench_md.csv] [--plot out/bench_md.png]
+
+Without the maps directory a generated warehouse (1 m cells, 1-cell aisles) with random start/goal
+pairs stands in, and the output says so.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import multiprocessing as mp
+import queue
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+import numpy as np  # noqa: E402
+
+from fleet_planner.checker import check_plan  # noqa: E402
+from fleet_planner.grid import GridMap  # noqa: E402
+from fleet_planner.model import PlanningError, RobotSpec  # noqa: E402
+from fleet_planner.paths import PathFinder  # noqa: E402
+from fleet_planner.planners import get_planner  # noqa: E402
+from fleet_planner.scenario import ScenarioError, scenario_from_movingai  # noqa: E402
+
+#: planner label -> (registry name, options)
+PLANNERS = {"md": ("md", {}), "md-box": ("md", {"mode": "box"}), "prior": ("prior", {})}
+RADIUS = (0.35, 0.45)
+SPEED = (0.7, 1.0)
+
+
+@dataclass
+class Instance:
+    """One map with its robots for the largest N (smaller N take a prefix)."""
+
+    name: str
+    grid: GridMap
+    robots: list[RobotSpec]
+
+
+@dataclass
+class Row:
+    map: str
+    n: int
+    planner: str
+    time_s: float | None = None
+    soc_ratio: float | None = None
+    makespan_ratio: float | None = None
+    reorders: int | None = None
+    regions: int | None = None
+    verdict: str = ""
+    detail: str = ""
+
+
+def _args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--maps-dir", type=Path, default=REPO.parent / "shared" / "data" / "maps",
+                   help="MovingAI maps and .scen files (default: %(default)s)")
+    p.add_argument("--maps", help="comma-separated map names (default: every warehouse-*.map in --maps-dir)")
+    p.add_argument("--scen", default="random-1", help="which .scen of each map: <map>-<SCEN>.scen (default: %(default)s)")
+    p.add_argument("--sizes", default="10,50,100,200,500", help="numbers of robots (default: %(default)s)")
+    p.add_argument("--planners", default="md,md-box", help=f"of {', '.join(PLANNERS)} (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="radii and speeds (default: %(default)s)")
+    p.add_argument("--timeout", type=float, default=600.0, help="seconds per planning run (default: %(default)s)")
+    p.add_argument("--csv", type=Path, help="also write the table as CSV")
+    p.add_argument("--plot", type=Path, help="also draw time and quality against N to this PNG")
+    args = p.parse_args(argv)
+    try:
+        args.sizes = sorted({int(s) for s in args.sizes.split(",") if s.strip()})
+    except ValueError:
+        p.error(f"--sizes: expected comma-separated integers, got {args.sizes!r}")
+    if not args.sizes or args.sizes[0] < 1:
+        p.error("--sizes: numbers of robots must be >= 1")
+    args.planners = [s.strip() for s in args.planners.split(",") if s.strip()]
+    unknown = [s for s in args.planners if s not in PLANNERS]
+    if unknown or not args.planners:
+        p.error(f"--planners: unknown {unknown}; choose from {', '.join(PLANNERS)}")
+    if not args.timeout > 0:
+        p.error("--timeout: must be > 0")
+    return args
+
+
+# ---------------------------------------------------------------------------------------------
+# instances
+# ---------------------------------------------------------------------------------------------
+def movingai_instances(maps_dir: Path, names: list[str] | None, scen: str, n: int, seed: int) -> list[Instance]:
+    if names is None:
+        names = sorted(p.stem for p in maps_dir.glob("warehouse-*.map"))
+    out = []
+    for name in names:
+        map_path, scen_path = maps_dir / f"{name}.map", maps_dir / f"{name}-{scen}.scen"
+        for path in (map_path, scen_path):
+            if not path.is_file():
+                sys.exit(f"bench_md: {path} not found (--maps / --scen)")
+        try:
+            sc = scenario_from_movingai(map_path, scen_path, n, seed, RADIUS, SPEED)
+        except ScenarioError as exc:
+            sys.exit(f"bench_md: {name}: {exc}")
+        out.append(Instance(name, sc.grid, sc.robots))
+    return out
+
+
+def generated_instance(n: int, seed: int) -> Instance:
+    """A MovingAI-like warehouse (1 m cells, 1-cell aisles) and random distinct start/goal cells."""
+    from fleet_planner.warehouse import generate_warehouse
+
+    grid = generate_warehouse(8, 12, 10, 2, 1, 1.0, "generated-warehouse").grid
+    free = PathFinder(grid, RADIUS[1]).free
+    rows, cols = np.nonzero(free)
+    rng = np.random.default_rng(seed)
+    if 2 * n > len(rows):
+        sys.exit(f"bench_md: the generated warehouse has {len(rows)} free cells, {n} robots need {2 * n}")
+    cells = rng.permutation(len(rows))
+    starts, goals = cells[:n], cells[n:2 * n]
+    robots = [RobotSpec(f"r{i}", float(rng.uniform(*RADIUS)), float(rng.uniform(*SPEED)),
+                        grid.centre(int(cols[s]), int(rows[s])), grid.centre(int(cols[g]), int(rows[g])))
+              for i, (s, g) in enumerate(zip(starts, goals))]
+    return Instance(grid.name, grid, robots)
+
+
+class AloneTimes:
+    """Each robot's arrival time driven alone: shortest path without avoid discs / top speed."""
+
+    def __init__(self, grid: GridMap):
+        self.grid = grid
+        self._finders: dict[float, PathFinder] = {}
+        self._cache: dict[tuple, float] = {}
+
+    def __call__(self, r: RobotSpec) -> float:
+        key = (r.start, r.goal, r.radius, r.max_speed)
+        if key not in self._cache:
+            pf = self._finders.get(r.radius) or self._finders.setdefault(r.radius, PathFinder(self.grid, r.radius))
+            path = pf.find(r.start, r.goal)
+            self._cache[key] = math.inf if path is None else \
+                float(np.sum(np.hypot(*np.diff(path, axis=0).T))) / r.max_speed
+        return self._cache[key]
+
+
+# ---------------------------------------------------------------------------------------------
+# one planning run, in a child process
+# ---------------------------------------------------------------------------------------------
+def _child(results, grid: GridMap, robots: list[RobotSpec], label: str) -> None:
+    name, options = PLANNERS[label]
+    try:
+        t0 = time.perf_counter()
+        plan = get_planner(name, **options).plan(grid, robots)
+        elapsed = time.perf_counter() - t0
+        plan.info.pop("network", None)   # large and not needed here
+        results.put(("ok", elapsed, plan))
+    except PlanningError as exc:
+        results.put(("no plan", time.perf_counter() - t0, str(exc).splitlines()[1].strip()))
+    except Exception:  # noqa: BLE001 - a crash of the planner is a result to report, not to hide
+        results.put(("error", None, traceback.format_exc(limit=3)))
+
+
+def run_one(inst: Instance, n: int, label: str, timeout: float, alone: AloneTimes) -> Row:
+    robots = inst.robots[:n]
+    row = Row(inst.name, n, label)
+    ctx = mp.get_context("fork")
+    results = ctx.Queue()
+    proc = ctx.Process(target=_child, args=(results, inst.grid, robots, label), daemon=True)
+    proc.start()
+    try:
+        status, elapsed, payload = results.get(timeout=timeout)
+    except queue.Empty:
+        status, elapsed, payload = "timeout", None, f"> {timeout:g} s"
+    finally:
+        if proc.is_alive():
+            proc.terminate()
+        proc.join()
+        results.close()
+    row.time_s = elapsed
+    if status != "ok":
+        row.verdict, row.detail = status, str(payload)
+        return row
+    plan = payload
+    base = [alone(r) for r in robots]
+    arrivals = {p.robot_id: p.arrival_time for p in plan.paths}
+    row.soc_ratio = sum(arrivals.values()) / sum(base)
+    row.makespan_ratio = max(arrivals.values()) / max(base)
+    row.reorders = plan.info.get("reorders")
+    row.regions = plan.info.get("regions")
+    violations = check_plan(inst.grid, robots, plan)
+    if violations:
+        row.verdict = f"FAIL ({len(violations)})"
+        row.detail = "; ".join(str(v) for v in violations[:5])
+    else:
+        row.verdict = "ok"
+    return row
+
+
+# ---------------------------------------------------------------------------------------------
+# output
+# ---------------------------------------------------------------------------------------------
+def _fmt(value, spec: str) -> str:
+    """``value`` formatted by ``spec`` (e.g. "8.2f"), or a dash as wide."""
+    return f"{'-':>{spec.split('.')[0].rstrip('df')}}" if value is None else format(value, spec)
+
+
+def table(rows: list[Row]) -> str:
+    w = max([3] + [len(r.map) for r in rows])
+    head = f"{'map':<{w}} {'N':>4} {'planner':<7} {'time s':>8} {'SoC/free':>8} {'mkspan/free':>11} " \
+           f"{'reorders':>8} {'regions':>8}  valid"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(f"{r.map:<{w}} {r.n:>4} {r.planner:<7} {_fmt(r.time_s, '8.2f')} {_fmt(r.soc_ratio, '8.3f')} "
+                     f"{_fmt(r.makespan_ratio, '11.3f')} {_fmt(r.reorders, '8d')} {_fmt(r.regions, '8d')}  "
+                     f"{r.verdict}")
+    return "\n".join(lines)
+
+
+def write_csv(rows: list[Row], path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(["map", "n", "planner", "time_s", "soc_ratio", "makespan_ratio", "reorders", "regions",
+                      "verdict", "detail"])
+        for r in rows:
+            out.writerow([r.map, r.n, r.planner, r.time_s, r.soc_ratio, r.makespan_ratio, r.reorders, r.regions,
+                          r.verdict, r.detail])
+
+
+def plot(rows: list[Row], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_t, ax_q) = plt.subplots(1, 2, figsize=(12, 4.5))
+    for (m, planner) in dict.fromkeys((r.map, r.planner) for r in rows):
+        mine = [r for r in rows if r.map == m and r.planner == planner and r.verdict == "ok"]
+        if not mine:
+            continue
+        ns = [r.n for r in mine]
+        line, = ax_t.plot(ns, [r.time_s for r in mine], "o-", label=f"{m} {planner}")
+        ax_q.plot(ns, [r.soc_ratio for r in mine], "o-", color=line.get_color(), label=f"{m} {planner}")
+    ax_t.set(xlabel="robots", ylabel="planning time (s)", yscale="log", title="planning time")
+    ax_q.set(xlabel="robots", ylabel="sum of arrivals / no-interference", title="plan quality")
+    ax_q.axhline(1.0, color="grey", lw=0.5)
+    for ax in (ax_t, ax_q):
+        ax.grid(alpha=0.3)
+    ax_q.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+
+
+def main(argv=None) -> int:
+    from tqdm import tqdm
+
+    tqdm.monitor_interval = 0   # no monitor thread: the planning runs are forked
+    args = _args(argv)
+    n_max = args.sizes[-1]
+    if args.maps_dir.is_dir():
+        names = [s.strip() for s in args.maps.split(",")] if args.maps else None
+        instances = movingai_instances(args.maps_dir, names, args.scen, n_max, args.seed)
+    else:
+        print(f"bench_md: no maps directory {args.maps_dir}: using a generated warehouse with random "
+              f"start/goal pairs instead of MovingAI maps", file=sys.stderr)
+        instances = [generated_instance(n_max, args.seed)]
+    rows: list[Row] = []
+    jobs = [(inst, n, p) for inst in instances for n in args.sizes for p in args.planners]
+    alone = {inst.name: AloneTimes(inst.grid) for inst in instances}
+    with tqdm(jobs, unit="run", file=sys.stderr) as bar:
+        for inst, n, planner in bar:
+            bar.set_postfix_str(f"{inst.name} N={n} {planner}")
+            row = run_one(inst, n, planner, args.timeout, alone[inst.name])
+            rows.append(row)
+            if row.verdict.startswith("FAIL"):
+                bar.write(f"!!! FAIL: invalid plan on {inst.name} N={n} planner={planner} seed={args.seed}: "
+                          f"{row.detail}")
+            elif row.verdict != "ok":
+                bar.write(f"{inst.name} N={n} {planner}: {row.verdict}: {row.detail.strip()}")
+    print(table(rows))
+    if args.csv:
+        write_csv(rows, args.csv)
+    if args.plot:
+        plot(rows, args.plot)
+    invalid = [r for r in rows if r.verdict.startswith("FAIL")]
+    if invalid:
+        print(f"\n!!! {len(invalid)} INVALID PLAN(S) (seed {args.seed}):", file=sys.stderr)
+        for r in invalid:
+            print(f"!!!   {r.map} N={r.n} {r.planner}: {r.detail}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

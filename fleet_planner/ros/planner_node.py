@@ -1,0 +1,186 @@
+"""The central planner node: a thin adapter between the fleet topics and :class:`FleetManager`.
+
+Subscribes ``/fleet/tasks`` and ``/fleet/robot_status``; on a timer (ROS time) asks the fleet
+manager what changes and publishes each robot's new timed path (``/robots/<id>/timed_path``, one
+stamp per pose), the task events, the schedule, RViz markers, and once the map. No single message
+can stop it: a bad task is answered with a ``rejected`` event naming the problem, a bad status
+with a logged warning.
+
+    ros2 run fleet_planner planner --ros-args --params-file config/planner_params.yaml
+"""
+from __future__ import annotations
+
+import traceback
+from dataclasses import fields, replace
+from typing import Mapping
+
+import rclpy
+from nav_msgs.msg import OccupancyGrid, Path
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
+
+from fleet_planner.dispatch import Decisions, DispatchParams, FleetManager
+from fleet_planner.robots import RobotKind, load_kinds
+from fleet_planner.warehouse import Warehouse, load_warehouse
+from msg_schemas import topics
+from msg_schemas.convert import grid_to_msg, ns_to_stamp, plan_markers, record_to_string, timed_path_to_msg
+from msg_schemas.records import RecordError, RobotStatus, TaskEvent
+
+#: parameters that shape planned legs and cannot change while the node runs
+_FIXED = ("speed_factor", "safety_margin", "lead_s")
+_HELP = {
+    "speed_factor": "legs are planned at this fraction of each robot's top speed",
+    "safety_margin": "m added to the margin that covers the robots' tracking lag",
+    "lead_s": "s between planning a leg and its start (time to deliver it)",
+    "offline_timeout_s": "s without a status after which a robot is offline",
+    "lateness_tolerance_s": "s behind schedule after which a robot re-plans its leg",
+    "low_battery": "battery fraction below which a free robot goes to a charger",
+    "min_task_battery": "battery fraction a robot needs to take a job",
+    "idle_s": "s a free robot waits before it goes to a charger",
+}
+
+
+def _range(description: str, lo: float, hi: float, read_only: bool = True) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=read_only,
+                               floating_point_range=[FloatingPointRange(from_value=float(lo), to_value=float(hi))])
+
+
+class PlannerNode(Node):
+    """The planner. ``warehouse`` and ``kinds`` may be handed in (tests); otherwise they are read from
+    the files named by the parameters ``warehouse_file`` and ``kinds_file`` (empty: the shipped ones)."""
+
+    def __init__(self, name: str = "planner", *, warehouse: Warehouse | None = None,
+                 kinds: Mapping[str, RobotKind] | None = None, **kwargs):
+        super().__init__(name, **kwargs)
+        text = ParameterDescriptor(read_only=True)
+        wh_file = self.declare_parameter("warehouse_file", "", ParameterDescriptor(
+            description="warehouse YAML (empty: the shipped config/warehouse.yaml)", read_only=True)).value
+        kinds_file = self.declare_parameter("kinds_file", "", ParameterDescriptor(
+            description="robot kinds YAML (empty: the shipped config/robot_kinds.yaml)", read_only=True)).value
+        self.frame_id = self.declare_parameter("frame_id", "map", text).value
+        spots = self.declare_parameter("parking", Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
+            description="parking spots besides the chargers, flattened: [x1, y1, x2, y2, ...] (m)",
+            read_only=True)).value or []
+        period = self.declare_parameter("step_period_s", 0.5, _range(
+            "s of ROS time between planning steps", 0.05, 10.0)).value
+        defaults = DispatchParams()
+        values = {}
+        for f in fields(DispatchParams):
+            lo, hi = DispatchParams.RANGES[f.name]
+            values[f.name] = self.declare_parameter(f.name, float(getattr(defaults, f.name)), _range(
+                _HELP[f.name], lo, hi, read_only=f.name in _FIXED)).value
+        if len(spots) % 2:
+            raise ValueError(f"parking: needs x, y pairs (got {len(spots)} numbers)")
+
+        warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
+        kinds = kinds if kinds is not None else load_kinds(kinds_file or None)
+        self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
+                                  [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)])
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
+        self._schedule = self.create_publisher(String, topics.SCHEDULE, topics.SCHEDULE_QOS)
+        self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
+        self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
+        self._paths: dict[str, Publisher] = {}
+        self.create_subscription(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        self._timer = self.create_timer(period, self._on_timer)
+        self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
+        self.get_logger().info(
+            f"planning for warehouse {warehouse.name!r} ({len(warehouse.stations)} stations), margin "
+            f"{self.fleet.margin:.2f} m, {len(self.fleet.parking)} parking spots, step every {period:g} s")
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds / 1e9
+
+    # -- callbacks: none of them lets an exception out ----------------------------------------------
+    def _on_task(self, msg: String) -> None:
+        now = self._now()
+        try:
+            events = self.fleet.submit(msg.data, now)
+        except Exception as exc:  # a bug must not take the fleet down: answer, log, carry on
+            self.get_logger().error(f"task {msg.data[:200]!r}: {exc!r}")
+            events = [TaskEvent(task_id="?", event="rejected", stamp=now, reason=f"internal error: {exc}")]
+        for ev in events:
+            if ev.event == "rejected":
+                self.get_logger().warning(f"task {ev.task_id} rejected: {ev.reason}")
+        self._publish_events(events)
+
+    def _on_status(self, msg: String) -> None:
+        try:
+            self.fleet.on_status(RobotStatus.from_json(msg.data), self._now())
+        except (RecordError, ValueError) as exc:
+            self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
+        except Exception as exc:
+            self.get_logger().error(f"robot status {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
+
+    def _on_timer(self) -> None:
+        now = self._now()
+        try:
+            decisions = self.fleet.step(now)
+        except Exception as exc:
+            self.get_logger().error(f"planning step failed: {exc!r}\n{traceback.format_exc(limit=-8)}",
+                                    throttle_duration_sec=5.0)
+            return
+        self._publish(decisions, now)
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        names = {f.name for f in fields(DispatchParams)}
+        changes = {p.name: p.value for p in params if p.name in names}
+        if not changes:
+            return SetParametersResult(successful=True)
+        try:
+            self.fleet.set_params(replace(self.fleet.params, **changes))
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    # -- output ---------------------------------------------------------------------------------------
+    def _publish(self, d: Decisions, now: float) -> None:
+        log = self.get_logger()
+        for note in d.notes:
+            log.info(note)
+        for leg in d.legs:
+            try:
+                msg = timed_path_to_msg(leg.relative(), ns_to_stamp(leg.path_id), self.frame_id)
+                self._path_publisher(leg.robot_id).publish(msg)
+            except ValueError as exc:
+                log.error(f"robot {leg.robot_id}: timed path not sent: {exc}")
+        self._publish_events(d.events)
+        if d.legs:
+            self._schedule.publish(record_to_string(self.fleet.schedule(now)))
+        self._markers.publish(plan_markers(self.fleet.trajectories(), self.fleet.statuses(), self.frame_id, now))
+
+    def _publish_events(self, events: list[TaskEvent]) -> None:
+        for ev in events:
+            self._events.publish(record_to_string(ev))
+
+    def _path_publisher(self, robot_id: str) -> Publisher:
+        if robot_id not in self._paths:
+            self._paths[robot_id] = self.create_publisher(Path, topics.timed_path_topic(robot_id),
+                                                          topics.TIMED_PATH_QOS)
+        return self._paths[robot_id]
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PlannerNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,83 @@
+"""A simulated clock: publishes ``rosgraph_msgs/Clock`` on ``/clock``, ``rate`` times faster than
+the wall clock, so that nodes started with ``use_sim_time:=true`` run the fleet faster than real time.
+
+Every tick the simulated time advances by ``step_s``, and ticks come every ``step_s / rate`` s of
+wall time. When the process is too busy to tick on time (as when it shares one executor with the
+whole fleet), simulated time slows down with it instead of jumping, so no node finds the world
+moved on while it was computing. Keep ``step_s`` at most the period of the fastest ROS-time timer
+of the fleet (the agents' 0.1 s status timer), or those timers fire less often than asked::
+
+    python -m fleet_planner.ros.sim_clock --rate 5          # 5x real time
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.time_source import CLOCK_TOPIC
+from rosgraph_msgs.msg import Clock as ClockMsg
+
+from msg_schemas.convert import ns_to_stamp
+
+
+def _double(description: str, lo: float, hi: float) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=True,
+                               floating_point_range=[FloatingPointRange(from_value=lo, to_value=hi)])
+
+
+class SimClock(Node):
+    """Publishes simulated time; parameters ``rate`` (x real time), ``step_s`` (simulated seconds per
+    tick) and ``start_s`` (simulated time of the first tick). It runs on the wall clock itself."""
+
+    def __init__(self, name: str = "sim_clock", **kwargs):
+        super().__init__(name, **kwargs)
+        rate = self.declare_parameter("rate", 1.0, _double("simulated seconds per wall second", 0.01, 1000.0)).value
+        step = self.declare_parameter("step_s", 0.1, _double("simulated seconds per tick", 0.001, 10.0)).value
+        start = self.declare_parameter("start_s", 0.0, _double("simulated time of the first tick", 0.0, 1e9)).value
+        if self.get_parameter("use_sim_time").value:
+            raise ValueError("use_sim_time: the sim clock cannot run on simulated time itself")
+        self._step_ns = round(step * 1e9)
+        self.now_ns = round(start * 1e9)
+        self._pub = self.create_publisher(ClockMsg, CLOCK_TOPIC, QoSProfile(depth=10))
+        self._timer = self.create_timer(step / rate, self._tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._publish()
+        self.get_logger().info(f"simulated clock at {rate:g}x real time from t = {start:g} s")
+
+    def _tick(self) -> None:
+        self.now_ns += self._step_ns
+        self._publish()
+
+    def _publish(self) -> None:
+        self._pub.publish(ClockMsg(clock=ns_to_stamp(self.now_ns)))
+
+
+def main(args: list[str] | None = None) -> None:
+    argv = sys.argv if args is None else args
+    parser = argparse.ArgumentParser(prog="sim_clock", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rate", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument("--step", type=float, default=0.1, help="simulated seconds per tick (default 0.1)")
+    parser.add_argument("--start", type=float, default=0.0, help="simulated time of the first tick (default 0)")
+    opts = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    rclpy.init(args=argv)
+    node = None
+    try:
+        node = SimClock(parameter_overrides=[Parameter("rate", value=opts.rate), Parameter("step_s", value=opts.step),
+                                             Parameter("start_s", value=opts.start)])
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

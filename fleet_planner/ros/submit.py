@@ -1,0 +1,128 @@
+"""``fleet-submit``: publish one job on ``/fleet/tasks`` and follow it until it ends.
+
+    fleet-submit --pick chute_2 --place B12-04 --needs forklift [--id J1] [--timeout 60]
+
+Prints each task event of the job as it comes (``J1 assigned to r3``) and exits 0 when it is done,
+1 when it is rejected, fails or the timeout (wall seconds) runs out first.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import uuid
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from fleet_planner.robots import CAPABILITIES
+from msg_schemas import topics
+from msg_schemas.records import RecordError, Task, TaskEvent
+
+ENDS = {"done": 0, "rejected": 1, "failed": 1, "cancelled": 1}
+
+
+def planner_matched(node: Node, tasks_pub, events_sub) -> bool:
+    """A node that takes tasks and publishes task events (the planner) is in the graph, and our task
+    publisher and event subscription are matched with every endpoint on those topics: a task sent
+    now reaches it, and its answer reaches us."""
+    takers = {(i.node_namespace, i.node_name) for i in node.get_subscriptions_info_by_topic(topics.TASKS)}
+    tellers = {(i.node_namespace, i.node_name) for i in node.get_publishers_info_by_topic(topics.TASK_EVENTS)}
+    return bool(takers & tellers) and tasks_pub.get_subscription_count() >= len(takers) \
+        and events_sub.get_publisher_count() >= len(tellers)
+
+
+class Submitter(Node):
+    """Publishes one task once the planner can hear it, and collects the task's events."""
+
+    def __init__(self, task: Task, name: str = "fleet_submit", **kwargs):
+        super().__init__(name, **kwargs)
+        self.task = task
+        self.events: list[TaskEvent] = []
+        self._pub = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
+        self._sub = self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+
+    def planner_ready(self) -> bool:
+        return planner_matched(self, self._pub, self._sub)
+
+    def send(self) -> None:
+        self._pub.publish(String(data=self.task.to_json()))
+
+    def _on_event(self, msg: String) -> None:
+        try:
+            ev = TaskEvent.from_json(msg.data)
+        except RecordError:
+            return
+        if ev.task_id == self.task.id:
+            self.events.append(ev)
+
+
+def describe(ev: TaskEvent) -> str:
+    text = f"{ev.task_id} {ev.event}"
+    if ev.robot_id:
+        text += f" {'to' if ev.event == 'assigned' else 'by'} {ev.robot_id}"
+    if ev.reason:
+        text += f": {ev.reason}"
+    return f"[t={ev.stamp:.1f}] {text}"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="fleet-submit", description=__doc__.split("\n\n")[0])
+    p.add_argument("--pick", required=True, help="chute to pick at (station name)")
+    p.add_argument("--place", required=True, help="address tag (or storing site) to place at")
+    p.add_argument("--needs", action="append", choices=CAPABILITIES, default=[],
+                   help="a capability the robot needs (repeat for several)")
+    p.add_argument("--payload", type=float, default=0.0, help="kg (default 0)")
+    p.add_argument("--priority", type=int, default=0, help="higher goes first (default 0)")
+    p.add_argument("--id", help="task id (default: a fresh one)")
+    p.add_argument("--timeout", type=float, default=60.0, help="wall seconds to wait for the end (default 60)")
+    return p
+
+
+def main(args: list[str] | None = None) -> None:
+    argv = sys.argv if args is None else args
+    opts = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    try:
+        task = Task(id=opts.id or f"job_{uuid.uuid4().hex[:8]}", pick=opts.pick, place=opts.place,
+                    needs=tuple(opts.needs), payload_kg=opts.payload, priority=opts.priority)
+    except RecordError as exc:
+        _parser().error(str(exc))
+    rclpy.init(args=argv)
+    node = None
+    code = 1
+    try:
+        node = Submitter(task)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        deadline = time.monotonic() + opts.timeout
+        while not node.planner_ready() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        if not node.planner_ready():
+            print(f"{task.id}: no planner on {topics.TASKS} within {opts.timeout:g} s", file=sys.stderr)
+        else:
+            node.send()
+            shown = 0
+            while time.monotonic() < deadline and not any(e.event in ENDS for e in node.events):
+                executor.spin_once(timeout_sec=0.1)
+                for ev in node.events[shown:]:
+                    print(describe(ev), flush=True)
+                shown = len(node.events)
+            for ev in node.events[shown:]:
+                print(describe(ev), flush=True)
+            end = next((e.event for e in node.events if e.event in ENDS), None)
+            if end is None:
+                print(f"{task.id}: not finished within {opts.timeout:g} s", file=sys.stderr)
+            code = ENDS.get(end, 1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    sys.exit(code)
+
+
+if __name__ == "__main__":
+    main()

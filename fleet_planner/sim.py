@@ -1,0 +1,748 @@
+"""Delivery simulation of paper 002, section V: N robots serve a fixed sequence of delivery tasks.
+
+A *task* is "drive to station k, dock there, drive to station l, dock there". Every robot takes the
+next task of one seeded sequence whenever it has finished its previous one; when the sequence is
+used up it drives to a free parking spot. The run ends when every delivery is done (its completion
+time is CTime), at a cap on simulated time, or when nothing has moved for a long time (a stall).
+Everything runs in simulated time, much faster than real time, without ROS.
+
+Methods (:data:`METHODS`):
+
+* ``md`` / ``md-box`` - central: each time a robot needs a new leg,
+  :meth:`~fleet_planner.planners.md.MDPlanner.plan_incremental` plans it around the trajectories
+  every other robot is driving (robots standing still are one-waypoint trajectories); robots follow
+  their timed paths exactly. ``md-box`` uses the paper's collision boxes, ``md`` the exact regions.
+* ``prior`` - the same flow with :meth:`~fleet_planner.planners.prior.PriorPlanner.plan_incremental`.
+* ``behavior`` - BBMRCA: :class:`~fleet_planner.behavior.BehaviorFleet`, each robot plans its own A*
+  path and the behaviours resolve conflicts locally, stepped with a fixed ``dt``.
+
+Station discipline of the central methods (the behaviour layer has its own, the docking arbiter):
+a station is *claimed* by one robot from the moment it decides to go there until it leaves it
+again, since a robot parked on a station would block every plan that ends there. A robot whose
+station is claimed drives to a free parking spot near it and queues there (first come first
+served). Parking spots are chosen so that a robot parked on one never cuts a passage
+(:func:`choose_spots`). A leg that cannot be planned is tried again a little later, once some
+other robot got a new leg.
+
+Measured per run (:class:`DeliveryResult`): CTime, a lower bound (each robot's own task sequence
+driven alone: shortest-path legs at top speed plus docking, maximum over robots), the average
+velocity (distance driven / CTime, averaged over robots), planner or decision wall time, the
+number of pairs of discs that ever overlap (exactly on the executed trajectories for the central
+methods, at every step for ``behavior``) and the robots left deadlocked.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from .grid import GridMap
+from .model import Plan, PlanningError, Point, RobotSpec, TimedPath
+from .paths import PathFinder
+
+METHODS = ("md", "md-box", "prior", "behavior")
+#: a 0.5 m x 0.5 m robot as a disc: half its diagonal
+ROBOT_RADIUS = math.hypot(0.25, 0.25)
+TOP_SPEED = 0.8
+DOCK_S = 5.0
+#: parked discs keep this much more than touching from each other and from stations
+SPOT_MARGIN = 0.05
+#: parking spots keep this far from every station (outside the behaviour layer's docking region)
+STATION_CLEARANCE = 2.0
+
+#: progress callback: (deliveries done, deliveries in total, simulated time)
+SimProgress = Callable[[int, int, float], None]
+
+
+# ---------------------------------------------------------------------------------------------
+# the problem
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Task:
+    """One delivery: load at station ``pick``, unload at station ``drop``."""
+
+    pick: str
+    drop: str
+
+
+@dataclass
+class DeliveryProblem:
+    """Map, stations, the task sequence and where the robots start.
+
+    ``spots`` are the parking spots, the robots' homes first (robot i starts on ``spots[i]``).
+    """
+
+    name: str
+    grid: GridMap
+    stations: dict[str, Point]
+    tasks: list[Task]
+    spots: list[Point]
+    n_robots: int
+    radius: float = ROBOT_RADIUS
+    max_speed: float = TOP_SPEED
+    dock_s: float = DOCK_S
+
+    def __post_init__(self) -> None:
+        if self.n_robots < 1:
+            raise ValueError(f"{self.name}: n_robots must be >= 1 (got {self.n_robots})")
+        if len(self.spots) < self.n_robots:
+            raise ValueError(f"{self.name}: {len(self.spots)} parking spots for {self.n_robots} robots")
+        for k, task in enumerate(self.tasks):
+            for s in (task.pick, task.drop):
+                if s not in self.stations:
+                    raise ValueError(f"{self.name}: tasks[{k}] names unknown station {s!r}")
+        if not (self.dock_s >= 0 and math.isfinite(self.dock_s)):
+            raise ValueError(f"{self.name}: dock_s must be a finite number >= 0 (got {self.dock_s!r})")
+
+    @property
+    def homes(self) -> list[Point]:
+        return self.spots[:self.n_robots]
+
+    def robot_ids(self) -> list[str]:
+        return [f"r{i}" for i in range(self.n_robots)]
+
+
+class _Layout:
+    """Cells a parked disc may take without cutting a passage for the other robots.
+
+    ``free`` is where the centre of a robot fits (the path finder's mask, restricted to the largest
+    4-connected part so every place is reachable from every other); ``taken`` the cells no robot
+    centre may use because a station or a parking spot keeps them for a parked disc.
+    """
+
+    def __init__(self, grid: GridMap, radius: float):
+        self.grid = grid
+        free = PathFinder(grid, radius).free
+        labels, count = ndimage.label(free)
+        if count == 0:
+            raise ValueError(f"{grid.name}: no cell fits a disc of radius {radius:g} m")
+        largest = 1 + int(np.argmax(ndimage.sum_labels(free, labels, range(1, count + 1))))
+        self.free = labels == largest
+        self.taken = np.zeros_like(self.free)
+        reach = 2 * radius + SPOT_MARGIN
+        self.k = int(math.ceil(reach / grid.resolution))
+        dc, dr = np.meshgrid(np.arange(-self.k, self.k + 1), np.arange(-self.k, self.k + 1))
+        self.footprint = np.hypot(dc, dr) * grid.resolution < reach
+        self.window = self.k + max(2, int(math.ceil(1.0 / grid.resolution)))
+
+    def take(self, col: int, row: int) -> None:
+        _stamp(self.taken, col, row, self.footprint)
+
+    def usable(self, col: int, row: int) -> bool:
+        """The disc fits here, nothing is parked close, and parking here cuts no passage: within
+        a window around the cell, the free cells on the window's border that were connected stay
+        connected and no free pocket is cut off."""
+        if not self.free[row, col] or self.taken[row, col]:
+            return False
+        m, h, w = self.window, self.grid.height, self.grid.width
+        r0, r1, c0, c1 = max(0, row - m), min(h, row + m + 1), max(0, col - m), min(w, col + m + 1)
+        before = self.free[r0:r1, c0:c1] & ~self.taken[r0:r1, c0:c1]
+        parked = np.zeros_like(before)
+        _stamp(parked, col - c0, row - r0, self.footprint)
+        after = before & ~parked
+        lab_b, _ = ndimage.label(before)
+        lab_a, n_a = ndimage.label(after)
+        border = np.zeros_like(before)
+        border[[0, -1], :] = True
+        border[:, [0, -1]] = True
+        if not (lab_b[row - r0, col - c0] and (border & (lab_b == lab_b[row - r0, col - c0])).any()):
+            return False                              # an enclosed pocket of the window
+        for comp in np.unique(lab_b[border & before]):
+            if len(np.unique(lab_a[border & (lab_b == comp) & after])) > 1:
+                return False                          # border cells separated
+        on_border = set(np.unique(lab_a[border & after]).tolist())
+        return all(a in on_border for a in range(1, n_a + 1))   # no pocket cut off
+
+    def cell(self, p: Point) -> tuple[int, int]:
+        return self.grid.cell_of(*p)
+
+
+def _stamp(mask: np.ndarray, col: int, row: int, footprint: np.ndarray) -> None:
+    """OR a square ``footprint`` centred on (col, row) into ``mask`` (clipped at the edges)."""
+    k = footprint.shape[0] // 2
+    h, w = mask.shape
+    r0, c0 = row - k, col - k
+    rs, cs = max(0, r0), max(0, c0)
+    re, ce = min(h, r0 + 2 * k + 1), min(w, c0 + 2 * k + 1)
+    if rs < re and cs < ce:
+        mask[rs:re, cs:ce] |= footprint[rs - r0:re - r0, cs - c0:ce - c0]
+
+
+def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point] = (),
+                 radius: float = ROBOT_RADIUS) -> list[Point]:
+    """``count`` parking spots (cell centres, seeded random order) where a parked robot cuts no
+    passage, at least :data:`STATION_CLEARANCE` from every station and a disc apart from each
+    other. Raises ValueError when the map has fewer."""
+    layout = _Layout(grid, radius)
+    for p in stations:
+        layout.take(*layout.cell(p))
+    rows, cols = np.nonzero(layout.free & ~layout.taken)
+    centres = np.column_stack([(cols + 0.5) * grid.resolution, (rows + 0.5) * grid.resolution])
+    if len(stations):
+        far = cKDTree(np.asarray(stations, dtype=float)).query(centres)[0] >= STATION_CLEARANCE
+        rows, cols = rows[far], cols[far]
+    order = np.random.default_rng(seed).permutation(len(rows))
+    spots: list[Point] = []
+    for i in order:
+        col, row = int(cols[i]), int(rows[i])
+        if layout.usable(col, row):
+            layout.take(col, row)
+            spots.append(grid.centre(col, row))
+            if len(spots) == count:
+                return spots
+    raise ValueError(f"{grid.name}: only {len(spots)} parking spots that cut no passage, {count} needed "
+                     f"(fewer robots or a larger map)")
+
+
+def spread_stations(grid: GridMap, count: int, seed: int, radius: float = ROBOT_RADIUS) -> dict[str, Point]:
+    """``count`` stations ``S1``, ``S2``... at free cells spread over the map (farthest-point
+    sampling from a seeded first pick), each one where a docked robot cuts no passage."""
+    layout = _Layout(grid, radius)
+    rows, cols = np.nonzero(layout.free)
+    centres = np.column_stack([(cols + 0.5) * grid.resolution, (rows + 0.5) * grid.resolution])
+    rng = np.random.default_rng(seed)
+    dist = np.full(len(rows), np.inf)
+    out: dict[str, Point] = {}
+    for n in range(count):
+        ranked = rng.permutation(len(rows)) if n == 0 else np.argsort(-dist, kind="stable")
+        for i in ranked:
+            if dist[i] <= 0:
+                break
+            if layout.usable(int(cols[i]), int(rows[i])):
+                layout.take(int(cols[i]), int(rows[i]))
+                out[f"S{n + 1}"] = grid.centre(int(cols[i]), int(rows[i]))
+                dist = np.minimum(dist, np.hypot(*(centres - centres[i]).T))
+                break
+        else:
+            raise ValueError(f"{grid.name}: room for only {n} stations, {count} asked for")
+    return out
+
+
+def delivery_problem(grid: GridMap, stations: dict[str, Point], n_robots: int, n_deliveries: int, seed: int,
+                     pick: Sequence[str] | None = None, drop: Sequence[str] | None = None,
+                     name: str | None = None, spare_spots: int | None = None, radius: float = ROBOT_RADIUS,
+                     max_speed: float = TOP_SPEED, dock_s: float = DOCK_S) -> DeliveryProblem:
+    """A seeded delivery problem: each task loads at a station of ``pick`` and unloads at a
+    different one of ``drop`` (both default to all stations). Parking spots: one home per robot
+    plus ``spare_spots`` (default N/4 + 8) to queue at."""
+    if n_deliveries < 1:
+        raise ValueError(f"n_deliveries: must be >= 1 (got {n_deliveries})")
+    pick = list(stations) if pick is None else list(pick)
+    drop = list(stations) if drop is None else list(drop)
+    if not pick or not drop or (len(pick) == 1 and pick == drop):
+        raise ValueError("stations: need at least two stations to deliver between")
+    rng = np.random.default_rng(seed)
+    tasks = []
+    while len(tasks) < n_deliveries:
+        k, l = pick[int(rng.integers(len(pick)))], drop[int(rng.integers(len(drop)))]
+        if k != l:
+            tasks.append(Task(k, l))
+    spare = n_robots // 4 + 8 if spare_spots is None else spare_spots
+    spots = choose_spots(grid, n_robots + spare, seed, list(stations.values()), radius)
+    return DeliveryProblem(name or grid.name, grid, dict(stations), tasks, spots, n_robots, radius,
+                           max_speed, dock_s)
+
+
+def warehouse_problem(warehouse, n_robots: int, n_deliveries: int, seed: int, **options) -> DeliveryProblem:
+    """A delivery problem on a :class:`~fleet_planner.warehouse.Warehouse`: load at its chutes,
+    unload at its storing sites (chargers are left out)."""
+    chutes = [s.name for s in warehouse.stations_of("chute")]
+    sites = [s.name for s in warehouse.stations_of("storage")]
+    used = {n: warehouse.stations[n].pose for n in chutes + sites}
+    options.setdefault("name", warehouse.name)
+    return delivery_problem(warehouse.grid, used, n_robots, n_deliveries, seed, chutes or None, sites or None,
+                            **options)
+
+
+# ---------------------------------------------------------------------------------------------
+# the result
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class DeliveryResult:
+    """What one run measured. ``ctime`` is the completion time of the last delivery, or the
+    simulated time at which the run stopped when ``stop`` is not "done"."""
+
+    problem: str
+    method: str
+    n_robots: int
+    n_deliveries: int
+    completed: int
+    stop: str                  # "done", "cap" (simulated-time cap), "stall" (nothing moved for long), "wall"
+    ctime: float
+    lower_bound: float
+    avg_velocity: float
+    decision_s: float          # planner wall s per planned leg, failed attempts included (central),
+                               # or wall s per fleet step (behavior)
+    decision_unit: str         # "leg" or "step"
+    planner_wall_s: float      # all wall time spent planning / deciding
+    legs: int                  # legs driven (planned and started)
+    failed_plans: int          # planning attempts that raised PlanningError (retried later)
+    collisions: int            # pairs of discs that overlapped (central), overlap events (behavior)
+    min_gap: float             # smallest distance minus sum of radii seen over the run
+    deadlocks: int             # robots with work left that made no progress for no_progress_s at the end
+    wall_s: float
+    violations: list[str] = field(default_factory=list)  # central: other plan-contract breaches
+    trajectories: list[TimedPath] | None = None          # central: what every robot drove
+    positions: np.ndarray | None = None                  # behavior with record=True: (steps + 1, N, 2)
+    times: np.ndarray | None = None                      # the times of ``positions``
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def finished(self) -> bool:
+        return self.stop == "done"
+
+
+class _LegTimes:
+    """Shortest-path driving times between points for the lower bound (cached)."""
+
+    def __init__(self, problem: DeliveryProblem):
+        self.finder = PathFinder(problem.grid, problem.radius)
+        self.speed = problem.max_speed
+        self._cache: dict[tuple[Point, Point], float] = {}
+
+    def __call__(self, a: Point, b: Point) -> float:
+        key = (tuple(a), tuple(b))
+        if key not in self._cache:
+            path = self.finder.find(a, b)
+            if path is None:
+                raise ValueError(f"no path from {a} to {b} for radius {self.finder.radius:g}")
+            self._cache[key] = float(np.sum(np.hypot(*np.diff(path, axis=0).T))) / self.speed
+        return self._cache[key]
+
+
+# ---------------------------------------------------------------------------------------------
+# dispatch: the part all methods share
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class _Robot:
+    idx: int
+    id: str
+    pos: Point
+    phase: str = "idle"          # need, drive, dock, queued (central), done
+    task: Task | None = None
+    picked: bool = False
+    target: Point | None = None
+    kind: str = ""               # what the target is: pick, drop, hold, park
+    station: str | None = None   # the station the target is or queues for
+    spot: int | None = None      # reserved parking spot (home, queue or final)
+    here: str | None = None      # the station it stands on (claimed) after docking
+    wake: float = 0.0
+    since: float = 0.0           # progress: last time it made some
+    best: float = math.inf       # behavior: the least path length left to the target on this leg
+    lb: float = 0.0              # its task sequence driven alone
+    lb_at: Point = (0.0, 0.0)
+    pending: str = ""            # pick or drop: what it queues for at a parking spot
+    reserved: int | None = None  # the parking spot it is heading for
+
+
+class _Dispatch:
+    """Task sequence, station claims and queues, parking spots, the lower bound, progress."""
+
+    def __init__(self, problem: DeliveryProblem, claims: bool):
+        self.p = problem
+        self.claims = claims
+        self.leg_time = _LegTimes(problem)
+        self.robots = [_Robot(i, rid, problem.spots[i], spot=i, lb_at=problem.spots[i])
+                       for i, rid in enumerate(problem.robot_ids())]
+        self.spot_owner: list[int | None] = [None] * len(problem.spots)
+        for r in self.robots:
+            self.spot_owner[r.idx] = r.idx
+        self.next_task = 0
+        self.completed = 0
+        self.ctime: float | None = None
+        self.claim: dict[str, int] = {}
+        self.queue: dict[str, list[int]] = {s: [] for s in problem.stations}
+        self.released: list[int] = []     # robots a freed station was just handed to
+
+    # -- decisions ------------------------------------------------------------------------------
+    def next_target(self, r: _Robot, t: float) -> None:
+        """After a dock (or at the start): where to go next; sets ``phase`` to need or queued."""
+        if r.task is not None and not r.picked:
+            self._to_station(r, r.task.pick, "pick", t)
+        elif r.task is not None:
+            self._to_station(r, r.task.drop, "drop", t)
+        elif self.next_task < len(self.p.tasks):
+            r.task, r.picked = self.p.tasks[self.next_task], False
+            self.next_task += 1
+            self.lb_add(r, self.p.stations[r.task.pick])
+            self.lb_add(r, self.p.stations[r.task.drop])
+            self._to_station(r, r.task.pick, "pick", t)
+        else:
+            spot = self._free_spot(r.pos, r)
+            self._need(r, self.p.spots[spot], "park", None, t)
+
+    def lb_add(self, r: _Robot, station: Point) -> None:
+        r.lb += self.leg_time(r.lb_at, station) + self.p.dock_s
+        r.lb_at = station
+
+    def _to_station(self, r: _Robot, station: str, kind: str, t: float) -> None:
+        if not self.claims or self.claim.get(station, r.idx) == r.idx:
+            if self.claims:
+                self.claim[station] = r.idx
+            self._need(r, self.p.stations[station], kind, station, t)
+        elif r.spot is not None and r.here is None and r.pos == self.p.spots[r.spot]:
+            self._queue(r, station, kind)   # already on a parking spot: queue right here
+        else:
+            spot = self._free_spot(self.p.stations[station], r)
+            self._need(r, self.p.spots[spot], "hold", station, t)
+            r.pending = kind
+
+    def _queue(self, r: _Robot, station: str, kind: str) -> None:
+        r.phase, r.station, r.wake = "queued", station, math.inf
+        r.pending = kind
+        self.queue[station].append(r.idx)
+
+    def _need(self, r: _Robot, target: Point, kind: str, station: str | None, t: float) -> None:
+        r.phase, r.target, r.kind, r.station, r.wake = "need", target, kind, station, t
+
+    def _free_spot(self, near: Point, r: _Robot) -> int:
+        """The free parking spot closest to ``near`` (reserved for r; its old one is kept until it
+        leaves)."""
+        spots = np.asarray(self.p.spots)
+        d = np.hypot(*(spots - np.asarray(near)).T)
+        for i in np.argsort(d, kind="stable"):
+            if self.spot_owner[i] is None:
+                self.spot_owner[i] = r.idx
+                r.reserved = int(i)
+                return int(i)
+        raise RuntimeError("no free parking spot left; more spots than robots are always chosen")
+
+    # -- events ---------------------------------------------------------------------------------
+    def left(self, r: _Robot, t: float) -> None:
+        """r drove off from where it stood: free its spot and the station it stood on."""
+        if r.spot is not None and self.spot_owner[r.spot] == r.idx:
+            self.spot_owner[r.spot] = None
+        r.spot = r.reserved if r.kind in ("hold", "park") else None
+        r.reserved = None
+        if r.here is not None:
+            self.release(r.here)
+            r.here = None
+        r.since = t
+
+    def release(self, station: str) -> None:
+        if self.claim.get(station) is None:
+            return
+        del self.claim[station]
+        if self.queue[station]:
+            q = self.robots[self.queue[station].pop(0)]
+            self.claim[station] = q.idx
+            self.released.append(q.idx)
+
+    def arrived(self, r: _Robot, t: float) -> None:
+        """r reached its target."""
+        r.since = t
+        r.pos = r.target
+        if r.kind in ("pick", "drop"):
+            r.phase, r.wake, r.here = "dock", t + self.p.dock_s, r.station if self.claims else None
+        elif r.kind == "hold":
+            station = r.station
+            if self.claim.get(station) is None:
+                self.claim[station] = r.idx
+                self._need(r, self.p.stations[station], r.pending, station, t)
+            else:
+                self._queue(r, station, r.pending)
+        else:
+            r.phase, r.wake = "done", math.inf
+
+    def docked(self, r: _Robot, t: float) -> None:
+        """r's docking time is over."""
+        r.since = t
+        if r.kind == "pick":
+            r.picked = True
+        else:
+            r.task = None
+            self.completed += 1
+            if self.completed == len(self.p.tasks):
+                self.ctime = t
+        self.next_target(r, t)
+
+    def take_released(self, t: float) -> list[_Robot]:
+        """Robots that were queued and now hold their station: they need their leg to it."""
+        out = []
+        for i in self.released:
+            r = self.robots[i]
+            self._need(r, self.p.stations[r.station], r.pending, r.station, t)
+            out.append(r)
+        self.released = []
+        return out
+
+    # -- measures -------------------------------------------------------------------------------
+    def busy(self, r: _Robot) -> bool:
+        """r still has a delivery to make."""
+        return r.task is not None
+
+    def lower_bound(self) -> float:
+        return max((r.lb for r in self.robots), default=0.0)
+
+    def deadlocked(self, t: float, no_progress_s: float, moving: tuple[str, ...]) -> int:
+        """Robots with a delivery left, in none of the ``moving`` phases, without progress for long."""
+        return sum(1 for r in self.robots
+                   if self.busy(r) and r.phase not in moving and t - r.since > no_progress_s)
+
+
+# ---------------------------------------------------------------------------------------------
+# central methods: event-driven, robots follow their timed paths exactly
+# ---------------------------------------------------------------------------------------------
+def _planner(method: str, options: dict | None):
+    from .planners.md import MDPlanner
+    from .planners.prior import PriorPlanner
+
+    options = dict(options or {})
+    if method == "md":
+        return MDPlanner(**options)
+    if method == "md-box":
+        return MDPlanner(mode="box", **options)
+    return PriorPlanner(**options)
+
+
+def _simulate_central(problem: DeliveryProblem, method: str, cap_s: float, stall_s: float, no_progress_s: float,
+                      retry_s: float, wall_cap_s: float, planner_options: dict | None,
+                      progress: SimProgress | None) -> DeliveryResult:
+    wall0 = time.perf_counter()
+    planner = _planner(method, planner_options)
+    d = _Dispatch(problem, claims=True)
+    robots, n = d.robots, problem.n_robots
+    legs: list[list[np.ndarray]] = [[np.array([[*r.pos, 0.0]])] for r in robots]
+    traj: list[TimedPath] = [TimedPath(r.id, problem.radius, legs[r.idx][0]) for r in robots]
+    tried = [-1] * n                       # plan version at the last failed attempt
+    last_try = [0.0] * n
+    version, plan_wall, n_legs, failed, delay = 0, 0.0, 0, 0, 0.0
+    last_activity, t, stop = 0.0, 0.0, "done"
+
+    for r in robots:
+        d.next_target(r, 0.0)
+
+    def fixed(q: _Robot, now: float) -> TimedPath:
+        tp = traj[q.idx]
+        if len(tp.waypoints) > 1 and tp.waypoints[-1, 2] <= now:
+            tp = traj[q.idx] = TimedPath(q.id, problem.radius, [[*tp.waypoints[-1, :2], now]])
+        return tp
+
+    def attempt(r: _Robot, now: float) -> bool:
+        nonlocal version, plan_wall, n_legs, failed, delay
+        if math.dist(r.pos, r.target) < 1e-9:
+            d.arrived(r, now)
+            return True
+        spec = RobotSpec(r.id, problem.radius, problem.max_speed, r.pos, r.target)
+        others = [fixed(q, now) for q in robots if q is not r]
+        t0 = time.perf_counter()
+        try:
+            leg = planner.plan_incremental(problem.grid, [spec], others, now)[0]
+        except PlanningError:
+            plan_wall += time.perf_counter() - t0
+            failed += 1
+            tried[r.idx], last_try[r.idx], r.wake = version, now, now + 15 * retry_s
+            return False
+        plan_wall += time.perf_counter() - t0
+        version += 1
+        n_legs += 1
+        delay += leg.arrival_time - now - leg.length / problem.max_speed
+        traj[r.idx] = leg
+        legs[r.idx].append(leg.waypoints)
+        d.left(r, now)
+        r.phase, r.wake = "drive", max(now, leg.arrival_time)
+        return True
+
+    while True:
+        if d.ctime is not None:
+            t = d.ctime
+            break
+        wake = np.array([r.wake for r in robots])
+        t_next = float(wake.min())
+        if t_next > cap_s:
+            t, stop = cap_s, "cap"
+            break
+        if t_next - last_activity > stall_s:
+            t, stop = last_activity + stall_s, "stall"
+            break
+        if time.perf_counter() - wall0 > wall_cap_s:
+            stop = "wall"
+            break
+        t = t_next
+        for i in np.nonzero(wake <= t)[0]:
+            r = robots[int(i)]
+            if r.wake > t:
+                continue
+            if r.phase == "drive":
+                d.arrived(r, t)
+                last_activity = t
+            elif r.phase == "dock":
+                d.docked(r, t)
+                last_activity = t
+                if progress:
+                    progress(d.completed, len(problem.tasks), t)
+            if r.phase == "need" and r.wake <= t:
+                if attempt(r, t):
+                    last_activity = t
+            for q in d.take_released(t):
+                if attempt(q, t):
+                    last_activity = t
+        # robots that failed before may succeed now that others have new legs
+        for r in robots:
+            if r.phase == "need" and tried[r.idx] != version:
+                r.wake = min(r.wake, max(t, last_try[r.idx] + retry_s))
+                tried[r.idx] = version
+
+    paths = [TimedPath(r.id, problem.radius, np.vstack(legs[r.idx])) for r in robots]
+    collisions, gap, violations = _check_trajectories(problem, paths)
+    driven = [_driven(p.waypoints, t) for p in paths]
+    return DeliveryResult(problem.name, method, n, len(problem.tasks), d.completed, stop, t, d.lower_bound(),
+                          float(np.mean(driven)) / t if t > 0 else 0.0, plan_wall / max(n_legs, 1), "leg",
+                          plan_wall, n_legs, failed, collisions, gap, d.deadlocked(t, no_progress_s, ("dock", "drive")),
+                          time.perf_counter() - wall0, violations, paths,
+                          extra={"mean_leg_delay_s": delay / max(n_legs, 1)})
+
+
+def _check_trajectories(problem: DeliveryProblem, paths: list[TimedPath]) -> tuple[int, float, list[str]]:
+    """Overlapping pairs, the smallest gap, and every other breach of the plan contract, by the
+    independent checker on what the robots drove."""
+    from .checker import check_plan, min_separation
+
+    specs = [RobotSpec(p.robot_id, problem.radius, problem.max_speed, tuple(p.waypoints[0, :2]),
+                       tuple(p.waypoints[-1, :2])) for p in paths]
+    found = check_plan(problem.grid, specs, Plan("sim", paths))
+    collisions = sum(1 for v in found if v.kind == "collision")
+    return collisions, min_separation(paths)[0], [str(v) for v in found if v.kind != "collision"]
+
+
+def _driven(wp: np.ndarray, t: float) -> float:
+    """Distance driven along waypoints ``(x, y, t)`` until time t."""
+    seg = np.hypot(*np.diff(wp[:, :2], axis=0).T)
+    t0, t1 = wp[:-1, 2], wp[1:, 2]
+    frac = np.clip((t - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0, 1.0)
+    frac = np.where(t1 > t0, frac, (t >= t1).astype(float))
+    return float(np.sum(seg * frac))
+
+
+# ---------------------------------------------------------------------------------------------
+# behaviour-based: time-stepped
+# ---------------------------------------------------------------------------------------------
+def _simulate_behavior(problem: DeliveryProblem, dt: float, cap_s: float, stall_s: float, no_progress_s: float,
+                       retry_s: float, wall_cap_s: float, record: bool, progress: SimProgress | None) -> DeliveryResult:
+    from .behavior import BehaviorFleet
+
+    wall0 = time.perf_counter()
+    d = _Dispatch(problem, claims=False)
+    robots, n = d.robots, problem.n_robots
+    specs = [RobotSpec(r.id, problem.radius, problem.max_speed, r.pos, r.pos) for r in robots]
+    fleet = BehaviorFleet(problem.grid, specs)
+    decide_wall, n_legs, failed, steps = 0.0, 0, 0, 0
+    reach = 2 * problem.radius
+    overlapping: set[tuple[int, int]] = set()
+    events, min_gap = 0, math.inf
+    driven = np.zeros(n)
+    pos = fleet.positions()
+    log = [pos.copy()] if record else None
+    times = [0.0] if record else None
+    stop = "done"
+
+    def assign(r: _Robot, now: float) -> None:
+        nonlocal decide_wall, n_legs, failed
+        t0 = time.perf_counter()
+        try:
+            fleet.assign(r.id, r.target, r.station if r.kind in ("pick", "drop") else None)
+        except PlanningError:
+            failed += 1
+            r.wake = now + retry_s
+            return
+        finally:
+            decide_wall += time.perf_counter() - t0
+        n_legs += 1
+        d.left(r, now)
+        r.phase, r.best = "drive", math.inf
+
+    for r in robots:
+        d.next_target(r, 0.0)
+        assign(r, 0.0)
+    while d.ctime is None:
+        t = fleet.time
+        if t >= cap_s:
+            stop = "cap"
+            break
+        stuck = [r for r in robots if d.busy(r) and r.phase != "dock"]
+        if stuck and all(t - r.since > stall_s for r in stuck):
+            stop = "stall"
+            break
+        if time.perf_counter() - wall0 > wall_cap_s:
+            stop = "wall"
+            break
+        t0 = time.perf_counter()
+        fleet.step(dt)
+        decide_wall += time.perf_counter() - t0
+        steps += 1
+        t = fleet.time
+        new = fleet.positions()
+        driven += np.hypot(*(new - pos).T)
+        pos = new
+        if record:
+            log.append(pos.copy())
+            times.append(t)
+        now_overlapping = set()
+        for a, b in cKDTree(pos).query_pairs(reach + 1.0):
+            gap = float(np.hypot(*(pos[a] - pos[b]))) - reach
+            min_gap = min(min_gap, gap)
+            if gap < -1e-9:
+                now_overlapping.add((a, b))
+        events += len(now_overlapping - overlapping)
+        overlapping = now_overlapping
+        for r in robots:
+            r.pos = (float(pos[r.idx, 0]), float(pos[r.idx, 1]))
+            if r.phase == "drive":   # progress: 1 m less path left than ever before on this leg
+                left = fleet.view(r.id).remaining
+                if left <= r.best - 1.0:
+                    r.best = left
+                    r.since = t
+            if r.phase == "drive" and fleet.arrived(r.id):
+                d.arrived(r, t)
+            elif r.phase == "dock" and t >= r.wake - 1e-9:
+                d.docked(r, t)
+                if progress:
+                    progress(d.completed, len(problem.tasks), t)
+            if r.phase == "need" and t >= r.wake - 1e-9:
+                assign(r, t)
+    t = d.ctime if d.ctime is not None else fleet.time
+    stats = fleet.stats()   # the fleet's own counters (deadlocks found, re-plans...), as extras
+    return DeliveryResult(problem.name, "behavior", n, len(problem.tasks), d.completed, stop, t, d.lower_bound(),
+                          float(np.mean(driven)) / t if t > 0 else 0.0, decide_wall / max(steps, 1), "step",
+                          decide_wall, n_legs, failed, events, min_gap, d.deadlocked(t, no_progress_s, ("dock",)),
+                          time.perf_counter() - wall0, [], None,
+                          np.array(log) if record else None, np.array(times) if record else None,
+                          {k: v for k, v in asdict(stats).items() if k != "time"})
+
+
+# ---------------------------------------------------------------------------------------------
+def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: float = 4 * 3600.0,
+             stall_s: float = 600.0, no_progress_s: float = 120.0, retry_s: float = 2.0,
+             wall_cap_s: float = math.inf, record: bool = False, planner_options: dict | None = None,
+             progress: SimProgress | None = None) -> DeliveryResult:
+    """Run the deliveries of ``problem`` with ``method`` (one of :data:`METHODS`).
+
+    ``dt``: step of the behaviour simulation (the central methods are event-driven and exact).
+    ``cap_s``: stop at this simulated time; ``stall_s``: stop when no robot made progress for this
+    long (a deadlock nobody resolves); ``no_progress_s``: at the end, robots with a delivery left
+    that made no progress for this long count as deadlocked. ``retry_s``: a leg that could not be
+    planned is tried again this much later (once another robot got a new leg; at the latest 15
+    times as late). ``wall_cap_s``: stop after this much wall-clock time (stop "wall").
+    ``record``: keep the behaviour fleet's positions at every step.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method: must be one of {', '.join(METHODS)} (got {method!r})")
+    for name, value in (("dt", dt), ("cap_s", cap_s), ("stall_s", stall_s), ("no_progress_s", no_progress_s),
+                        ("retry_s", retry_s)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: must be a finite number > 0 (got {value!r})")
+    if not wall_cap_s > 0:
+        raise ValueError(f"wall_cap_s: must be > 0 (got {wall_cap_s!r})")
+    if method == "behavior":
+        return _simulate_behavior(problem, dt, cap_s, stall_s, no_progress_s, retry_s, wall_cap_s, record, progress)
+    return _simulate_central(problem, method, cap_s, stall_s, no_progress_s, retry_s, wall_cap_s, planner_options,
+                             progress)
+
+
+__all__ = ["DOCK_S", "METHODS", "ROBOT_RADIUS", "TOP_SPEED", "DeliveryProblem", "DeliveryResult", "Task",
+           "choose_spots", "delivery_problem", "simulate", "spread_stations", "warehouse_problem"]

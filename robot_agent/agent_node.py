@@ -1,0 +1,131 @@
+"""The robot agent node: one robot of the fleet, a thin adapter around :class:`RobotAgent`.
+
+It follows the timed paths the planner sends on ``/robots/<id>/timed_path`` (waiting on the ROS
+clock for each departure), learns its jobs from ``/fleet/task_events`` (``assigned`` to its id) and
+their stations from ``/fleet/tasks``, picks, places and charges where its legs end, and publishes its
+status on ``/fleet/robot_status`` at ``status_rate_hz`` of ROS time (simulated time with
+``use_sim_time:=true``).
+
+    ros2 run fleet_planner robot_agent --ros-args -p id:=r3 -p kind:=cargo_forklift -p x:=6.25 -p y:=22.75
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import rclpy
+from nav_msgs.msg import Path
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from fleet_planner.dispatch import RobotAgent
+from fleet_planner.model import ROBOT_KINDS
+from fleet_planner.robots import RobotKind, RobotModel, load_kinds
+from fleet_planner.warehouse import Warehouse, load_warehouse
+from msg_schemas import topics
+from msg_schemas.convert import msg_to_timed_path, stamp_to_ns
+from msg_schemas.records import RecordError, Task, TaskEvent, robot_id_problem
+
+COORDINATION = ("central",)
+
+
+def _range(description: str, lo: float, hi: float) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=True,
+                               floating_point_range=[FloatingPointRange(from_value=float(lo), to_value=float(hi))])
+
+
+def _fixed(description: str) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=True)
+
+
+class AgentNode(Node):
+    """One robot. ``warehouse`` and ``kinds`` may be handed in (tests); otherwise they are read from the
+    files named by the parameters ``warehouse_file`` and ``kinds_file`` (empty: the shipped ones).
+    The robot's id is the parameter ``id``, or else the last part of the node's namespace."""
+
+    def __init__(self, name: str = "robot_agent", *, warehouse: Warehouse | None = None,
+                 kinds: Mapping[str, RobotKind] | None = None, **kwargs):
+        super().__init__(name, **kwargs)
+        robot_id = self.declare_parameter("id", "", _fixed("robot id (letters, digits, _); empty: the namespace")).value
+        kind = self.declare_parameter("kind", "cargo", _fixed(f"one of {', '.join(ROBOT_KINDS)}")).value
+        x = self.declare_parameter("x", 0.0, _fixed("start x (m, map frame)")).value
+        y = self.declare_parameter("y", 0.0, _fixed("start y (m, map frame)")).value
+        yaw = self.declare_parameter("yaw", 0.0, _fixed("start heading (rad)")).value
+        battery = self.declare_parameter("battery", 1.0, _range("battery at start, fraction of full", 0.0, 1.0)).value
+        mode = self.declare_parameter("coordination", "central", _fixed(
+            "how the robot avoids others: 'central' (follow the planner's timed paths)")).value
+        rate = self.declare_parameter("status_rate_hz", 10.0, _range("status messages per second of ROS time",
+                                                                     0.1, 100.0)).value
+        wh_file = self.declare_parameter("warehouse_file", "", _fixed(
+            "warehouse YAML (empty: the shipped config/warehouse.yaml)")).value
+        kinds_file = self.declare_parameter("kinds_file", "", _fixed(
+            "robot kinds YAML (empty: the shipped config/robot_kinds.yaml)")).value
+
+        robot_id = robot_id or self.get_namespace().rstrip("/").rsplit("/", 1)[-1]
+        problem = robot_id_problem(robot_id)
+        if problem:
+            raise ValueError(f"parameter id: {problem}" if robot_id else "parameter id: required (or a namespace)")
+        if mode not in COORDINATION:
+            raise ValueError(f"parameter coordination: {mode!r} is not one of {', '.join(COORDINATION)}")
+        kinds = kinds if kinds is not None else load_kinds(kinds_file or None)
+        if kind not in kinds:
+            raise ValueError(f"parameter kind: {kind!r} is not one of {', '.join(kinds)}")
+        warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
+        chargers = [s.pose for s in warehouse.stations_of("charger")]
+        model = RobotModel(robot_id, kinds[kind], x, y, yaw, battery, chargers)
+        self.agent = RobotAgent(model, warehouse)
+        self.robot_id = robot_id
+
+        self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
+        self.create_subscription(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
+        self.create_subscription(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        self._timer = self.create_timer(1.0 / rate, self._on_timer)
+        self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}")
+
+    # -- callbacks: none of them lets an exception out ----------------------------------------------
+    def _on_path(self, msg: Path) -> None:
+        try:
+            path, t0 = msg_to_timed_path(msg, self.robot_id, self.agent.model.kind.radius)
+            t0_ns = stamp_to_ns(t0)
+            self.agent.on_path(path, t0_ns / 1e9, t0_ns)
+        except (RecordError, ValueError) as exc:
+            self.get_logger().error(f"timed path ignored: {exc}")
+
+    def _on_task(self, msg: String) -> None:
+        try:
+            self.agent.on_task(Task.from_json(msg.data))
+        except RecordError:
+            pass  # the planner answers bad tasks; the robot only needs the good ones
+
+    def _on_event(self, msg: String) -> None:
+        try:
+            self.agent.on_event(TaskEvent.from_json(msg.data))
+        except RecordError as exc:
+            self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _on_timer(self) -> None:
+        try:
+            status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
+            self._status.publish(String(data=status.to_json()))
+        except Exception as exc:  # keep reporting: the planner must not take a live robot for dead
+            self.get_logger().error(f"robot step failed: {exc!r}", throttle_duration_sec=5.0)
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = AgentNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

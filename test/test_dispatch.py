@@ -1,0 +1,341 @@
+"""The fleet manager and the robot agent, without ROS: task checks, allocation, charging, parking,
+offline handover, late robots, and a short simulated run whose legs and driven positions keep every
+pair of robots apart (the independent checker is the oracle)."""
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from fleet_planner.checker import min_separation
+from fleet_planner.dispatch import (DispatchParams, FleetError, FleetManager, RobotAgent, lag_allowance,
+                                    load_fleet, samples_to_path)
+from fleet_planner.grid import GridMap
+from fleet_planner.model import TimedPath
+from fleet_planner.robots import RobotModel, load_kinds
+from fleet_planner.warehouse import Station, Warehouse, generate_warehouse, load_warehouse
+from msg_schemas.records import RobotStatus, Task
+
+KINDS = load_kinds()
+#: the shipped kinds with short picks and places, so that simulated runs stay short
+FAST = {name: replace(k, pick_s=2.0, place_s=2.0, lift_s=1.0 if k.lift_s else 0.0) for name, k in KINDS.items()}
+WH = generate_warehouse(2, 2, 8, 2, 4, 0.5, "small", chutes=2, chargers=4)  # 16 m x 13 m
+PARKING = [(10.75, 11.75), (12.75, 11.75), (14.75, 11.75)]  # along the south wall, right of the chargers
+CHARGERS = [s.pose for s in WH.stations_of("charger")]
+
+
+def status(rid, kind, x, y, *, battery=1.0, mode="idle", stamp=0.0, path_id=None, progress=1.0, **extra):
+    return RobotStatus(id=rid, kind=kind, x=x, y=y, yaw=0.0, vx=0.0, vy=0.0, battery=battery, mode=mode,
+                       progress=progress, stamp=stamp, radius=KINDS[kind].radius, path_id=path_id, **extra)
+
+
+def task(tid="J1", pick="chute_1", place="B01-01", **fields):
+    return Task(id=tid, pick=pick, place=place, **fields)
+
+
+def manager(wh=WH, parking=PARKING, **params):
+    return FleetManager(wh, FAST, DispatchParams(**params), parking)
+
+
+class Sim:
+    """A fleet manager and robot agents on one simulated clock: statuses, legs and events are
+    delivered at once. Agents step every ``dt``, the manager every ``period``."""
+
+    def __init__(self, fleet, wh=WH, parking=PARKING, kinds=FAST, dt=0.1, period=0.5, **params):
+        self.wh, self.dt, self.period = wh, dt, period
+        self.fm = FleetManager(wh, kinds, DispatchParams(**params), parking)
+        chargers = [s.pose for s in wh.stations_of("charger")]
+        self.agents = {rid: RobotAgent(RobotModel(rid, kinds[k], x, y, battery=b, chargers=chargers), wh)
+                       for rid, k, x, y, b in fleet}
+        self.dead: set[str] = set()
+        self.t = 0.0
+        self.events, self.notes = [], []
+        self.legs = {rid: [] for rid in self.agents}
+        self.start = {rid: (a.model.x, a.model.y) for rid, a in self.agents.items()}
+        self.track = {rid: [] for rid in self.agents}
+        self._ticks = 0
+
+    def submit(self, *tasks):
+        out = []
+        for tk in tasks:
+            for a in self.agents.values():
+                a.on_task(tk)
+            out += self.fm.submit(tk, self.t)
+        self.events += out
+        return out
+
+    def run_until(self, condition, limit=600.0):
+        """Step until ``condition()`` holds; False if ``limit`` simulated seconds pass first."""
+        end = self.t + limit
+        while not condition():
+            if self.t >= end:
+                return False
+            self._tick()
+        return True
+
+    def _tick(self):
+        self._ticks += 1
+        self.t = round(self._ticks * self.dt, 9)
+        for rid, a in self.agents.items():
+            if rid in self.dead:
+                continue
+            st = a.tick(self.t)
+            self.track[rid].append((st.x, st.y, self.t))
+            self.fm.on_status(st, self.t)
+        if self._ticks % round(self.period / self.dt) == 0:
+            d = self.fm.step(self.t)
+            self.notes += d.notes
+            for leg in d.legs:
+                self.legs[leg.robot_id].append(leg)
+                if leg.robot_id not in self.dead:
+                    self.agents[leg.robot_id].on_path(leg.relative(), leg.t0, leg.path_id)
+            for ev in d.events:
+                self.events.append(ev)
+                for rid, a in self.agents.items():
+                    if rid not in self.dead:
+                        a.on_event(ev)
+
+    def last(self, task_id):
+        evs = [e for e in self.events if e.task_id == task_id]
+        return evs[-1].event if evs else None
+
+    def driven(self):
+        """Every robot's simulated positions as timed paths."""
+        return [samples_to_path(rid, self.agents[rid].model.kind.radius, tr) for rid, tr in self.track.items()]
+
+    def planned(self):
+        """Every robot's trajectory as the manager planned it: its legs one after the other, each
+        until the next one starts, standing at its start before the first."""
+        out = []
+        for rid, legs in self.legs.items():
+            wp = [[*self.start[rid], 0.0]]
+            for k, leg in enumerate(legs):
+                w = leg.path.waypoints
+                nxt = legs[k + 1].t0 if k + 1 < len(legs) else math.inf
+                wp += [list(p) for p in w[w[:, 2] < nxt]]
+                if nxt < math.inf:
+                    wp.append([*leg.path.position(nxt), nxt])
+            out.append(TimedPath(rid, self.agents[rid].model.kind.radius, np.array(wp)))
+        return out
+
+
+def four_robots(battery=0.9):
+    """One robot of each kind, on the four chargers."""
+    names = ["cargo", "manipulator", "cargo_forklift", "manipulator_forklift"]
+    return [(f"r{i + 1}", k, *CHARGERS[i], battery) for i, k in enumerate(names)]
+
+
+# -- task checks -------------------------------------------------------------------------------------
+@pytest.mark.parametrize("raw, words", [
+    ('{"schema": "fleet/task@1", "id": "bad1", "pick": ', ["bad1", "not valid JSON"]),
+    ('{"schema": "fleet/task@1", "id": "bad2", "pick": "chute_1", "place": "B01-01", "payload_kg": NaN}',
+     ["bad2", "payload_kg", "NaN"]),
+    (task("bad3", pick="chute_9").to_json(), ["bad3", "task.pick", "unknown station 'chute_9'"]),
+    (task("bad4", pick="B01").to_json(), ["bad4", "'B01' is a storage, not a chute"]),
+    (task("bad5", place="Z99-01").to_json(), ["bad5", "unknown address tag", "'Z99-01'"]),
+    (task("bad6", payload_kg=5000).to_json(), ["bad6", "no robot can do it", "5000 kg"]),
+    ('{"schema": "fleet/task@1", "id": "bad7", "pick": "chute_1", "place": "B01-01", "needs": ["wings"]}',
+     ["bad7", "task.needs[0]", "wings"]),
+    ("[1, 2]", ["?", "must be a JSON object"]),
+])
+def test_bad_tasks_are_rejected_naming_the_problem(raw, words):
+    fm = manager()
+    [ev] = fm.submit(raw, 3.0)
+    assert ev.event == "rejected" and ev.stamp == 3.0
+    for w in words:
+        assert w in ev.task_id + " " + ev.reason
+    assert fm.jobs == {}
+
+
+def test_good_tasks_are_accepted_by_tag_or_site_and_a_duplicate_id_is_rejected():
+    fm = manager()
+    assert [e.event for e in fm.submit(task("J1", place="B02-03"), 0.0)] == ["accepted"]
+    assert [e.event for e in fm.submit(json.dumps(task("J2", place="B04").to_dict()), 0.0)] == ["accepted"]
+    [dup] = fm.submit(task("J1", pick="chute_2"), 1.0)
+    assert dup.event == "rejected" and "duplicate task id 'J1'" in dup.reason
+    assert fm.jobs["J1"].place.name == "B02" and fm.jobs["J2"].place.name == "B04"
+    assert fm.jobs["J1"].pick.name == "chute_1"
+
+
+# -- allocation ---------------------------------------------------------------------------------------
+def allocate(robots, tk, **params):
+    """Robots given as (id, kind, x, y, battery); returns the id of the robot assigned ``tk``."""
+    fm = manager(**params)
+    for rid, kind, x, y, battery in robots:
+        fm.on_status(status(rid, kind, x, y, battery=battery), 0.0)
+    fm.submit(tk, 0.0)
+    d = fm.step(0.5)
+    assigned = [e for e in d.events if e.event == "assigned"]
+    if not assigned:
+        return None
+    [leg] = [leg for leg in d.legs if leg.robot_id == assigned[0].robot_id]
+    assert leg.purpose == "pick" and tuple(leg.path.waypoints[-1, :2]) == WH.stations["chute_1"].pose
+    return assigned[0].robot_id
+
+
+def test_allocation_takes_the_nearest_robot_able_to_do_the_job():
+    near, far = (6.25, 3.75), (14.25, 11.75)  # chute_1 is at (4.25, 2.25)
+    robots = [("cargo", "cargo", *near, 1.0), ("fork", "cargo_forklift", *far, 1.0)]
+    assert allocate(robots, task()) == "cargo"
+    assert allocate(robots, task(needs=("forklift",))) == "fork"
+    assert allocate(robots, task(payload_kg=150.0)) == "fork"  # a cargo carries 100 kg
+    assert allocate(robots[:1], task(needs=("forklift",))) is None  # waits for a forklift
+
+
+def test_allocation_skips_robots_low_on_battery_and_breaks_ties_by_battery():
+    a, b = (2.25, 3.75), (6.25, 3.75)  # both 2.5 m from chute_1
+    assert allocate([("a", "cargo", *a, 0.5), ("b", "cargo", *b, 0.9)], task()) == "b"
+    assert allocate([("a", "cargo", *a, 0.2), ("b", "cargo", *(12.25, 6.25), 0.9)], task()) == "b"
+    assert allocate([("a", "cargo", *a, 0.2)], task(), min_task_battery=0.3) is None
+
+
+# -- charging and parking -------------------------------------------------------------------------------
+def test_a_robot_low_on_battery_goes_to_the_nearest_free_charger():
+    fm = manager()
+    fm.on_status(status("r1", "cargo", 5.25, 9.25, battery=0.1), 0.0)
+    fm.on_status(status("r2", "cargo", *CHARGERS[1]), 0.0)  # charger_2, the nearest, is taken
+    d = fm.step(0.5)
+    [leg] = d.legs
+    assert (leg.robot_id, leg.purpose, leg.goal) == ("r1", "charge", "charger_3")
+
+
+def test_an_idle_robot_goes_charging_and_one_at_a_station_parks_when_no_charger_is_free():
+    fm = manager(idle_s=5.0)
+
+    def report(t):
+        for i, pose in enumerate(CHARGERS):
+            fm.on_status(status(f"c{i}", "cargo", *pose, stamp=t), t)
+        fm.on_status(status("idle", "cargo", *WH.stations["B01"].pose, stamp=t), t)
+    report(0.0)
+    assert fm.step(1.0).legs == []  # not idle long enough yet
+    report(6.0)
+    [leg] = fm.step(6.0).legs
+    assert (leg.robot_id, leg.purpose) == ("idle", "park")
+    assert tuple(leg.path.waypoints[-1, :2]) in PARKING
+
+
+def test_an_agent_charges_at_a_charger_and_stops_when_sent_off():
+    agent = RobotAgent(RobotModel("r1", FAST["cargo"], *CHARGERS[0], battery=0.5, chargers=CHARGERS), WH)
+    agent.tick(0.0)
+    assert agent.tick(10.0).mode == "charging"
+    assert agent.model.battery > 0.5
+
+
+def test_an_agent_picks_only_at_its_jobs_chute_and_places_only_where_the_tag_is():
+    pick, site = WH.stations["chute_1"], WH.station_for_tag("B03-02")
+    agent = RobotAgent(RobotModel("r1", FAST["cargo"], *pick.pose), WH)
+    agent.on_task(task("J1", pick="chute_2", place="B03-02"))
+    from msg_schemas.records import TaskEvent
+    agent.on_event(TaskEvent(task_id="J1", event="assigned", stamp=0.0, robot_id="r1"))
+    assert agent.tick(0.0).mode == "idle"  # at chute_1, but the job picks at chute_2
+    agent = RobotAgent(RobotModel("r1", FAST["cargo"], *pick.pose), WH)
+    agent.on_task(task("J1", pick="chute_1", place="B03-02"))
+    agent.on_event(TaskEvent(task_id="J1", event="assigned", stamp=0.0, robot_id="r1"))
+    assert agent.tick(0.0).mode == "picking"
+    assert agent.tick(5.0).mode == "idle" and agent.loaded
+    for name in ("B01", site.name):  # a leg to another storing site, then to the one with the tag
+        here = agent.model
+        agent.on_path(TimedPath("r1", 0.35, [[here.x, here.y, 0.0], [*WH.stations[name].pose, 0.01]]), 5.0, 1)
+        here.x, here.y = WH.stations[name].pose  # (teleported: the test is about where it acts)
+        here.follow(TimedPath("r1", 0.35, [[*WH.stations[name].pose, 0.0]]), 5.0, 2)
+        st = agent.tick(5.1)
+        assert st.mode == ("placing" if name == site.name else "idle"), name
+    assert agent.tick(10.0).task_id is None and not agent.loaded
+
+
+# -- whole runs ------------------------------------------------------------------------------------------
+JOBS = [task("J1", "chute_1", "B01-01"), task("J2", "chute_2", "B04-02", needs=("manipulator",)),
+        task("J3", "chute_1", "B02-03", needs=("forklift",)), task("J4", "chute_2", "B03-04", payload_kg=200),
+        task("J5", "chute_2", "B01-02", needs=("manipulator", "forklift")), task("J6", "chute_1", "B04-01")]
+
+
+def test_a_short_run_does_every_job_and_no_two_robots_ever_touch():
+    sim = Sim(four_robots())
+    assert [e.event for e in sim.submit(*JOBS)] == ["accepted"] * len(JOBS)
+    assert sim.run_until(lambda: all(sim.last(j.id) == "done" for j in JOBS), limit=900)
+    for j in JOBS:  # the lifecycle, in order, by one robot that can do the job
+        evs = [e for e in sim.events if e.task_id == j.id]
+        assert [e.event for e in evs] == ["accepted", "assigned", "picked", "placed", "done"]
+        robot = sim.agents[evs[1].robot_id].model.kind
+        assert set(j.needs) <= robot.capabilities and j.payload_kg <= robot.payload_kg
+    planned_gap, *who = min_separation(sim.planned())
+    assert planned_gap >= sim.fm.margin - 1e-6, who
+    driven_gap, *who = min_separation(sim.driven())
+    assert driven_gap >= 0.0, who
+    # the margin is what the robots' lag needs: more than the driven paths ever used of it
+    assert sim.fm.margin == pytest.approx(2 * max(lag_allowance(k, 0.5) for k in FAST.values()) + 0.05)
+
+
+def test_an_offline_robot_becomes_an_obstacle_and_its_job_goes_to_another_robot():
+    sim = Sim(four_robots(), offline_timeout_s=2.0)
+    sim.submit(task("J1", "chute_2", "B04-01"))
+    assert sim.run_until(lambda: sim.last("J1") == "assigned")
+    first = next(e.robot_id for e in sim.events if e.event == "assigned")
+    assert sim.run_until(lambda: sim.agents[first].model.speed > 0)
+    sim.dead.add(first)  # its agent dies on the way
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=400)
+    owners = [e.robot_id for e in sim.events if e.task_id == "J1" and e.event == "assigned"]
+    assert owners[0] == first and owners[-1] != first
+    assert not sim.fm.robots[first].online
+    assert any(f"robot {first} offline" in n for n in sim.notes)
+    gap, *who = min_separation(sim.driven())  # the dead robot's track ends where it stopped
+    assert gap >= 0.0, who
+
+
+def test_a_robot_late_on_its_schedule_re_plans_from_where_it_is():
+    slow = dict(FAST, cargo=replace(FAST["cargo"], max_speed=0.25))  # the planner thinks 1 m/s
+    sim = Sim([("r1", "cargo", *CHARGERS[0], 1.0)], lateness_tolerance_s=2.0)
+    sim.agents["r1"] = RobotAgent(RobotModel("r1", slow["cargo"], *CHARGERS[0], chargers=CHARGERS), WH)
+    sim.submit(task("J1", "chute_2", "B04-01"))
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=600)
+    assert any("late: re-planning" in n for n in sim.notes)
+    replans = [leg for leg in sim.legs["r1"] if leg.purpose in ("pick", "place")]
+    assert len(replans) > 2  # more legs than the two of the job
+
+
+def test_a_free_robot_blocking_the_only_way_is_sent_off_first():
+    rows = ["@@@@@@@@@@@@@@@@@@@@@@@@",
+            "@.........@@@@.........@",
+            "@.........@@@@.........@",
+            "@.........@@@@.........@",
+            "@......................@",
+            "@......................@",
+            "@......................@",
+            "@.........@@@@.........@",
+            "@.........@@@@.........@",
+            "@.........@@@@.........@",
+            "@@@@@@@@@@@@@@@@@@@@@@@@"]  # two rooms joined by a corridor only one robot wide
+    stations = [Station("chute_1", "chute", 10.25, 1.25), Station("B01", "storage", 10.25, 4.25, ("B01-01",)),
+                Station("charger_1", "charger", 1.25, 1.25)]
+    wh = Warehouse(GridMap.from_rows(rows, 0.5), {s.name: s for s in stations})
+    sim = Sim([("arm", "manipulator", 2.75, 2.75, 1.0), ("plug", "cargo", 6.0, 2.75, 1.0)], wh=wh,
+              parking=[(1.25, 4.25)], idle_s=3600.0)
+    sim.submit(task("J1", needs=("manipulator",)))
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=300)
+    moves = [leg for leg in sim.legs["plug"]]
+    assert moves and moves[0].purpose in ("charge", "park")  # it made way; it had nothing else to do
+    assert min_separation(sim.driven())[0] >= 0.0
+
+
+# -- fleet files ------------------------------------------------------------------------------------------
+def test_the_shipped_demo_fleet_is_mixed_and_fits_the_default_warehouse():
+    fleet = load_fleet(None, KINDS, load_warehouse())
+    assert len(fleet) >= 8 and {m.kind for m in fleet} == set(KINDS)
+
+
+@pytest.mark.parametrize("robots, expected", [
+    ([{"id": "r1", "kind": "cargo", "x": 2.25}], "robots[0].y: missing"),
+    ([{"id": "1r", "kind": "cargo", "x": 2.25, "y": 10.75}], "robots[0].id: must be letters"),
+    ([{"id": "r1", "kind": "drone", "x": 2.25, "y": 10.75}], "robot 'r1'.kind: 'drone' is not one of"),
+    ([{"id": "r1", "kind": "cargo", "x": 2.25, "y": 10.75, "battery": 2}], "robot 'r1'.battery: must be in [0, 1]"),
+    ([{"id": "r1", "kind": "cargo", "x": 0.1, "y": 10.75}], "robot 'r1': (0.1, 10.75) is not free"),
+    ([{"id": "r1", "kind": "cargo", "x": 2.25, "y": 10.75}, {"id": "r2", "kind": "cargo", "x": 2.5, "y": 10.75}],
+     "robot 'r2': overlaps robot 'r1'"),
+])
+def test_a_bad_fleet_file_names_the_robot_and_field(tmp_path, robots, expected):
+    path = tmp_path / "fleet.yaml"
+    path.write_text(json.dumps({"robots": robots}))
+    with pytest.raises(FleetError) as err:
+        load_fleet(path, KINDS, WH)
+    assert expected in str(err.value)

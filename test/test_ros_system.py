@@ -1,0 +1,108 @@
+"""The whole fleet on ROS in one process: a simulated clock, the planner, one agent of each kind and
+a monitor on one executor. Jobs go in on /fleet/tasks, the test watches /fleet/task_events and
+checks the robots' own status reports for contact (the planner is not asked)."""
+from dataclasses import replace
+
+import pytest
+from rclpy.parameter import Parameter
+
+from fleet_planner.dispatch import FleetMember
+from fleet_planner.robots import load_kinds
+from fleet_planner.ros.demo import bring_up, spin_until
+from fleet_planner.warehouse import generate_warehouse
+from msg_schemas.records import Task
+
+KINDS = {name: replace(k, pick_s=2.0, place_s=2.0, lift_s=1.0 if k.lift_s else 0.0)
+         for name, k in load_kinds().items()}  # short picks and places keep the runs short
+WH = generate_warehouse(2, 2, 8, 2, 4, 0.5, "small", chutes=2, chargers=4)  # 16 m x 13 m
+PARKING = [10.75, 11.75, 12.75, 11.75, 14.75, 11.75]
+MEMBERS = [FleetMember(f"r{i + 1}", kind, *s.pose, battery=0.9)
+           for i, (kind, s) in enumerate(zip(KINDS, WH.stations_of("charger")))]
+RATE = 10.0      # simulated seconds per wall second, at most (the clock slows down when the CPU is busy)
+WAIT = 60.0      # wall seconds any one wait may take before the test gives up
+
+
+@pytest.fixture(scope="module")
+def fleet(ros_context):
+    fleet = bring_up(ros_context, WH, KINDS, MEMBERS, RATE, planner_params=[
+        Parameter("parking", value=PARKING), Parameter("offline_timeout_s", value=2.0)])
+    try:
+        ids = {m.id for m in MEMBERS}
+        assert spin_until(fleet.executor, lambda: fleet.monitor.planner_ready() and ids <= set(fleet.monitor.status),
+                          WAIT)
+        yield fleet
+    finally:
+        fleet.destroy()
+
+
+def wait_for(fleet, condition) -> bool:
+    return spin_until(fleet.executor, condition, WAIT)
+
+
+def ended(fleet, task_id, event="done") -> bool:
+    ev = fleet.monitor.last_event.get(task_id)
+    return ev is not None and ev.event == event
+
+
+def no_contact(fleet) -> None:
+    gap, a, b, t = fleet.monitor.min_separation()
+    assert gap >= 0.0, f"{a} and {b} overlapped by {-gap:.3f} m at t = {t:.1f} s"
+
+
+def test_jobs_submitted_on_the_topic_are_all_done_by_able_robots(fleet):
+    jobs = [Task(id="S1", pick="chute_1", place="B01-01"),
+            Task(id="S2", pick="chute_2", place="B04-02", needs=("manipulator",)),
+            Task(id="S3", pick="chute_1", place="B02-03", needs=("forklift",), payload_kg=250.0),
+            Task(id="S4", pick="chute_2", place="B03-01", needs=("manipulator", "forklift"))]
+    for job in jobs:
+        fleet.monitor.submit(job)
+    assert wait_for(fleet, lambda: all(ended(fleet, j.id) for j in jobs)), fleet.monitor.last_event
+    for job in jobs:
+        evs = fleet.monitor.events_of(job.id)
+        assert [e.event for e in evs] == ["accepted", "assigned", "picked", "placed", "done"]
+        kind = KINDS[next(m.kind for m in MEMBERS if m.id == evs[1].robot_id)]
+        assert set(job.needs) <= kind.capabilities and job.payload_kg <= kind.payload_kg
+        assert len({e.robot_id for e in evs[1:]}) == 1  # the robot it was assigned to did it
+    no_contact(fleet)
+
+
+BAD = [('{"schema": "fleet/task@1", "id": "B1", "pick": "chute_1", ', "B1", "not valid JSON"),
+       (Task(id="B2", pick="chute_7", place="B01-01").to_json(), "B2", "unknown station 'chute_7'"),
+       (Task(id="B3", pick="chute_1", place="Q42-01").to_json(), "B3", "unknown address tag or storing site 'Q42-01'"),
+       (Task(id="B4", pick="chute_1", place="B01-01", payload_kg=900.0).to_json(), "B4", "no robot can do it"),
+       (Task(id="S1", pick="chute_2", place="B02-01").to_json(), "S1", "duplicate task id 'S1'"),
+       ('{"schema": "fleet/task@1", "id": "B6", "pick": "chute_1", "place": "B01-01", "payload_kg": NaN}',
+        "B6", "task.payload_kg: must be a finite number (got NaN)")]
+
+
+def test_bad_jobs_are_rejected_with_the_reason_and_a_good_one_still_completes(fleet):
+    mon = fleet.monitor
+    if "S1" not in mon.last_event:  # the duplicate needs an S1 known to the planner
+        mon.submit(Task(id="S1", pick="chute_1", place="B01-01"))
+        assert wait_for(fleet, lambda: "S1" in mon.last_event)
+    for raw, _, _ in BAD:
+        mon.submit(raw)
+    assert wait_for(fleet, lambda: sum(e.event == "rejected" for e in mon.events) >= len(BAD))
+    rejected = {e.task_id: e.reason for e in mon.events if e.event == "rejected"}
+    for _, task_id, words in BAD:
+        assert words in rejected[task_id], (task_id, rejected[task_id])
+    mon.submit(Task(id="G1", pick="chute_2", place="B02-02"))
+    assert wait_for(fleet, lambda: ended(fleet, "G1"))
+    no_contact(fleet)
+
+
+def test_a_robot_whose_agent_dies_is_marked_offline_and_another_robot_does_its_job(fleet):
+    mon = fleet.monitor
+    mon.submit(Task(id="O1", pick="chute_2", place="B04-01"))
+    assert wait_for(fleet, lambda: any(e.event == "assigned" for e in mon.events_of("O1")))
+    first = next(e.robot_id for e in mon.events_of("O1") if e.event == "assigned")
+    assert wait_for(fleet, lambda: mon.status[first].mode == "driving")
+    agent = fleet.agents.pop(first)
+    fleet.executor.remove_node(agent)
+    agent.destroy_node()
+    assert wait_for(fleet, lambda: not fleet.planner.fleet.robots[first].online)
+    assert wait_for(fleet, lambda: ended(fleet, "O1"))
+    owners = [e.robot_id for e in mon.events_of("O1") if e.event == "assigned"]
+    assert owners[0] == first and owners[-1] != first
+    assert all(e.robot_id == owners[-1] for e in mon.events_of("O1") if e.event in ("picked", "placed", "done"))
+    no_contact(fleet)  # the dead robot's reports end where it stopped: the others kept clear of it
