@@ -314,27 +314,29 @@ class PathFinder:
 
     def _astar(self, moves: list[int], sources: dict[int, float], targets: dict[int, float],
                goal_cell: tuple[int, int]) -> list[int] | None:
-        """Flat indices of the cells from a source to a target (octile A*, ties to larger g)."""
+        """Flat indices of the cells from a source to a target (octile A*, ties to larger g).
+
+        The heuristic of every cell is computed at once with numpy, and g and parent live in flat
+        lists: the loop then does only list look-ups and heap operations."""
         wp = self._wp
         steps_of = self._steps_of
         g_col, g_row = goal_cell[0] + 1, goal_cell[1] + 1
         # targets other than the goal's own cell are its neighbours: shrink the heuristic by the
         # longest step so it stays admissible
         slack = 0.0 if list(targets) == [g_row * wp + g_col] else _SQRT2
-        sqrt2m2 = _SQRT2 - 2.0
-        g: dict[int, float] = {}
-        parent: dict[int, int] = {}
+        size = len(moves)
+        dx = np.abs(np.arange(wp) - g_col)[None, :]
+        dy = np.abs(np.arange(size // wp) - g_row)[:, None]
+        h = np.maximum(dx + dy + (_SQRT2 - 2.0) * np.minimum(dx, dy) - slack, 0.0).ravel().tolist()
+        inf = math.inf
+        g = [inf] * size
+        parent = [-1] * size
         heap: list[tuple[float, float, int]] = []
         for s, cost in sources.items():
-            if cost < g.get(s, math.inf):
+            if cost < g[s]:
                 g[s] = cost
-                parent[s] = -1
-                r, c = divmod(s, wp)
-                dx, dy = abs(c - g_col), abs(r - g_row)
-                hh = max(dx + dy + sqrt2m2 * (dx if dx < dy else dy) - slack, 0.0)
-                heapq.heappush(heap, (cost + hh, -cost, s))
-        push, pop, get = heapq.heappush, heapq.heappop, g.get
-        inf = math.inf
+                heapq.heappush(heap, (cost + h[s], -cost, s))
+        push, pop = heapq.heappush, heapq.heappop
         while heap:
             _, neg, i = pop(heap)
             gi = -neg
@@ -348,14 +350,10 @@ class PathFinder:
             for off, cost in steps_of[moves[i]]:
                 j = i + off
                 nj = gi + cost
-                if nj < get(j, inf):
+                if nj < g[j]:
                     g[j] = nj
                     parent[j] = i
-                    r, c = divmod(j, wp)
-                    dx = c - g_col if c > g_col else g_col - c
-                    dy = r - g_row if r > g_row else g_row - r
-                    hh = dx + dy + sqrt2m2 * (dx if dx < dy else dy) - slack
-                    push(heap, (nj + (hh if hh > 0 else 0.0), -nj, j))
+                    push(heap, (nj + h[j], -nj, j))
         return None
 
     def _centre(self, i: int) -> tuple[float, float]:

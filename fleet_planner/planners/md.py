@@ -123,12 +123,12 @@ class MDPlanner(Planner):
         if self.order == "given" or len(robots) < 2:
             return idx
         if self.order == "parking":
-            return _parking_order(grid, robots, self.margin, shortest)
+            return _parking_order(_Finders.of(grid), robots, self.margin, shortest)
         dist = [float(np.hypot(r.goal[0] - r.start[0], r.goal[1] - r.start[1])) for r in robots]
         return sorted(idx, key=lambda x: dist[x], reverse=self.order == "longest")
 
 
-def _parking_order(grid: GridMap, robots: list[RobotSpec], margin: float,
+def _parking_order(finders: "_Finders", robots: list[RobotSpec], margin: float,
                    shortest: dict[int, np.ndarray] | None = None) -> list[int]:
     """Priority from where robots park (FINDINGS 1 turned into an order): score = how many other
     robots' shortest paths pass a robot's start disc minus how many pass its goal disc; the
@@ -136,7 +136,6 @@ def _parking_order(grid: GridMap, robots: list[RobotSpec], margin: float,
     leave before the others come through, and robots parking in them arrive after."""
     import shapely
 
-    finders = _Finders(grid)
     lines, owner = [], []
     for x, r in enumerate(robots):
         path = finders.get(r.radius).find(r.start, r.goal)
@@ -172,7 +171,7 @@ class _Session:
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
         self.margin = planner.margin
         self.rank = {x: k for k, x in enumerate(order)}
-        self.finder = _Finders(grid)
+        self.finder = _Finders.of(grid)
         self.paths: list[np.ndarray | None] = list(fixed_paths) + [None] * (len(robots) - fixed)
         #: per robot, discs it was found to block and must keep off, by the robot whose start or
         #: goal they are
@@ -211,9 +210,6 @@ class _Session:
                  if y != x and rank[y] < rank[x]]
         by_owner = self.must.get(x, {})
         must = [d for discs in by_owner.values() for d in discs]
-        finders = [self.finder.get(me.radius), self.finder.get(me.radius, exact=True)]
-        if finders[0] is finders[1]:
-            finders.pop()
         levels = [starts + goals + must, goals + must]
         if must:
             levels.append(must)
@@ -223,11 +219,13 @@ class _Session:
         hint = self.hints.pop(x, None)
         if hint is not None and _keeps_off(hint, levels[0], me.start, me.goal):
             return hint
+        rounded = self.finder.get(me.radius)
         for avoid in levels:
-            for pf in finders:
-                path = pf.find(me.start, me.goal, avoid=avoid)
-                if path is not None:
-                    return path
+            path = rounded.find(me.start, me.goal, avoid=avoid)
+            if path is None and rounded.radius != me.radius:
+                path = self.finder.get(me.radius, exact=True).find(me.start, me.goal, avoid=avoid)
+            if path is not None:
+                return path
         return None
 
     def resolve(self, progress: Progress | None = None) -> None:
@@ -295,6 +293,15 @@ class _Finders:
     def __init__(self, grid: GridMap):
         self.grid = grid
         self._by_radius: dict[float, object] = {}
+
+    @classmethod
+    def of(cls, grid: GridMap) -> "_Finders":
+        """The finders of a map, kept on the map object so every planning call on the same map
+        (the fleet node re-plans many times a minute) reuses the inflated maps and disc caches."""
+        finders = grid.__dict__.get("_md_finders")
+        if finders is None:
+            finders = grid.__dict__["_md_finders"] = cls(grid)
+        return finders
 
     def get(self, radius: float, exact: bool = False):
         """A finder for a disc of ``radius`` or a slightly larger one (radii rounded up to the
