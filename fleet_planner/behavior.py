@@ -92,8 +92,8 @@ class BehaviorParams:
     dock_region: float = 1.5        # a robot this close to its station asks to dock
     dock_give_up: float = 3.0       # WaitForDocking ends when pushed this far from the station
     go_through_timeout: float = 30.0  # a GoThrough lasting longer fails (paper IV.C.4)
-    avoid_timeout: float = 15.0     # an Avoid / Exchange this long without progress found no free space
-    blocked_timeout: float = 5.0    # FollowWayPoint unable to move with nobody in front fails
+    avoid_timeout: float = 15.0     # Avoid / Exchange / waiting for an obstacle this long without progress fails
+    blocked_timeout: float = 5.0    # FollowWayPoint unable to move this long fails; also the re-plan cooldown
     stall_time: float = 60.0        # stats: a robot not closer to its goal for this long is stalled
 
     def __post_init__(self) -> None:
@@ -119,7 +119,7 @@ class RobotView:
     ``remaining`` is the length of the rest of its path (for :func:`low_order`), ``straight`` the
     length of the straight run of it ahead (up to the next turn or the goal).
     ``partner`` is the id of the robot its current behaviour is about (the one it waits for,
-    avoids, exchanges with...).
+    avoids, exchanges with...); ``no_space`` says its Avoid / Exchange finds no free space.
     """
 
     id: str
@@ -131,6 +131,7 @@ class RobotView:
     straight: float = math.inf
     station: str | None = None
     partner: str | None = None
+    no_space: bool = False
 
     @property
     def direction(self) -> tuple[float, float] | None:
@@ -571,10 +572,11 @@ class _Robot:
     behavior: Behavior = B.FOLLOW_WAYPOINT
     partner: str | None = None
     since: float = 0.0                  # when the current behaviour began
-    replan_after: float = -math.inf     # no re-plan before (after a failed one)
+    replan_after: float = -math.inf     # no re-plan before this time
     best_distance: float = math.inf     # closest it came to its goal since assigned
     progress_at: float = 0.0            # when it last came closer by _PROGRESS (or was assigned)
     side: int = 0                       # Avoid/Exchange: +1 pass the partner on the left, -1 right
+    no_space: bool = False              # Avoid/Exchange found no free space to pass the partner
     blocked_since: float | None = None  # since when the safety layer refuses the wanted motion
     off_path: bool = False              # pushed off its path: the way to the next waypoint hits a wall
     clear_at: tuple[float, float, float] = (0.0, 0.0, -math.inf)  # (x, y, clearance there), a cache
@@ -710,7 +712,7 @@ class BehaviorFleet:
             ahead = math.dist(r.pos, nxt)
             remaining, straight = ahead + float(r.tail[r.wp]), ahead + float(r.run[r.wp])
         return RobotView(r.id, (float(r.pos[0]), float(r.pos[1])), r.radius, r.behavior, nxt,
-                         remaining, straight, r.station, r.partner)
+                         remaining, straight, r.station, r.partner, r.no_space)
 
     def _set_path(self, r: _Robot, path: np.ndarray) -> None:
         path = np.asarray(path, dtype=float)
@@ -734,7 +736,7 @@ class BehaviorFleet:
 
     def _set(self, r: _Robot, behavior: Behavior, partner: str | None) -> None:
         if behavior is not r.behavior or partner != r.partner:
-            r.side = 0
+            r.side, r.no_space = 0, False
         if behavior is not r.behavior:
             r.since = self.time
             r.blocked_since = None
@@ -787,7 +789,6 @@ class BehaviorFleet:
             r.since, r.blocked_since = since, blocked_since
 
     def _select(self, r: _Robot, me: RobotView, sensed: list[RobotView]) -> None:
-        p = self.params
         if r.path is None:                      # idle, or parked on its goal (docked if it holds)
             self._set(r, B.DOCK if r.holds else B.FOLLOW_WAYPOINT, None)
             return
@@ -803,40 +804,52 @@ class BehaviorFleet:
                 return
         if self._skip_covered_waypoints(r, sensed) or r.path is not path:
             me = self._view(r)
-        in_front = robots_in_front(me, sensed, p)
-        front_ids = {o.id for o in in_front}
-        b = r.behavior
-        # completion of the running behaviour (IV.A)
-        if b in (B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH):
-            partner = next((o for o in sensed if o.id == r.partner), None)
-            done = partner is None or partner.id not in front_ids
-            if b is B.AVOID and partner is not None and not partner.travelling:
-                done = not in_critical_area(me, partner, p)   # a standing obstacle: done once my channel is clear
-            if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.behavior is not B.GO_THROUGH:
-                done = True
-            if done:
-                self._set(r, B.FOLLOW_WAYPOINT, None)
+        in_front = robots_in_front(me, sensed, self.params)
+        self._complete(r, me, sensed, in_front)
         # traffic rules (IV.B) against the robot the front area check selects
-        other = front_area_check(me, in_front, p)
+        other = front_area_check(me, in_front, self.params)
         if other is not None:
             me = replace(me, behavior=r.behavior, partner=r.partner)
-            new = select_behavior(me, other, in_front, p)
+            new = select_behavior(me, other, in_front, self.params)
             if new is not None:
                 self._set(r, new, other.id)
             elif r.behavior is B.WAIT_KEEP_DISTANCE:
                 r.partner = other.id   # I wait for whoever blocks my front area now (WaitMessages go there)
-        # failures (IV.C) -> re-plan with a virtual wall
-        stalled = r.blocked_since is not None and self.time - r.blocked_since > p.blocked_timeout
-        failed = False
-        if r.behavior in (B.AVOID, B.EXCHANGE):
-            stalled = stalled or self.time - max(r.since, r.progress_at) > p.avoid_timeout
-            failed = self._pass_or_fail(r, me, sensed, in_front, stalled)
-        elif r.behavior is B.GO_THROUGH:
-            failed = self.time - r.since > p.go_through_timeout            # IV.C.4
-        elif r.behavior is B.FOLLOW_WAYPOINT:
-            failed = stalled and not in_front                               # IV.C.1
-        if failed:
+        if self._failed(r, me, sensed, in_front):
             self._replan(r, sensed)
+
+    def _complete(self, r: _Robot, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> None:
+        """End the running behaviour when its partner left the front area (IV.A), back to
+        FollowWayPoint; WaitForGoThrough also ends when the partner stops going through."""
+        b = r.behavior
+        if b not in (B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH):
+            return
+        partner = next((o for o in sensed if o.id == r.partner), None)
+        done = partner is None or all(o.id != partner.id for o in in_front)
+        if b is B.AVOID and partner is not None and not partner.travelling:
+            done = not in_critical_area(me, partner, self.params)  # a standing obstacle: once my channel is clear
+        if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.behavior is not B.GO_THROUGH:
+            done = True
+        if done:
+            self._set(r, B.FOLLOW_WAYPOINT, None)
+
+    def _failed(self, r: _Robot, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> bool:
+        """The failures of IV.C, after which the robot re-plans with a virtual wall."""
+        p = self.params
+        stalled = r.blocked_since is not None and self.time - r.blocked_since > p.blocked_timeout
+        no_progress = self.time - r.progress_at > p.avoid_timeout
+        if r.behavior in (B.AVOID, B.EXCHANGE):                              # IV.C.2-3
+            stalled = stalled or (no_progress and self.time - r.since > p.blocked_timeout)
+            if self._pass_or_fail(r, me, sensed, in_front, stalled):
+                return True
+        elif r.behavior is B.GO_THROUGH:                                     # IV.C.4
+            return self.time - r.since > p.go_through_timeout
+        elif r.behavior is B.FOLLOW_WAYPOINT:                                # IV.C.1
+            return stalled and not in_front
+        # Interpretation: waiting for a standing robot in my channel that I could not drive round
+        # is waiting for an obstacle (IV.C.1)
+        return (r.behavior is B.WAIT_KEEP_DISTANCE and no_progress
+                and any(o.id == r.partner and not o.travelling and in_critical_area(me, o, p) for o in in_front))
 
     def _repair(self, r: _Robot) -> None:
         """A robot pushed off its path (by avoiding or backing off) whose straight way to the next
@@ -914,8 +927,9 @@ class BehaviorFleet:
                       stalled: bool) -> bool:
         """Avoid / Exchange: pick the side to pass the partner on; True when the behaviour failed
         and the robot must re-plan (IV.C.2-3). A sidestep refused by the safety layer for
-        ``blocked_timeout``, or a behaviour that brought the robot no closer to its goal for
-        ``avoid_timeout``, counts as no free space."""
+        ``blocked_timeout``, or a behaviour running for that long while the robot came no closer
+        to its goal for ``avoid_timeout``, counts as no free space. Robots standing without a path
+        are obstacles like the partner, not "other robots"."""
         partner = next((o for o in sensed if o.id == r.partner), None)
         if partner is None or self._frame(r) is None:
             return False
@@ -929,16 +943,26 @@ class BehaviorFleet:
         if not stalled:
             for side in sides:
                 if self._side_is_free(r, partner, side, sensed):
-                    r.side = side
+                    r.side, r.no_space = side, False
                     return False
+        r.side, r.no_space = 0, True
         if r.behavior is B.AVOID:
-            if not any(o.id != partner.id and o.travelling and o.behavior.is_active for o in in_front):
-                return True                    # IV.C.2: no free space, no other robot about to move
+            if not any(o.id != partner.id and o.travelling for o in in_front):
+                return True                    # IV.C.2: no free space, no robot but the partner in front
             self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)
             return False
-        if id_key(r.id) < id_key(partner.id):
-            return True                        # IV.C.3: the lower id re-plans ...
-        self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)  # ... the higher id waits
+        # IV.C.3: when both exchanging robots find no free space, the lower id re-plans and the
+        # higher id waits (still saying it found no space, so that the lower id learns it). A
+        # partner that has not tried yet gets its turn (it cooperates with my Exchange), one with
+        # room passes me while I hold still, and one that is not about me is waited for.
+        about_me = partner.partner == r.id
+        if (about_me and partner.no_space) or stalled:
+            if id_key(r.id) < id_key(partner.id):
+                return True
+            self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)
+            r.no_space = True
+        elif not about_me:
+            self._set(r, B.WAIT_KEEP_DISTANCE, partner.id)
         return False
 
     def _replan(self, r: _Robot, sensed: Sequence[RobotView]) -> None:
@@ -946,18 +970,19 @@ class BehaviorFleet:
 
         Interpretation: the new path also keeps out of the robots standing in range (parked robots
         do not give way) and, where possible, of those waiting close by (what the behaviour failed
-        on), by enough to keep them out of its critical area. Without such a path the robot keeps
-        its path, waits for its partner if it has one, and does not search again for
-        ``blocked_timeout`` (a wait cycle is then found by WaitMessages, and another robot in it
-        re-plans).
+        on), by enough to keep them out of its critical area.
+
+        A robot re-plans at most once per ``blocked_timeout``; when it cannot (or finds no path)
+        it keeps its path and waits for its partner if it has one: a wait cycle is then found by
+        WaitMessages and another robot in it re-plans. (Otherwise the robot the rules pick, e.g.
+        the lower id of an Exchange, may re-plan back and forth between two blocked ways.)
         """
         if r.path is None or r.goal is None:
             return
         path = None
         if self.time >= r.replan_after:
             path = self._find_detour(r, sensed)
-            if path is None:
-                r.replan_after = self.time + self.params.blocked_timeout
+            r.replan_after = self.time + self.params.blocked_timeout
         if path is None:
             if r.partner is not None and r.behavior.is_active:
                 self._set(r, B.WAIT_KEEP_DISTANCE, r.partner)
@@ -975,8 +1000,8 @@ class BehaviorFleet:
         for q in r.path[r.wp:]:
             step = math.dist(points[-1], q)
             if step >= left and len(points) > 1:
-                t = left / step
-                points.append((points[-1][0] + (q[0] - points[-1][0]) * t, points[-1][1] + (q[1] - points[-1][1]) * t))
+                (x, y), t = points[-1], left / step
+                points.append((x + (q[0] - x) * t, y + (q[1] - y) * t))
                 break
             points.append((float(q[0]), float(q[1])))
             left -= step

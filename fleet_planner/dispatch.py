@@ -174,6 +174,7 @@ class _Robot:
     saw_action: bool = False          # a status showed it picking / placing there
     last_path_id: int = -1
     trouble: str = ""                 # why its last leg could not be planned (noted once)
+    stop: bool = False                # back online: stop it wherever it is heading
 
     @property
     def id(self) -> str:
@@ -231,6 +232,7 @@ class FleetManager:
                 raise ValueError(f"parking[{i}]: ({x:g}, {y:g}) has no room for a robot of radius {largest:g} m")
             self.parking[f"parking_{i + 1}"] = (x, y)
         self.chargers = {s.name: s.pose for s in warehouse.stations_of("charger")}
+        self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
         self.planner = MDPlanner(margin=self.margin)
@@ -240,7 +242,7 @@ class FleetManager:
         self._plan_id = 0
 
     def set_params(self, params: DispatchParams) -> None:
-        """Change thresholds at run time (not the speed factor or margin, which shape planned legs)."""
+        """Change thresholds at run time (not the speed factor or margin: the margin depends on them)."""
         if (params.speed_factor, params.safety_margin) != (self.params.speed_factor, self.params.safety_margin):
             raise ValueError("speed_factor and safety_margin cannot change while the fleet runs")
         self.params = params
@@ -278,11 +280,12 @@ class FleetManager:
         if self._storing_site(task.place) is None:
             return f"task.place: unknown address tag or storing site {task.place!r}"
         if not any(can_do(k, task) for k in self.kinds.values()):
-            needs = "+".join(task.needs) or "no special capability"
-            best = max(k.payload_kg for k in self.kinds.values() if set(task.needs) <= k.capabilities) \
-                if any(set(task.needs) <= k.capabilities for k in self.kinds.values()) else 0.0
-            return (f"no robot can do it: it needs {needs} and {task.payload_kg:g} kg payload "
-                    f"(kinds with {needs} carry at most {best:g} kg)")
+            needs = "+".join(task.needs)
+            equipped = [k.payload_kg for k in self.kinds.values() if set(task.needs) <= k.capabilities]
+            if not equipped:
+                return f"no robot can do it: no robot kind has {needs}"
+            return (f"no robot can do it: it weighs {task.payload_kg:g} kg and robots "
+                    f"{'with ' + needs + ' ' if needs else ''}carry at most {max(equipped):g} kg")
         return None
 
     def _storing_site(self, place: str) -> Station | None:
@@ -310,8 +313,8 @@ class FleetManager:
             return  # an old status overtaken by a newer one
         r.status, r.seen = status, now
         if not r.online:
-            r.online, r.immobile = True, status.mode == "error"
-            r.idle_since = now
+            r.online, r.immobile, r.idle_since = True, status.mode == "error", now
+            r.stop = not r.immobile  # it may still drive a leg the others no longer keep clear of
             self._notes.append(f"robot {r.id} is back online at ({status.x:.2f}, {status.y:.2f})")
             return
         leg, target = r.leg, r.target
@@ -329,6 +332,10 @@ class FleetManager:
         d = Decisions(notes=self._notes)
         self._notes = []
         self._find_immobile(now, d)
+        for r in self.robots.values():
+            if r.stop and r.online:
+                self._hold(r, now, d)
+                r.stop = False
         self._arrivals(now, d)
         self._find_late(d)
         self._replan(now, d)
@@ -362,7 +369,7 @@ class FleetManager:
                 job.state, job.robot, job.picked = "queued", None, False
                 d.notes.append(f"job {job.task.id} is queued again for another robot")
         for o in self.robots.values():
-            if o is r or o.leg is None or o.immobile:
+            if o is r or o.leg is None or o.immobile or o.target is None:
                 continue
             if _passes_near(o.leg.path, now, r.pos, o.radius + r.radius + self.margin):
                 o.replan = o.conflict = True
@@ -414,16 +421,16 @@ class FleetManager:
                 self._hold(r, now, d)
 
     def _hold(self, r: _Robot, now: float, d: Decisions) -> None:
-        """Stop ``r`` where it will be at the leg's start (it keeps its target and re-plans from there);
-        legs of others that pass there re-plan too."""
+        """Stop ``r`` where it will be when the hold starts (it keeps any target and re-plans from
+        there); legs of others that pass there re-plan too."""
         path_id = self._next_path_id(r, now)
         x, y = self._start_of(r, path_id / 1e9)
         leg = Leg(r.id, TimedPath(r.id, r.radius, [[x, y, path_id / 1e9]]), path_id, "hold", "")
         self._give(r, leg, d)
         r.conflict = False
-        d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f}): no way around the obstacle yet")
+        d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
         for o in self.robots.values():
-            if o is not r and o.leg is not None and not o.immobile and \
+            if o is not r and o.leg is not None and not o.immobile and o.target is not None and \
                     _passes_near(o.leg.path, now, (x, y), o.radius + r.radius + self.margin):
                 o.replan = o.conflict = True
 
@@ -461,7 +468,7 @@ class FleetManager:
             spot = self._free_spot(r, self.chargers)
             if spot is not None:
                 self._plan_leg(r, _Target("charge", *spot), now, d)
-            elif idle and self._at(r.pos, {s.name: s.pose for s in self.warehouse.stations.values()}):
+            elif idle and self._at(r.pos, self.work_stops):
                 self._send_away(r, now, d)
 
     # -- helpers ---------------------------------------------------------------------------------------
@@ -518,10 +525,12 @@ class FleetManager:
 
     def _start_of(self, r: _Robot, t0: float) -> Point:
         """Where ``r`` will be at ``t0``: where it stands, or, driving its leg, a little further along
-        it at the speed its status shows (never beyond where its schedule is due)."""
+        it at the speed its status shows (never beyond where its schedule is due); driving a path
+        the manager does not know (back from offline), straight on at its velocity."""
         st = r.status
         if not r.on_leg:
-            return st.x, st.y
+            ahead = max(0.0, t0 - st.stamp) if st.mode == "driving" else 0.0
+            return st.x + st.vx * ahead, st.y + st.vy * ahead
         wp = r.leg.path.waypoints
         arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
         due = float(np.interp(t0, wp[:, 2], arc))
@@ -573,12 +582,9 @@ class FleetManager:
                 nodes[r.id] = {"delay": 0.0, "travel": 0.0}
             else:
                 p = r.leg.path
-                nodes[r.id] = {"delay": max(0.0, p.start_time - r.leg.t0), "travel": max(0.0, p.arrival_time - p.start_time)}
+                nodes[r.id] = {"delay": max(0.0, p.start_time - r.leg.t0),
+                               "travel": max(0.0, p.arrival_time - p.start_time)}
         return Schedule(plan_id=self._plan_id, stamp=float(now), priority=tuple(nodes), nodes=nodes)
-
-    def job_state(self, task_id: str) -> str | None:
-        job = self.jobs.get(task_id)
-        return None if job is None else job.state
 
 
 def _event(task_id: str, event: str, now: float, robot_id: str | None = None, reason: str | None = None) -> TaskEvent:

@@ -10,11 +10,13 @@ status on ``/fleet/robot_status`` at ``status_rate_hz`` of ROS time (simulated t
 """
 from __future__ import annotations
 
+import sys
 from typing import Mapping
 
 import rclpy
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
@@ -121,6 +123,9 @@ def main(args: list[str] | None = None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
+        print(f"robot_agent: {exc}", file=sys.stderr)
+        sys.exit(2)
     finally:
         if node is not None:
             node.destroy_node()

@@ -34,7 +34,8 @@ R = 0.35  # every disc in the rule tests; default params: front area 2 x 2 m, cr
 
 
 def view(rid, pos, wp=None, behavior=FWP, remaining=10.0, partner=None, station=None, straight=math.inf):
-    return RobotView(rid, pos, R, behavior, wp, remaining, straight, station, partner)
+    return RobotView(rid, pos, R, behavior, next_waypoint=wp, remaining=remaining, straight=straight,
+                     station=station, partner=partner)
 
 
 # "me" stands at the origin heading along +x; the other robot's place and heading give the collision
@@ -418,13 +419,14 @@ def test_bad_input_is_named():
         BehaviorFleet(OPEN, [a, RobotSpec("b", 0.35, 1.0, (1.9, 1.5), (1.9, 1.5))])
     with pytest.raises(ValueError, match="duplicate"):
         BehaviorFleet(OPEN, [a, a])
-    fleet = BehaviorFleet(GridMap.from_rows(["...", ".@.", "..."]), [RobotSpec("a", 0.35, 1.0, (0.5, 0.5), (0.5, 0.5))])
+    corner = RobotSpec("a", 0.35, 1.0, (0.5, 0.5), (0.5, 0.5))
+    fleet = BehaviorFleet(GridMap.from_rows(["...", ".@.", "..."]), [corner])
     with pytest.raises(ValueError, match="unknown robot"):
         fleet.assign("zz", (2.5, 2.5))
     with pytest.raises(ValueError, match="not free"):
         fleet.assign("a", (1.5, 1.5))
     with pytest.raises(ValueError, match="dt"):
         fleet.step(0.0)
-    walled = BehaviorFleet(GridMap.from_rows([".@.", ".@.", ".@."]), [RobotSpec("a", 0.35, 1.0, (0.5, 0.5), (0.5, 0.5))])
+    walled = BehaviorFleet(GridMap.from_rows([".@.", ".@.", ".@."]), [corner])
     with pytest.raises(PlanningError, match="no path"):
         walled.assign("a", (2.5, 2.5))

@@ -15,7 +15,7 @@ from fleet_planner.grid import GridMap
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import RobotModel, load_kinds
 from fleet_planner.warehouse import Station, Warehouse, generate_warehouse, load_warehouse
-from msg_schemas.records import RobotStatus, Task
+from msg_schemas.records import RobotStatus, Task, TaskEvent
 
 KINDS = load_kinds()
 #: the shipped kinds with short picks and places, so that simulated runs stay short
@@ -48,7 +48,8 @@ class Sim:
         chargers = [s.pose for s in wh.stations_of("charger")]
         self.agents = {rid: RobotAgent(RobotModel(rid, kinds[k], x, y, battery=b, chargers=chargers), wh)
                        for rid, k, x, y, b in fleet}
-        self.dead: set[str] = set()
+        self.dead: set[str] = set()   # agents that stopped: no ticks, nothing in or out
+        self.mute: set[str] = set()   # agents cut off: they drive on, nothing in or out
         self.t = 0.0
         self.events, self.notes = [], []
         self.legs = {rid: [] for rid in self.agents}
@@ -82,18 +83,19 @@ class Sim:
                 continue
             st = a.tick(self.t)
             self.track[rid].append((st.x, st.y, self.t))
-            self.fm.on_status(st, self.t)
+            if rid not in self.mute:
+                self.fm.on_status(st, self.t)
         if self._ticks % round(self.period / self.dt) == 0:
             d = self.fm.step(self.t)
             self.notes += d.notes
             for leg in d.legs:
                 self.legs[leg.robot_id].append(leg)
-                if leg.robot_id not in self.dead:
+                if leg.robot_id not in self.dead | self.mute:
                     self.agents[leg.robot_id].on_path(leg.relative(), leg.t0, leg.path_id)
             for ev in d.events:
                 self.events.append(ev)
                 for rid, a in self.agents.items():
-                    if rid not in self.dead:
+                    if rid not in self.dead | self.mute:
                         a.on_event(ev)
 
     def last(self, task_id):
@@ -223,25 +225,30 @@ def test_an_agent_charges_at_a_charger_and_stops_when_sent_off():
 
 
 def test_an_agent_picks_only_at_its_jobs_chute_and_places_only_where_the_tag_is():
-    pick, site = WH.stations["chute_1"], WH.station_for_tag("B03-02")
-    agent = RobotAgent(RobotModel("r1", FAST["cargo"], *pick.pose), WH)
-    agent.on_task(task("J1", pick="chute_2", place="B03-02"))
-    from msg_schemas.records import TaskEvent
+    def agent_at(station, loaded=False):
+        agent = RobotAgent(RobotModel("r1", FAST["cargo"], *WH.stations[station].pose), WH)
+        agent.on_task(task("J1", pick="chute_1", place="B03-02"))
+        agent.on_event(TaskEvent(task_id="J1", event="assigned", stamp=0.0, robot_id="r1"))
+        agent.loaded = loaded
+        return agent
+
+    assert agent_at("chute_2").tick(0.0).mode == "idle"  # a chute, but not the job's
+    picker = agent_at("chute_1")
+    assert picker.tick(0.0).mode == "picking"
+    assert picker.tick(5.0).mode == "idle" and picker.loaded
+    assert agent_at("B01", loaded=True).tick(0.0).mode == "idle"  # a storing site without the tag
+    placer = agent_at(WH.station_for_tag("B03-02").name, loaded=True)
+    assert placer.tick(0.0).mode == "placing"
+    done = placer.tick(5.0)
+    assert done.mode == "idle" and done.task_id is None and not placer.loaded
+
+
+def test_an_agent_drops_a_job_given_to_another_robot():
+    agent = RobotAgent(RobotModel("r1", FAST["cargo"], *CHARGERS[0]), WH)
     agent.on_event(TaskEvent(task_id="J1", event="assigned", stamp=0.0, robot_id="r1"))
-    assert agent.tick(0.0).mode == "idle"  # at chute_1, but the job picks at chute_2
-    agent = RobotAgent(RobotModel("r1", FAST["cargo"], *pick.pose), WH)
-    agent.on_task(task("J1", pick="chute_1", place="B03-02"))
-    agent.on_event(TaskEvent(task_id="J1", event="assigned", stamp=0.0, robot_id="r1"))
-    assert agent.tick(0.0).mode == "picking"
-    assert agent.tick(5.0).mode == "idle" and agent.loaded
-    for name in ("B01", site.name):  # a leg to another storing site, then to the one with the tag
-        here = agent.model
-        agent.on_path(TimedPath("r1", 0.35, [[here.x, here.y, 0.0], [*WH.stations[name].pose, 0.01]]), 5.0, 1)
-        here.x, here.y = WH.stations[name].pose  # (teleported: the test is about where it acts)
-        here.follow(TimedPath("r1", 0.35, [[*WH.stations[name].pose, 0.0]]), 5.0, 2)
-        st = agent.tick(5.1)
-        assert st.mode == ("placing" if name == site.name else "idle"), name
-    assert agent.tick(10.0).task_id is None and not agent.loaded
+    assert agent.job == "J1"
+    agent.on_event(TaskEvent(task_id="J1", event="assigned", stamp=1.0, robot_id="r2"))
+    assert agent.job is None
 
 
 # -- whole runs ------------------------------------------------------------------------------------------
@@ -281,6 +288,23 @@ def test_an_offline_robot_becomes_an_obstacle_and_its_job_goes_to_another_robot(
     assert any(f"robot {first} offline" in n for n in sim.notes)
     gap, *who = min_separation(sim.driven())  # the dead robot's track ends where it stopped
     assert gap >= 0.0, who
+
+
+def test_a_robot_heard_again_after_a_silence_is_stopped_where_it_is_and_serves_again():
+    sim = Sim(four_robots(), offline_timeout_s=2.0)
+    sim.submit(task("J1", "chute_2", "B04-01"))
+    assert sim.run_until(lambda: sim.last("J1") == "assigned")
+    first = next(e.robot_id for e in sim.events if e.event == "assigned")
+    assert sim.run_until(lambda: sim.agents[first].model.speed > 0)
+    sim.mute.add(first)  # it drives on, unheard
+    assert sim.run_until(lambda: not sim.fm.robots[first].online)
+    sim.mute.clear()
+    assert sim.run_until(lambda: any(f"robot {first} is back online" in n for n in sim.notes))
+    assert sim.run_until(lambda: sim.legs[first][-1].purpose == "hold")
+    hold = sim.legs[first][-1]
+    assert sim.run_until(lambda: sim.agents[first].model.path_id == hold.path_id, limit=5)
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=400)
+    assert sim.fm.robots[first].online
 
 
 def test_a_robot_late_on_its_schedule_re_plans_from_where_it_is():

@@ -5,11 +5,13 @@ from dataclasses import replace
 
 import pytest
 from rclpy.parameter import Parameter
+from std_msgs.msg import String
 
 from fleet_planner.dispatch import FleetMember
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.demo import bring_up, spin_until
 from fleet_planner.warehouse import generate_warehouse
+from msg_schemas import topics
 from msg_schemas.records import Task
 
 KINDS = {name: replace(k, pick_s=2.0, place_s=2.0, lift_s=1.0 if k.lift_s else 0.0)
@@ -18,7 +20,7 @@ WH = generate_warehouse(2, 2, 8, 2, 4, 0.5, "small", chutes=2, chargers=4)  # 16
 PARKING = [10.75, 11.75, 12.75, 11.75, 14.75, 11.75]
 MEMBERS = [FleetMember(f"r{i + 1}", kind, *s.pose, battery=0.9)
            for i, (kind, s) in enumerate(zip(KINDS, WH.stations_of("charger")))]
-RATE = 10.0      # simulated seconds per wall second, at most (the clock slows down when the CPU is busy)
+RATE = 20.0      # simulated seconds per wall second, at most (the clock slows down when the CPU is busy)
 WAIT = 60.0      # wall seconds any one wait may take before the test gives up
 
 
@@ -47,6 +49,19 @@ def ended(fleet, task_id, event="done") -> bool:
 def no_contact(fleet) -> None:
     gap, a, b, t = fleet.monitor.min_separation()
     assert gap >= 0.0, f"{a} and {b} overlapped by {-gap:.3f} m at t = {t:.1f} s"
+
+
+def test_planner_parameters_have_ranges_and_only_thresholds_change_at_run_time(fleet):
+    node = fleet.planner
+    assert node.describe_parameter("speed_factor").read_only
+    assert node.describe_parameter("offline_timeout_s").floating_point_range[0].from_value > 0
+    [ok] = node.set_parameters([Parameter("idle_s", value=7.5)])
+    assert ok.successful and node.fleet.params.idle_s == 7.5
+    [out_of_range] = node.set_parameters([Parameter("low_battery", value=1.5)])
+    [read_only] = node.set_parameters([Parameter("speed_factor", value=0.9)])
+    assert not out_of_range.successful and not read_only.successful
+    assert (node.fleet.params.low_battery, node.fleet.params.speed_factor) == (0.25, 0.5)
+    node.set_parameters([Parameter("idle_s", value=5.0)])
 
 
 def test_jobs_submitted_on_the_topic_are_all_done_by_able_robots(fleet):
@@ -80,6 +95,9 @@ def test_bad_jobs_are_rejected_with_the_reason_and_a_good_one_still_completes(fl
     if "S1" not in mon.last_event:  # the duplicate needs an S1 known to the planner
         mon.submit(Task(id="S1", pick="chute_1", place="B01-01"))
         assert wait_for(fleet, lambda: "S1" in mon.last_event)
+    garbage = mon.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
+    for text in ("not a status", '{"schema": "fleet/robot_status@1", "id": "r1", "x": NaN}'):
+        garbage.publish(String(data=text))  # the planner logs these and carries on
     for raw, _, _ in BAD:
         mon.submit(raw)
     assert wait_for(fleet, lambda: sum(e.event == "rejected" for e in mon.events) >= len(BAD))

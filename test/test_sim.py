@@ -82,11 +82,10 @@ def test_tiny_delivery_run(problem, method):
         pos = result.positions
         assert pos.shape == (len(result.times), problem.n_robots, 2)
         assert _min_gap(pos, r) >= -1e-9
-        stations = np.array(list(problem.stations.values()))
-        for name, point in problem.stations.items():
-            if any(name in (task.pick, task.drop) for task in problem.tasks):
-                assert np.min(np.hypot(*(pos - point).reshape(-1, 2).T)) < 1e-6, name
-        assert len(stations)
+        # every station of a task was reached (the behaviour fleet drives to it exactly)
+        for name in {s for task in problem.tasks for s in (task.pick, task.drop)}:
+            point = np.asarray(problem.stations[name])
+            assert np.min(np.hypot(*(pos - point).reshape(-1, 2).T)) < 1e-6, name
 
 
 def test_spots_never_cut_a_corridor():

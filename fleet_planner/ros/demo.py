@@ -17,7 +17,6 @@ in-process fleet) and :func:`start_processes` are also what the system tests use
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import random
 import signal
@@ -32,16 +31,18 @@ import numpy as np
 import rclpy
 import yaml
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
+from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
+from tqdm import tqdm
 
 from fleet_planner.checker import min_separation
 from fleet_planner.dispatch import FleetMember, load_fleet, samples_to_path
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import load_kinds
-from fleet_planner.ros.planner_node import PlannerNode
+from fleet_planner.ros.planner_node import DrainingExecutor, PlannerNode
 from fleet_planner.ros.sim_clock import SimClock
 from fleet_planner.ros.submit import planner_matched
 from fleet_planner.warehouse import config_path, load_warehouse
@@ -110,28 +111,6 @@ class FleetMonitor(Node):
     def min_separation(self) -> tuple[float, str | None, str | None, float | None]:
         """Smallest distance minus the sum of radii over all pairs and all reported times."""
         return min_separation(self.trajectories())
-
-
-class DrainingExecutor(SingleThreadedExecutor):
-    """A single-threaded executor that takes every message waiting in a ready subscription, not
-    just one as rclpy's wait-set executors do. With a whole simulated fleet on one executor, each
-    wait cycle brings a status from every robot; taking one per cycle, the planner and the monitor
-    would fall further and further behind (and take robots for offline)."""
-
-    def _take_subscription(self, sub):
-        calls = []
-        while len(calls) < 1000:  # bounded: a flood must not starve the rest of the executor
-            call = super()._take_subscription(sub)
-            if call is None:
-                break
-            calls.append(call)
-        if not calls:
-            return None
-
-        async def run_all():
-            for call in calls:
-                await call()
-        return run_all
 
 
 def spin_until(executor, condition, timeout: float, step: float = 0.05) -> bool:
@@ -206,19 +185,22 @@ def start_processes(members: Sequence, rate: float, params_file: Path, warehouse
     if kinds_file:
         files += ["-p", f"kinds_file:={kinds_file}"]
     sim = ["-p", "use_sim_time:=true"]
-    commands = [[sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)],
-                node_command("planner", "fleet_planner.ros.planner_node")
-                + ["--ros-args", "--params-file", str(params_file)] + sim + files]
+    commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)],
+                "planner": node_command("planner", "fleet_planner.ros.planner_node")
+                + ["--ros-args", "--params-file", str(params_file)] + sim + files}
     for m in members:
-        commands.append(node_command("robot_agent", "robot_agent.agent_node") + [
+        commands[f"agent_{m.id}"] = node_command("robot_agent", "robot_agent.agent_node") + [
             "--ros-args", "-r", f"__node:=agent_{m.id}", "-p", f"id:={m.id}", "-p", f"kind:={m.kind}",
-            "-p", f"x:={m.x!r}", "-p", f"y:={m.y!r}", "-p", f"yaw:={m.yaw!r}", "-p", f"battery:={m.battery!r}"]
-            + sim + files)
+            "-p", f"x:={m.x!r}", "-p", f"y:={m.y!r}", "-p", f"yaw:={m.yaw!r}", "-p", f"battery:={m.battery!r}"] \
+            + sim + files
     procs = []
     try:
-        for cmd in commands:
-            log = open(log_dir / f"{Path(cmd[0]).name}_{len(procs)}.log", "w") if log_dir else subprocess.DEVNULL
-            procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy()))
+        for name, cmd in commands.items():
+            if log_dir is None:
+                procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT))
+                continue
+            with open(log_dir / f"{name}.log", "w") as log:  # the child keeps its own copy open
+                procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT))
     except BaseException:
         stop_processes(procs)
         raise
@@ -354,7 +336,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="nodes in this process on one executor (default), or one process each")
     p.add_argument("--jobs", type=int, default=20, help="how many jobs to submit (default 20)")
     p.add_argument("--interval", type=float, default=4.0, help="simulated seconds between jobs (default 4)")
-    p.add_argument("--rate", type=float, default=8.0, help="simulated seconds per wall second (default 8)")
+    p.add_argument("--rate", type=float, default=10.0, help="simulated seconds per wall second, at most (default 10)")
     p.add_argument("--fleet", type=Path, help="fleet file (default: config/fleet.yaml)")
     p.add_argument("--warehouse", type=Path, help="warehouse YAML (default: config/warehouse.yaml)")
     p.add_argument("--params", type=Path, help="planner ros__parameters YAML (default: config/planner_params.yaml)")
@@ -362,6 +344,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("out"), help="where the picture goes (default out/)")
     p.add_argument("--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--verbose", action="store_true", help="show the nodes' info messages (in-process mode)")
     return p
 
 
@@ -390,6 +373,9 @@ def main(args: list[str] | None = None) -> None:
         if opts.mode == "inproc":
             fleet = bring_up(context, warehouse, kinds, members, opts.rate, params_file=params_file)
             executor, monitor, parking = fleet.executor, fleet.monitor, list(fleet.planner.fleet.parking.values())
+            if not opts.verbose:
+                for node in fleet.nodes:
+                    node.get_logger().set_level(LoggingSeverity.WARN)
         else:
             log_dir = opts.out / "logs"
             log_dir.mkdir(exist_ok=True)
@@ -436,14 +422,14 @@ def _run(executor, monitor, members: Sequence, jobs: Sequence, opts) -> Summary:
     spin_until(executor, lambda: monitor.now() > t_ready + 0.5, 30.0)
     bar = None
     if not opts.no_progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=len(jobs), desc="jobs done", unit="job", file=sys.stderr, dynamic_ncols=True)
     first = monitor.now()
     submitted = 0
     wall_start = time.monotonic()
-    finished = lambda: sum(monitor.last_event.get(j.id) is not None  # noqa: E731
-                           and monitor.last_event[j.id].event in TERMINAL for j in jobs)
+
+    def finished() -> int:
+        return sum(j.id in monitor.last_event and monitor.last_event[j.id].event in TERMINAL for j in jobs)
+
     try:
         while finished() < len(jobs) and time.monotonic() < deadline:
             now = monitor.now()

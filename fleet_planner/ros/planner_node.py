@@ -10,6 +10,7 @@ with a logged warning.
 """
 from __future__ import annotations
 
+import sys
 import traceback
 from dataclasses import fields, replace
 from typing import Mapping
@@ -17,7 +18,8 @@ from typing import Mapping
 import rclpy
 from nav_msgs.msg import OccupancyGrid, Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
@@ -32,7 +34,7 @@ from msg_schemas.convert import grid_to_msg, ns_to_stamp, plan_markers, record_t
 from msg_schemas.records import RecordError, RobotStatus, TaskEvent
 
 #: parameters that shape planned legs and cannot change while the node runs
-_FIXED = ("speed_factor", "safety_margin", "lead_s")
+_FIXED = ("speed_factor", "safety_margin")
 _HELP = {
     "speed_factor": "legs are planned at this fraction of each robot's top speed",
     "safety_margin": "m added to the margin that covers the robots' tracking lag",
@@ -43,6 +45,29 @@ _HELP = {
     "min_task_battery": "battery fraction a robot needs to take a job",
     "idle_s": "s a free robot waits before it goes to a charger",
 }
+
+
+class DrainingExecutor(SingleThreadedExecutor):
+    """A single-threaded executor that takes every message waiting in a ready subscription, not
+    just one as rclpy's wait-set executors do: each robot sends its status 10 times a (simulated)
+    second, and with a whole fleet on one executor every wait cycle brings one from each robot.
+    Taking one per cycle, the planner would fall further and further behind (and take robots for
+    offline)."""
+
+    def _take_subscription(self, sub):
+        calls = []
+        while len(calls) < 1000:  # bounded: a flood must not starve the rest of the executor
+            call = super()._take_subscription(sub)
+            if call is None:
+                break
+            calls.append(call)
+        if not calls:
+            return None
+
+        async def run_all():
+            for call in calls:
+                await call()
+        return run_all
 
 
 def _range(description: str, lo: float, hi: float, read_only: bool = True) -> ParameterDescriptor:
@@ -57,12 +82,12 @@ class PlannerNode(Node):
     def __init__(self, name: str = "planner", *, warehouse: Warehouse | None = None,
                  kinds: Mapping[str, RobotKind] | None = None, **kwargs):
         super().__init__(name, **kwargs)
-        text = ParameterDescriptor(read_only=True)
         wh_file = self.declare_parameter("warehouse_file", "", ParameterDescriptor(
             description="warehouse YAML (empty: the shipped config/warehouse.yaml)", read_only=True)).value
         kinds_file = self.declare_parameter("kinds_file", "", ParameterDescriptor(
             description="robot kinds YAML (empty: the shipped config/robot_kinds.yaml)", read_only=True)).value
-        self.frame_id = self.declare_parameter("frame_id", "map", text).value
+        self.frame_id = self.declare_parameter("frame_id", "map", ParameterDescriptor(
+            description="frame of the paths, markers and map", read_only=True)).value
         spots = self.declare_parameter("parking", Parameter.Type.DOUBLE_ARRAY, ParameterDescriptor(
             description="parking spots besides the chargers, flattened: [x1, y1, x2, y2, ...] (m)",
             read_only=True)).value or []
@@ -173,9 +198,12 @@ def main(args: list[str] | None = None) -> None:
     node = None
     try:
         node = PlannerNode()
-        rclpy.spin(node)
+        rclpy.spin(node, executor=DrainingExecutor())
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
+        print(f"planner: {exc}", file=sys.stderr)
+        sys.exit(2)
     finally:
         if node is not None:
             node.destroy_node()

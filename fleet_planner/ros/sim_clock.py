@@ -17,6 +17,7 @@ import sys
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -73,6 +74,9 @@ def main(args: list[str] | None = None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
+        print(f"sim_clock: {exc}", file=sys.stderr)
+        sys.exit(2)
     finally:
         if node is not None:
             node.destroy_node()
