@@ -42,14 +42,15 @@ class Region:
         return self.b_lo, self.b_hi, self.a_lo, self.a_hi
 
 
-def _segments(paths: Sequence[np.ndarray]):
-    """Flatten polylines into segment arrays. A path of one point (a robot that does not move) is a
-    zero-length segment, so a parked robot still has regions with everyone passing by."""
-    starts, dirs, lens, owner, offset = [], [], [], [], []
-    for idx, pts in enumerate(paths):
+def _segments(paths: Sequence[np.ndarray], times: Sequence[np.ndarray]):
+    """Flatten polylines into segment arrays (with each segment's start time and speed). A path
+    of one point (a robot that does not move) is a zero-length segment, so a parked robot still
+    has regions with everyone passing by."""
+    starts, dirs, lens, owner, offset, t0, speed = [], [], [], [], [], [], []
+    for idx, (pts, tt) in enumerate(zip(paths, times)):
         pts = np.asarray(pts, dtype=float).reshape(-1, 2)
         if len(pts) == 1:
-            pts = np.vstack([pts, pts])
+            pts, tt = np.vstack([pts, pts]), np.array([0.0, 1.0])
         d = np.diff(pts, axis=0)
         seg_len = np.hypot(d[:, 0], d[:, 1])
         unit = np.divide(d, seg_len[:, None], out=np.tile([1.0, 0.0], (len(d), 1)), where=seg_len[:, None] > 0)
@@ -58,10 +59,12 @@ def _segments(paths: Sequence[np.ndarray]):
         lens.append(seg_len)
         owner.append(np.full(len(d), idx))
         offset.append(np.concatenate([[0.0], np.cumsum(seg_len)[:-1]]))
+        t0.append(tt[:-1])
+        speed.append(np.where(seg_len > 0, seg_len / np.maximum(np.diff(tt), 1e-12), 1.0))
     first = np.concatenate([np.arange(len(o)) == 0 for o in owner])
     last = np.concatenate([np.arange(len(o)) == len(o) - 1 for o in owner])
     return (np.vstack(starts), np.vstack(dirs), np.concatenate(lens), np.concatenate(owner),
-            np.concatenate(offset), first, last)
+            np.concatenate(offset), first, last, np.concatenate(t0), np.concatenate(speed))
 
 
 def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray):
@@ -116,17 +119,23 @@ class CollisionModel:
     """Collision regions of every pair of robots, kept up to date as paths change.
 
     ``radii`` are the robots' radii; two discs are in conflict when closer than
-    ``r_x + r_y + margin``. ``set_path`` replaces one robot's path and recomputes only its pairs
+    ``r_x + r_y + margin``. How each robot drives its path is given either by constant ``speeds``
+    or by ``times``: per robot, the time (from its departure) at which it passes each vertex
+    (a speed profile with ramps, :func:`fleet_planner.model.drive_profile`). ``set_path`` replaces one robot's path and recomputes only its pairs
     (re-ordering robots re-plans one or two paths; everything else is kept).
     """
 
     def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0,
-                 speeds: Sequence[float] | None = None):
+                 speeds: Sequence[float] | None = None, times: Sequence[np.ndarray] | None = None):
         self.radii = np.asarray(radii, dtype=float)
-        self.speeds = np.ones(len(radii)) if speeds is None else np.asarray(speeds, dtype=float)
         self.margin = float(margin)
         self.paths = [np.asarray(p, dtype=float).reshape(-1, 2) for p in paths]
+        if times is None:
+            v = np.ones(len(self.paths)) if speeds is None else np.asarray(speeds, dtype=float)
+            times = [_cumlen(p) / v[x] for x, p in enumerate(self.paths)]
+        self.times = [np.asarray(t, dtype=float) for t in times]
         self.lengths = np.array([_length(p) for p in self.paths])
+        self.travel = np.array([float(t[-1]) for t in self.times])
         self._regions: dict[tuple[int, int], list[Region]] = {}
         self._pieces: dict[tuple[int, int], np.ndarray] = {}
         self._adj: dict[int, set[int]] = {}
@@ -153,13 +162,17 @@ class CollisionModel:
         return sum(len(v) for v in self._regions.values())
 
     # -- updates --------------------------------------------------------------------------------
-    def set_path(self, x: int, path: np.ndarray) -> None:
-        self.set_paths({x: path})
+    def tau(self, x: int, s):
+        """Time after its departure at which robot x has travelled ``s`` along its path."""
+        return np.interp(s, _cumlen(self.paths[x]), self.times[x])
 
-    def set_paths(self, changed: dict[int, np.ndarray]) -> None:
-        for x, path in changed.items():
+    def set_paths(self, changed: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
+        """Replace robots' (path, vertex times) and recompute only their pairs."""
+        for x, (path, times) in changed.items():
             self.paths[x] = np.asarray(path, dtype=float).reshape(-1, 2)
+            self.times[x] = np.asarray(times, dtype=float)
             self.lengths[x] = _length(self.paths[x])
+            self.travel[x] = float(self.times[x][-1])
         dirty = set(changed)
         self._regions = {k: v for k, v in self._regions.items() if k[0] not in dirty and k[1] not in dirty}
         self._pieces = {k: v for k, v in self._pieces.items() if k[0] not in dirty and k[1] not in dirty}
@@ -175,7 +188,7 @@ class CollisionModel:
         robots = list(robots)
         if not robots or len(self.paths) < 2:
             return
-        p0, u, seg_len, owner, offset, first, last = _segments(self.paths)
+        p0, u, seg_len, owner, offset, first, last, seg_t0, seg_v = _segments(self.paths, self.times)
         p1 = p0 + u * seg_len[:, None]
         lines = shapely.linestrings(np.stack([p0, p1], axis=1))
         reach = 2 * float(self.radii.max()) + self.margin
@@ -205,8 +218,8 @@ class CollisionModel:
         qi, ti, R = qi[hit], ti[hit], R[hit]
         if len(qi) == 0:
             return
-        pieces = _piece_table(p0[qi], u[qi], seg_len[qi], offset[qi], self.speeds[owner[qi]],
-                              p0[ti], u[ti], seg_len[ti], offset[ti], self.speeds[owner[ti]], R)
+        pieces = _piece_table(p0[qi], u[qi], seg_len[qi], offset[qi], seg_t0[qi], seg_v[qi],
+                              p0[ti], u[ti], seg_len[ti], offset[ti], seg_t0[ti], seg_v[ti], R)
         pieces[:, P_X], pieces[:, P_Y] = owner[qi], owner[ti]
         pieces[:, P_A_LO], pieces[:, P_A_HI] = offset[qi] + a_lo[hit], offset[qi] + a_hi[hit]
         pieces[:, P_B_LO], pieces[:, P_B_HI] = offset[ti] + b_lo[hit], offset[ti] + b_hi[hit]
@@ -228,21 +241,23 @@ class CollisionModel:
 # t_x(a) - t_y(b) (undelayed) over the piece, so that y collides with a delayed x here iff
 # d_y - d_x lies strictly inside (PHI_LO, PHI_HI). E_*: the piece's extent on the edges of the
 # segment pair where a robot may be parked (x at the start / end of its segment, y likewise), as
-# the other robot's travelled length (lo > hi when empty).
+# the other robot's travelled length (lo > hi when empty). OFF/T0/V: where each segment starts
+# (travelled length, undelayed time) and its speed, so t(s) = T0 + (s - OFF) / V on it.
 (P_X, P_Y, P_A_LO, P_A_HI, P_B_LO, P_B_HI, P_PHI_LO, P_PHI_HI,
  P_XS_LO, P_XS_HI, P_XE_LO, P_XE_HI, P_YS_LO, P_YS_HI, P_YE_LO, P_YE_HI,
- P_X_FIRST, P_X_LAST, P_Y_FIRST, P_Y_LAST) = range(20)
-_NO_PIECES = np.zeros((0, 20))
+ P_X_FIRST, P_X_LAST, P_Y_FIRST, P_Y_LAST,
+ P_X_OFF, P_X_T0, P_X_V, P_Y_OFF, P_Y_T0, P_Y_V) = range(26)
+_NO_PIECES = np.zeros((0, 26))
 
 
-def _piece_table(p0, u, lp, offp, vx, q0, v, lq, offq, vy, R) -> np.ndarray:
+def _piece_table(p0, u, lp, offp, tp, vx, q0, v, lq, offq, tq, vy, R) -> np.ndarray:
     """Exact extents of the convex set S = {(a, b) in [0, lp] x [0, lq] : |p0 + a u - q0 - b v| < R}
-    per row: the range of phi(a, b) = (offp + a)/vx - (offq + b)/vy over S, and S's edge intervals.
+    per row: the range of phi(a, b) = (tp + a/vx) - (tq + b/vy) over S, and S's edge intervals.
 
     A linear function's extremes over a convex set lie on its boundary: on the square's edges (the
     ends of the four edge intervals) or where the ellipse boundary is tangent to phi's level lines."""
     n = len(p0)
-    out = np.zeros((n, 20))
+    out = np.zeros((n, 26))
 
     def clip(lo, hi, length):
         lo, hi = np.maximum(lo, 0.0), np.minimum(hi, length)
@@ -253,7 +268,7 @@ def _piece_table(p0, u, lp, offp, vx, q0, v, lq, offq, vy, R) -> np.ndarray:
     xe = clip(*_circle_interval(q0 - p1, v, R), lq)   # ... at its segment end
     ys = clip(*_circle_interval(p0 - q0, u, R), lp)   # a-range with y at its segment start
     ye = clip(*_circle_interval(p0 - q1, u, R), lp)
-    phi = lambda a, b: (offp + a) / vx - (offq + b) / vy  # noqa: E731
+    phi = lambda a, b: (tp + a / vx) - (tq + b / vy)  # noqa: E731
     zero = np.zeros(n)
     cands = [phi(zero, xs[0]), phi(zero, xs[1]), phi(lp, xe[0]), phi(lp, xe[1]),
              phi(ys[0], zero), phi(ys[1], zero), phi(ye[0], lq), phi(ye[1], lq)]
@@ -283,6 +298,8 @@ def _piece_table(p0, u, lp, offp, vx, q0, v, lq, offq, vy, R) -> np.ndarray:
     out[:, P_XE_LO], out[:, P_XE_HI] = offq + xe[0], offq + xe[1]
     out[:, P_YS_LO], out[:, P_YS_HI] = offp + ys[0], offp + ys[1]
     out[:, P_YE_LO], out[:, P_YE_HI] = offp + ye[0], offp + ye[1]
+    out[:, P_X_OFF], out[:, P_X_T0], out[:, P_X_V] = offp, tp, vx
+    out[:, P_Y_OFF], out[:, P_Y_T0], out[:, P_Y_V] = offq, tq, vy
     return out
 
 
@@ -314,6 +331,10 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
                     break
     comps.sort(key=lambda c: c[0])
     return [tuple(c) for c in comps]
+
+
+def _cumlen(path: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))]) if len(path) > 1 else np.zeros(1)
 
 
 def _length(path: np.ndarray) -> float:

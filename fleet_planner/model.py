@@ -32,9 +32,11 @@ class RobotSpec:
     start: Point
     goal: Point
     kind: str = "cargo"
+    #: m/s^2; None = speed changes are instantaneous (the plan contract's constant-speed segments)
+    max_accel: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("radius", "max_speed"):
+        for name in ("radius", "max_speed") + (("max_accel",) if self.max_accel is not None else ()):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"robot {self.id!r}: {name} must be a finite number > 0, got {value!r}")
@@ -127,15 +129,52 @@ def polyline_length(points: Sequence[Point] | np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) if len(pts) > 1 else 0.0
 
 
+def drive_profile(points: Sequence[Point] | np.ndarray, speed: float, accel: float | None = None,
+                  ramp_pieces: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """How a robot drives a polyline from standstill to standstill: (vertices, times from its
+    departure). With ``accel`` the speed follows a trapezoid (a triangle on short paths), written
+    as ``ramp_pieces`` constant-speed pieces per ramp in equal time steps (the plan contract has
+    constant speed between waypoints); a robot that accelerates at ``accel`` stays within
+    accel * dt^2 / 8 of that (dt = ramp time / ramp_pieces) instead of lagging v^2 / (2 accel)
+    behind a plan that assumes instant speed changes."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    seg = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
+    pts = pts[np.concatenate([[True], seg > 1e-12])]
+    cum = np.concatenate([[0.0], np.cumsum(seg[seg > 1e-12])])
+    total = float(cum[-1])
+    if accel is None or not math.isfinite(accel) or total == 0.0:
+        return pts, cum / speed
+    peak = min(speed, math.sqrt(accel * total))
+    t_ramp = peak / accel
+    s_ramp = 0.5 * peak * t_ramp
+    dt = t_ramp / ramp_pieces
+    k = np.arange(ramp_pieces + 1)
+    up_s, up_t = 0.5 * accel * (k * dt) ** 2, k * dt
+    cruise_t = (total - 2 * s_ramp) / peak
+    down_s = total - up_s[::-1]
+    down_t = t_ramp + cruise_t + (t_ramp - up_t[::-1])
+    bs = np.concatenate([up_s, down_s])
+    bt = np.concatenate([up_t, down_t])
+    bs, keep = np.unique(bs, return_index=True)
+    bt = bt[keep]
+    s_all = np.union1d(cum, bs)
+    s_all = s_all[np.concatenate([[True], np.diff(s_all) > 1e-9])]
+    xy = np.column_stack([np.interp(s_all, cum, pts[:, 0]), np.interp(s_all, cum, pts[:, 1])])
+    return xy, np.interp(s_all, bs, bt)
+
+
+def timed_path_from_profile(robot_id: str, radius: float, points: np.ndarray, times: np.ndarray,
+                            departure: float = 0.0) -> TimedPath:
+    """A robot holding at ``points[0]`` until ``departure``, then at ``points[k]`` at
+    ``departure + times[k]`` (see :func:`drive_profile`)."""
+    wp = np.column_stack([np.asarray(points, dtype=float).reshape(-1, 2), departure + np.asarray(times, dtype=float)])
+    if departure > 0:
+        wp = np.vstack([[wp[0, 0], wp[0, 1], 0.0], wp])
+    return TimedPath(robot_id, radius, wp)
+
+
 def timed_path_from_polyline(robot_id: str, radius: float, points: Sequence[Point] | np.ndarray,
                              speed: float, departure: float = 0.0) -> TimedPath:
     """A robot holding at ``points[0]`` until ``departure`` then driving the polyline at ``speed``."""
-    pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    seg = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
-    keep = np.concatenate([[True], seg > 1e-12])
-    pts = pts[keep]
-    times = departure + np.concatenate([[0.0], np.cumsum(seg[seg > 1e-12]) / speed])
-    wp = np.column_stack([pts, times])
-    if departure > 0:
-        wp = np.vstack([[pts[0, 0], pts[0, 1], 0.0], wp])
-    return TimedPath(robot_id, radius, wp)
+    pts, times = drive_profile(points, speed)
+    return timed_path_from_profile(robot_id, radius, pts, times, departure)

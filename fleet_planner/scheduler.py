@@ -100,22 +100,21 @@ def _num(x: float) -> float | None:
 class DelayScheduler:
     """Departure delays for robots on fixed paths, in a given priority order (Eq. 3).
 
-    ``speeds`` are constant speeds along the paths; ``model`` holds the collision regions.
+    ``model`` holds the collision regions and how each robot drives its path (its times).
     ``schedule(order, start_at)`` keeps the delays of ``order[:start_at]`` (they do not depend on
     lower robots) and recomputes the rest, so a re-ordering recomputes only what changed.
     """
 
-    def __init__(self, model: CollisionModel, speeds: Sequence[float], mode: str = "box"):
+    def __init__(self, model: CollisionModel, mode: str = "box"):
         if mode not in MODES:
             raise ValueError(f"mode: must be one of {', '.join(MODES)} (got {mode!r})")
         self.model = model
-        self.speeds = np.asarray(speeds, dtype=float)
-        self.delays = np.zeros(len(speeds))
+        self.delays = np.zeros(len(model.paths))
         self.mode = mode
         self._done: set[int] = set()   # robots whose delay is up to date
 
     def travel(self, x: int) -> float:
-        return float(self.model.lengths[x] / self.speeds[x])
+        return float(self.model.travel[x])
 
     def _inlet(self, j: int, rank: dict[int, int]):
         """Arrays describing the inlet links of j: (i, T1, T4, b_lo, b_hi, pinned_start, to_goal)."""
@@ -123,19 +122,18 @@ class DelayScheduler:
         for i in self.model.neighbours(j):
             if rank.get(i, INF) >= rank[j]:
                 continue
-            vi, di, Li = self.speeds[i], self.delays[i], self.model.lengths[i]
+            di, Li = self.delays[i], self.model.lengths[i]
             Lj = self.model.lengths[j]
             for reg in self.model.regions(i, j):
                 a_lo, a_hi, b_lo, b_hi = reg.oriented(i)
-                t1 = 0.0 if a_lo <= EPS else di + a_lo / vi
-                t4 = INF if a_hi >= Li - EPS else di + a_hi / vi
+                t1 = 0.0 if a_lo <= EPS else di + float(self.model.tau(i, a_lo))
+                t4 = INF if a_hi >= Li - EPS else di + float(self.model.tau(i, a_hi))
                 rows.append((i, t1, t4, b_lo, b_hi, b_lo <= EPS, b_hi >= Lj - EPS))
         return rows
 
     def _times(self, j: int, b_lo, b_hi, pinned, to_goal, d: float):
-        v = self.speeds[j]
-        t2 = np.where(pinned, 0.0, d + b_lo / v)
-        t3 = np.where(to_goal, INF, d + b_hi / v)
+        t2 = np.where(pinned, 0.0, d + self.model.tau(j, b_lo))
+        t3 = np.where(to_goal, INF, d + self.model.tau(j, b_hi))
         return t2, t3
 
     def schedule_robot(self, j: int, rank: dict[int, int]) -> Blocked | None:
@@ -177,8 +175,8 @@ class DelayScheduler:
         tables = [self.model.pieces(i, j) for i in higher]
         P = np.vstack(tables)
         who = np.repeat(higher, [len(t) for t in tables])
-        di, vi, Li = self.delays[who], self.speeds[who], self.model.lengths[who]
-        vj, Lj = self.speeds[j], self.model.lengths[j]
+        di, Li, Ti = self.delays[who], self.model.lengths[who], self.model.travel[who]
+        Tj = self.model.travel[j]
         sw = who > j   # the piece table lists the smaller index first: is i the table's y?
 
         def col(x_col: int, y_col: int) -> np.ndarray:
@@ -193,15 +191,20 @@ class DelayScheduler:
         js_lo, js_hi = col(C.P_YS_LO, C.P_XS_LO), col(C.P_YS_HI, C.P_XS_HI)   # i's range, j at a segment start
         je_hi = col(C.P_YE_HI, C.P_XE_HI)                                     # i's range, j at a segment end
         je_lo = col(C.P_YE_LO, C.P_XE_LO)
+        # undelayed time at a travelled length on the piece's segment of i, of j
+        i_off, i_t0, i_v = col(C.P_X_OFF, C.P_Y_OFF), col(C.P_X_T0, C.P_Y_T0), col(C.P_X_V, C.P_Y_V)
+        j_off, j_t0, j_v = col(C.P_Y_OFF, C.P_X_OFF), col(C.P_Y_T0, C.P_X_T0), col(C.P_Y_V, C.P_X_V)
         with np.errstate(invalid="ignore"):
-            t_i_first = np.where(js_lo <= EPS, 0.0, di + js_lo / vi)          # i there from t = 0 if at its start
-            t_i_last = np.where(je_hi >= Li - EPS, INF, di + je_hi / vi)      # ... for ever if at its goal
+            tau_i = lambda s: i_t0 + (s - i_off) / i_v  # noqa: E731
+            tau_j = lambda s: j_t0 + (s - j_off) / j_v  # noqa: E731
+            t_i_first = np.where(js_lo <= EPS, 0.0, di + tau_i(js_lo))        # i there from t = 0 if at its start
+            t_i_last = np.where(je_hi >= Li - EPS, INF, di + tau_i(je_hi))    # ... for ever if at its goal
             cand = [  # (mask, lo, hi, kind): open intervals of forbidden delays of j
                 (np.isfinite(phi_lo), phi_lo, phi_hi, "move"),                             # both moving
-                (i_first & (is_lo <= is_hi), -is_hi / vj, di - is_lo / vj, "move"),          # i parked at start
-                (i_last & (ie_lo <= ie_hi), di + Li / vi - ie_hi / vj, INF, "goal"),         # i parked at goal
+                (i_first & (is_lo <= is_hi), -tau_j(is_hi), di - tau_j(is_lo), "move"),      # i parked at start
+                (i_last & (ie_lo <= ie_hi), di + Ti - tau_j(ie_hi), INF, "goal"),            # i parked at goal
                 (j_first & (js_lo <= js_hi), t_i_first, INF, "start"),                       # j parked at start
-                (j_last & (je_lo <= je_hi), -INF, t_i_last - Lj / vj, "move"),               # j parked at goal
+                (j_last & (je_lo <= je_hi), -INF, t_i_last - Tj, "move"),                    # j parked at goal
             ]
         lo = np.concatenate([np.broadcast_to(c[1], len(P))[c[0]] for c in cand])
         hi = np.concatenate([np.broadcast_to(c[2], len(P))[c[0]] for c in cand])

@@ -71,9 +71,32 @@ def test_incremental_update_equals_rebuild():
     radii = rng.uniform(0.3, 0.5, 12)
     model = CollisionModel(paths, radii, 0.05)
     new = {3: paths[3][::-1].copy(), 8: paths[8] + 0.7}
-    model.set_paths(new)
+    model.set_paths({x: (p, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))]))
+                     for x, p in new.items()})
     fresh = CollisionModel([new.get(k, p) for k, p in enumerate(paths)], radii, 0.05)
     assert set(model.pairs()) == set(fresh.pairs())
     for pair in fresh.pairs():
         assert model.regions(*pair) == fresh.regions(*pair)
         np.testing.assert_allclose(model.pieces(*pair), fresh.pieces(*pair))
+
+
+def test_ramped_profiles_are_scheduled_exactly():
+    """Robots that accelerate: the plan (with ramp pieces) is still valid by the exact checker,
+    and a follower may trail its leader down a corridor without waiting for it to leave."""
+    from fleet_planner.checker import check_plan
+    from fleet_planner.grid import GridMap
+    from fleet_planner.model import RobotSpec
+    from fleet_planner.planners.md import MDPlanner
+
+    grid = GridMap.from_rows(["." * 30, "." * 30])
+    robots = [RobotSpec("lead", 0.4, 1.0, (2.5, 0.5), (29.5, 0.5), max_accel=0.5),
+              RobotSpec("follow", 0.4, 1.2, (0.5, 0.5), (27.5, 0.5), max_accel=0.5),
+              RobotSpec("cross", 0.4, 0.8, (14.5, 1.5), (0.5, 1.5), max_accel=0.3)]
+    plan = MDPlanner(order="given").plan(grid, robots)
+    assert check_plan(grid, robots, plan) == []
+    lead, follow = plan.by_id()["lead"], plan.by_id()["follow"]
+    assert follow.start_time < lead.arrival_time - 10   # trails it, does not wait for it to arrive
+    # the ramp is in the plan: the first piece is slower than the top speed
+    wp = lead.waypoints[lead.waypoints[:, 2] >= lead.start_time]
+    first_speed = np.hypot(*(wp[1, :2] - wp[0, :2])) / (wp[1, 2] - wp[0, 2])
+    assert first_speed < 0.5

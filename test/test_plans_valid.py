@@ -1,7 +1,7 @@
 """Property: every plan a planner returns is valid, judged by the independent checker.
 
-Random scenarios (hypothesis): a small grid with random obstacles, 2-8 robots of different radii
-and speeds on distinct free cells. A planner may refuse (PlanningError naming robots), never
+Random scenarios (hypothesis): a small grid with random obstacles, 2-8 robots of different radii,
+speeds and accelerations on distinct free cells. A planner may refuse (PlanningError naming robots), never
 return an invalid plan. The same body runs over every planner and collision mode.
 """
 import numpy as np
@@ -28,8 +28,10 @@ def scenarios(draw):
     n = draw(st.integers(2, min(8, len(free) // 2)))
     cells = rng.permutation(len(free))[: 2 * n]
     grid = GridMap(blocked, 1.0, "random")
+    ramps = draw(st.booleans())   # robots that accelerate (md plans ramps) or change speed at once
     robots = [RobotSpec(f"r{k}", float(rng.uniform(0.25, 0.45)), float(rng.uniform(0.5, 1.5)),
-                        grid.centre(*free[cells[2 * k]]), grid.centre(*free[cells[2 * k + 1]]))
+                        grid.centre(*free[cells[2 * k]]), grid.centre(*free[cells[2 * k + 1]]),
+                        max_accel=float(rng.uniform(0.3, 1.0)) if ramps else None)
               for k in range(n)]
     return grid, robots
 
@@ -51,9 +53,6 @@ def test_exact_mode_never_delays_more_than_boxes_on_a_shared_aisle():
     """Two robots going the same way down one aisle: boxes make the aisle exclusive, the exact
     regions let the second follow at a safe distance."""
     grid = GridMap.from_rows(["." * 30])
-    robots = [RobotSpec("lead", 0.4, 1.0, (0.5, 0.5), (28.5, 0.5)),
-              RobotSpec("follow", 0.4, 1.0, (1.5, 0.5), (29.5, 0.5))]
-    # "follow" must start behind "lead": put lead's start ahead in the aisle
     robots = [RobotSpec("lead", 0.4, 1.0, (2.5, 0.5), (29.5, 0.5)),
               RobotSpec("follow", 0.4, 1.0, (0.5, 0.5), (27.5, 0.5))]
     exact = get_planner("md", mode="exact").plan(grid, robots)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..collision import CollisionModel
 from ..grid import GridMap
-from ..model import Plan, PlanningError, RobotSpec, TimedPath, timed_path_from_polyline
+from ..model import Plan, PlanningError, RobotSpec, TimedPath, drive_profile, timed_path_from_profile
 from ..scheduler import MODES, Blocked, DelayScheduler, Network
 from .base import Planner, Progress
 
@@ -45,7 +45,7 @@ def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Seque
     "box" (the paper's collision boxes) or "exact" (the regions themselves, see the scheduler)."""
     order = list(range(len(ids))) if order is None else list(order)
     model = CollisionModel(paths, radii, margin, speeds)
-    sched = DelayScheduler(model, speeds, mode)
+    sched = DelayScheduler(model, mode)
     blocked = sched.schedule(order)
     return Schedule(order, sched.delays.copy(), sched.network(order, ids), blocked)
 
@@ -100,15 +100,15 @@ class MDPlanner(Planner):
         robots = list(robots)
         kept = [_remaining(tp, t0) for tp in fixed]
         nf = len(kept)
-        specs = [RobotSpec(tp.robot_id, tp.radius, speed, tuple(poly[0]), tuple(poly[-1]))
-                 for tp, (poly, _, speed) in zip(fixed, kept)] + robots
+        specs = [RobotSpec(tp.robot_id, tp.radius, _top_speed(poly, times), tuple(poly[0]), tuple(poly[-1]))
+                 for tp, (poly, times, _) in zip(fixed, kept)] + robots
         _check_endpoints(specs[nf:], self.margin)
         shortest: dict[int, np.ndarray] = {}
         order = list(range(nf)) + [nf + x for x in self._initial_order(grid, robots, shortest)]
-        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[poly for poly, _, _ in kept])
+        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept])
         session.hints = {nf + x: path for x, path in shortest.items()}
         session.route()
-        session.sched.delays[:nf] = [delay for _, delay, _ in kept]
+        session.sched.delays[:nf] = [delay for _, _, delay in kept]
         session.resolve()
         out = session.timed_paths()[nf:]
         for tp in out:
@@ -167,12 +167,14 @@ class _Session:
     delays), their paths, the priority order, the collision model and the scheduler."""
 
     def __init__(self, planner: MDPlanner, grid: GridMap, robots: list[RobotSpec], order: list[int],
-                 fixed: int, fixed_paths: Sequence[np.ndarray] = ()):
+                 fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = ()):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
         self.margin = planner.margin
         self.rank = {x: k for k, x in enumerate(order)}
         self.finder = _Finders.of(grid)
-        self.paths: list[np.ndarray | None] = list(fixed_paths) + [None] * (len(robots) - fixed)
+        #: per robot its path and the times (from its departure) at which it passes the vertices
+        self.paths: list[np.ndarray | None] = [p for p, _ in fixed_paths] + [None] * (len(robots) - fixed)
+        self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
         #: per robot, discs it was found to block and must keep off, by the robot whose start or
         #: goal they are
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {}
@@ -187,16 +189,24 @@ class _Session:
         """Safe paths for every robot that is not fixed, then the collision model and scheduler."""
         free = self.order[self.fixed:]
         for k, x in enumerate(free):
-            self.paths[x] = self.safe_path(x)
+            self._set_route(x, self.safe_path(x))
             if progress:
                 progress(k + 1, len(free), "paths")
         missing = {self.robots[x].id: "no path from start to goal on this map for its radius"
                    for x in free if self.paths[x] is None}
         if missing:
             raise PlanningError(missing)
-        speeds = [r.max_speed for r in self.robots]
-        self.model = CollisionModel(self.paths, [r.radius for r in self.robots], self.margin, speeds)
-        self.sched = DelayScheduler(self.model, speeds, self.planner.mode)
+        self.model = CollisionModel(self.paths, [r.radius for r in self.robots], self.margin, times=self.times)
+        self.sched = DelayScheduler(self.model, self.planner.mode)
+
+    def _set_route(self, x: int, path: np.ndarray | None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Give robot x this path, driven from standstill to standstill with its acceleration."""
+        if path is None:
+            self.paths[x] = self.times[x] = None
+            return {}
+        r = self.robots[x]
+        self.paths[x], self.times[x] = drive_profile(path, r.max_speed, r.max_accel)
+        return {x: (self.paths[x], self.times[x])}
 
     def safe_path(self, x: int, partner: int | None = None) -> np.ndarray | None:
         """FINDINGS 1: avoid lower robots' starts and higher robots' goals; else goals only; else
@@ -248,7 +258,8 @@ class _Session:
             other = j if mover == i else i
             if tries[(j, i)] == 1 and mover >= self.fixed and self._reroute(mover, other, (disc, self.keep_out(i, j))):
                 blocked = self.sched.schedule(self.order, start_at=self.rank[mover],
-                                              dirty=_apply(self.model, {mover: self.paths[mover]}, mover))
+                                              dirty=_apply(self.model, {mover: (self.paths[mover], self.times[mover])},
+                                                           mover))
                 continue
             # 2. re-order: j goes just ahead of i (never ahead of a fixed robot)
             if i < self.fixed:
@@ -267,7 +278,7 @@ class _Session:
                 path = self.safe_path(x)
                 if path is None:
                     raise PlanningError({robots[x].id: "no path from start to goal on this map for its radius"})
-                self.paths[x] = changed[x] = path
+                changed.update(self._set_route(x, path))
             blocked = self.sched.schedule(self.order, start_at=pos_i, dirty=_apply(self.model, changed, j))
             if progress:
                 progress(self.reorders, limit, "re-ordering")
@@ -278,12 +289,12 @@ class _Session:
         path = self.safe_path(x, partner=owner)
         if path is None or _passes_near(path, disc[0], disc[1]):
             return False
-        self.paths[x] = path
+        self._set_route(x, path)
         self.reroutes += 1
         return True
 
     def timed_paths(self) -> list[TimedPath]:
-        return [timed_path_from_polyline(r.id, r.radius, self.paths[x], r.max_speed, float(self.sched.delays[x]))
+        return [timed_path_from_profile(r.id, r.radius, self.paths[x], self.times[x], float(self.sched.delays[x]))
                 for x, r in enumerate(self.robots)]
 
 
@@ -315,7 +326,7 @@ class _Finders:
         return self._by_radius[key]
 
 
-def _apply(model: CollisionModel, changed: dict[int, np.ndarray], moved: int) -> set[int]:
+def _apply(model: CollisionModel, changed: dict[int, tuple[np.ndarray, np.ndarray]], moved: int) -> set[int]:
     """Give the model the re-planned paths; return the robots whose constraints changed: the moved
     robot, the re-planned ones, and everyone who was or is now their neighbour."""
     dirty = {moved, *changed}
@@ -327,31 +338,34 @@ def _apply(model: CollisionModel, changed: dict[int, np.ndarray], moved: int) ->
     return dirty
 
 
-def _remaining(tp: TimedPath, t0: float) -> tuple[np.ndarray, float, float]:
+def _remaining(tp: TimedPath, t0: float) -> tuple[np.ndarray, np.ndarray, float]:
     """The part of a hold-then-drive timed path still ahead at ``t0``: (polyline from the robot's
-    position at t0, delay from t0 until it moves, its speed). A path that holds again after it has
-    started moving is not of this form and is refused (the md planner never makes one)."""
+    position at t0, the times from then on at which it passes the vertices, delay from t0 until it
+    moves). A path that holds again after it has started moving is not of this form and is
+    refused (the md planner never makes one)."""
     wp = tp.waypoints
     seg = np.hypot(*np.diff(wp[:, :2], axis=0).T)
-    dt = np.diff(wp[:, 2])
     moving = seg > 1e-9
     if not moving.any():
-        return wp[-1:, :2].copy(), 0.0, 1.0
+        return wp[-1:, :2].copy(), np.zeros(1), 0.0
     first, last = int(np.argmax(moving)), len(moving) - 1 - int(np.argmax(moving[::-1]))
-    if not moving[first:last + 1].all():
+    if not moving[first:last + 1].all() or np.any(np.diff(wp[first:last + 2, 2]) <= 0):
         raise ValueError(f"fixed path of {tp.robot_id!r}: holds after it starts moving; cannot be kept as is")
-    speeds = seg[first:last + 1] / np.maximum(dt[first:last + 1], 1e-12)
-    speed = float(np.median(speeds))
-    if np.max(np.abs(speeds - speed)) > 1e-6 * max(speed, 1.0):
-        raise ValueError(f"fixed path of {tp.robot_id!r}: speed varies along the path; cannot be kept as is")
-    depart = float(wp[first, 2])
+    depart, arrive = float(wp[first, 2]), float(wp[last + 1, 2])
     if t0 <= depart:
-        return wp[first:last + 2, :2].copy(), depart - t0, speed
-    if t0 >= wp[last + 1, 2]:
-        return wp[last + 1:last + 2, :2].copy(), 0.0, speed
+        return wp[first:last + 2, :2].copy(), wp[first:last + 2, 2] - depart, depart - t0
+    if t0 >= arrive:
+        return wp[last + 1:last + 2, :2].copy(), np.zeros(1), 0.0
     k = int(np.searchsorted(wp[:, 2], t0, side="right"))   # next vertex ahead of t0
     here = np.array(tp.position(t0))
-    return np.vstack([here, wp[k:last + 2, :2]]), 0.0, speed
+    return np.vstack([here, wp[k:last + 2, :2]]), np.concatenate([[0.0], wp[k:last + 2, 2] - t0]), 0.0
+
+
+def _top_speed(path: np.ndarray, times: np.ndarray) -> float:
+    """Fastest segment speed of a driven path (1 for a robot that stands still)."""
+    if len(path) < 2:
+        return 1.0
+    return float(np.max(np.hypot(*np.diff(path, axis=0).T) / np.maximum(np.diff(times), 1e-12)))
 
 
 def _keeps_off(path: np.ndarray, discs: list, start, goal) -> bool:
