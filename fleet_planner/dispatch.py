@@ -17,11 +17,12 @@ a free charger (or, standing at a station with no charger free, to a free parkin
 
 Every leg is planned with :meth:`MDPlanner.plan_incremental` around the trajectories of all other
 robots (a standing robot is a one-waypoint path), so planned discs never come closer than the sum
-of radii plus the planner's margin. Robots track their paths with finite acceleration and so lag
-behind them (never ahead, see :class:`~fleet_planner.robots.RobotModel`); planned at
-``speed_factor`` f of its top speed v, a robot with acceleration a lags at most (f v)^2 / (2 a)
-metres along its path. The margin is twice the largest such lag plus ``safety_margin``, so the
-discs as driven stay apart as well.
+of radii plus the planner's margin. Legs are planned with each kind's acceleration (speed ramps
+written as short constant-speed pieces, :func:`~fleet_planner.model.drive_profile`) at
+``speed_factor`` f of its top speed v; a robot tracking such a leg (never ahead, see
+:class:`~fleet_planner.robots.RobotModel`) lags it by at most the ramp approximation,
+(f v)^2 / (8 a n^2) for n pieces per ramp, plus what it drives in one control step. The margin is
+twice the largest such lag plus ``safety_margin``, so the discs as driven stay apart as well.
 
 When things go wrong: a leg that cannot be planned now (someone is parked in the way) is tried
 again at the next step, and an idle robot in the way is sent off first; a robot silent for
@@ -46,7 +47,7 @@ import yaml
 
 from msg_schemas.records import RecordError, RobotStatus, Schedule, Task, TaskEvent, robot_id_problem
 
-from .model import Point, PlanningError, RobotSpec, TimedPath
+from .model import RAMP_PIECES, Point, PlanningError, RobotSpec, TimedPath
 from .planners.md import MDPlanner
 from .robots import RobotKind, RobotModel
 from .warehouse import Station, Warehouse, config_path
@@ -69,7 +70,7 @@ class FleetError(ValueError):
 class DispatchParams:
     """What the fleet manager may tune (seconds, metres, battery fractions)."""
 
-    speed_factor: float = 0.5         # legs are planned at this fraction of each robot's top speed
+    speed_factor: float = 0.9         # legs are planned at this fraction of each robot's top speed
     safety_margin: float = 0.05       # added to the margin covering the robots' lag
     lead_s: float = 1.0               # a leg starts this long after it is planned (time to deliver it)
     offline_timeout_s: float = 3.0    # a robot silent this long is offline
@@ -90,12 +91,17 @@ class DispatchParams:
                 raise ValueError(f"{f.name}: must be a number in [{lo:g}, {hi:g}] (got {value!r})")
 
 
+#: seconds between two steps of a robot's controller (the agent steps its model at its status rate)
+CONTROL_PERIOD_S = 0.1
+
+
 def lag_allowance(kind: RobotKind, speed_factor: float) -> float:
-    """How far (m) a robot of this kind may fall behind a path planned at ``speed_factor`` of its top
-    speed: what it loses reaching the planned speed from rest, or braking to a stop."""
-    if math.isinf(kind.max_accel):
-        return 0.0
-    return (speed_factor * kind.max_speed) ** 2 / (2.0 * kind.max_accel)
+    """How far (m) a robot of this kind may fall behind a leg planned with its acceleration ramps at
+    ``speed_factor`` of its top speed: the ramps' piecewise-constant approximation plus one control
+    step of driving."""
+    v = speed_factor * kind.max_speed
+    ramp = 0.0 if math.isinf(kind.max_accel) else v * v / (8.0 * kind.max_accel * RAMP_PIECES ** 2)
+    return ramp + v * CONTROL_PERIOD_S
 
 
 def can_do(kind: RobotKind, task: Task) -> bool:
@@ -421,9 +427,10 @@ class FleetManager:
                 self._hold(r, now, d)
 
     def _hold(self, r: _Robot, now: float, d: Decisions) -> None:
-        """Stop ``r`` where it will be when the hold starts (it keeps any target and re-plans from
-        there); legs of others that pass there re-plan too."""
-        path_id = self._next_path_id(r, now)
+        """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
+        that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
+        more must stop at once, not drive on for another ``lead_s``."""
+        path_id = max(round(now * 1e9), r.last_path_id + 1)
         x, y = self._start_of(r, path_id / 1e9)
         leg = Leg(r.id, TimedPath(r.id, r.radius, [[x, y, path_id / 1e9]]), path_id, "hold", "")
         self._give(r, leg, d)
@@ -497,7 +504,8 @@ class FleetManager:
             path = TimedPath(r.id, r.radius, [[*target.pose, t0]])
         else:
             spec = RobotSpec(r.id, r.radius, r.kind.max_speed * self.params.speed_factor, start,
-                             target.pose, r.kind.name)
+                             target.pose, r.kind.name,
+                             r.kind.max_accel if math.isfinite(r.kind.max_accel) else None)
             others = [o.trajectory() for o in self.robots.values() if o is not r]
             try:
                 path = self.planner.plan_incremental(self.warehouse.grid, [spec], others, t0)[0]

@@ -129,8 +129,13 @@ def polyline_length(points: Sequence[Point] | np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) if len(pts) > 1 else 0.0
 
 
+#: constant-speed pieces per acceleration or braking ramp (a robot that accelerates at its limit
+#: stays within accel * dt^2 / 8 of such a plan, dt = ramp time / RAMP_PIECES)
+RAMP_PIECES = 16
+
+
 def drive_profile(points: Sequence[Point] | np.ndarray, speed: float, accel: float | None = None,
-                  ramp_pieces: int = 4) -> tuple[np.ndarray, np.ndarray]:
+                  ramp_pieces: int = RAMP_PIECES) -> tuple[np.ndarray, np.ndarray]:
     """How a robot drives a polyline from standstill to standstill: (vertices, times from its
     departure). With ``accel`` the speed follows a trapezoid (a triangle on short paths), written
     as ``ramp_pieces`` constant-speed pieces per ramp in equal time steps (the plan contract has

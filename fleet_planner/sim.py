@@ -18,9 +18,10 @@ Methods (:data:`METHODS`):
 
 Station discipline of the central methods (the behaviour layer has its own, the docking arbiter):
 a station is *claimed* by one robot from the moment it decides to go there until it leaves it
-again, since a robot parked on a station would block every plan that ends there. A robot whose
-station is claimed drives to a free parking spot near it and queues there (first come first
-served). Parking spots are chosen so that a robot parked on one never cuts a passage
+again, since a robot parked on a station would block every plan that ends there. So that a
+station is not held idle while its claimant drives from afar, a robot claims it only from within
+:data:`CLAIM_RADIUS`; from farther away, or when the station is claimed, it drives to a free
+parking spot near the station and queues there (first come first served). Parking spots are chosen so that a robot parked on one never cuts a passage
 (:func:`choose_spots`). A leg that cannot be planned is tried again a little later, once some
 other robot got a new leg.
 
@@ -54,6 +55,11 @@ DOCK_S = 5.0
 SPOT_MARGIN = 0.05
 #: parking spots keep this far from every station (outside the behaviour layer's docking region)
 STATION_CLEARANCE = 2.0
+#: central methods: a robot claims a station only from this close (m); from farther away it first
+#: drives to a parking spot near the station
+CLAIM_RADIUS = 8.0
+#: central methods: a robot with no parking spot free to queue on decides again this much later (s)
+RETARGET_S = 5.0
 
 #: progress callback: (deliveries done, deliveries in total, simulated time)
 SimProgress = Callable[[int, int, float], None]
@@ -338,6 +344,7 @@ class _Robot:
     lb_at: Point = (0.0, 0.0)
     pending: str = ""            # pick or drop: what it queues for at a parking spot
     reserved: int | None = None  # the parking spot it is heading for
+    entered: float = 0.0         # when it entered its phase
 
 
 class _Dispatch:
@@ -349,6 +356,7 @@ class _Dispatch:
         self.leg_time = _LegTimes(problem)
         self.robots = [_Robot(i, rid, problem.spots[i], spot=i, lb_at=problem.spots[i])
                        for i, rid in enumerate(problem.robot_ids())]
+        self._spots = np.asarray(problem.spots, dtype=float)
         self.spot_owner: list[int | None] = [None] * len(problem.spots)
         for r in self.robots:
             self.spot_owner[r.idx] = r.idx
@@ -358,6 +366,22 @@ class _Dispatch:
         self.claim: dict[str, int] = {}
         self.queue: dict[str, list[int]] = {s: [] for s in problem.stations}
         self.released: list[int] = []     # robots a freed station was just handed to
+        self.phase_s: dict[str, float] = {}  # robot-seconds spent in each phase
+        self.hold_legs = 0
+
+    def enter(self, r: _Robot, phase: str, t: float) -> None:
+        """r goes into ``phase`` at t (the time spent in the old one is counted)."""
+        self.phase_s[r.phase] = self.phase_s.get(r.phase, 0.0) + t - r.entered
+        r.phase, r.entered = phase, t
+
+    def mean_phase_s(self, t: float) -> dict[str, float]:
+        """Mean seconds per robot in each phase until t (need: waiting for a leg to be planned or
+        assigned; queued: on a parking spot waiting for a station; drive includes the wait at the
+        start of a planned leg)."""
+        total = dict(self.phase_s)
+        for r in self.robots:
+            total[r.phase] = total.get(r.phase, 0.0) + max(t - r.entered, 0.0)
+        return {k: round(v / len(self.robots), 1) for k, v in total.items() if k not in ("idle", "done")}
 
     # -- decisions ------------------------------------------------------------------------------
     def next_target(self, r: _Robot, t: float) -> None:
@@ -373,7 +397,12 @@ class _Dispatch:
             self.lb_add(r, self.p.stations[r.task.drop])
             self._to_station(r, r.task.pick, "pick", t)
         else:
-            spot = self._free_spot(r.pos, r)
+            spot = self._nearest_free_spot(r.pos)
+            if spot is None:                  # every spot taken or promised: stay (nothing left to do)
+                self.enter(r, "done", t)
+                r.wake = math.inf
+                return
+            self.spot_owner[spot], r.reserved = r.idx, spot
             self._need(r, self.p.spots[spot], "park", None, t)
 
     def lb_add(self, r: _Robot, station: Point) -> None:
@@ -381,36 +410,52 @@ class _Dispatch:
         r.lb_at = station
 
     def _to_station(self, r: _Robot, station: str, kind: str, t: float) -> None:
-        if not self.claims or self.claim.get(station, r.idx) == r.idx:
-            if self.claims:
+        """Central methods: claim the station only when close to it (it stays claimed until the
+        robot leaves it again, so a claim made from afar would idle it for the whole drive);
+        from afar, or when it is taken, wait on a parking spot near it first."""
+        goal = self.p.stations[station]
+        if not self.claims:
+            self._need(r, goal, kind, station, t)
+            return
+        free = self.claim.get(station, r.idx) == r.idx
+        dist = math.dist(r.pos, goal)
+        spot = self._nearest_free_spot(goal)
+        on_spot = r.spot is not None and r.here is None and r.pos == self.p.spots[r.spot]
+        if on_spot and (spot is None or dist <= max(CLAIM_RADIUS, math.dist(self.p.spots[spot], goal))):
+            if free:                          # close enough already: go from here
                 self.claim[station] = r.idx
-            self._need(r, self.p.stations[station], kind, station, t)
-        elif r.spot is not None and r.here is None and r.pos == self.p.spots[r.spot]:
-            self._queue(r, station, kind)   # already on a parking spot: queue right here
+                self._need(r, goal, kind, station, t)
+            else:                             # queue right here
+                self._queue(r, station, kind, t)
+        elif free and (dist <= CLAIM_RADIUS or spot is None):
+            self.claim[station] = r.idx
+            self._need(r, goal, kind, station, t)
+        elif spot is None:                    # nowhere to queue yet: decide again a little later
+            self.enter(r, "wait", t)
+            r.station, r.pending, r.wake = station, kind, t + RETARGET_S
         else:
-            spot = self._free_spot(self.p.stations[station], r)
+            self.spot_owner[spot] = r.idx
+            r.reserved, r.pending = spot, kind
             self._need(r, self.p.spots[spot], "hold", station, t)
-            r.pending = kind
+            self.hold_legs += 1
 
-    def _queue(self, r: _Robot, station: str, kind: str) -> None:
-        r.phase, r.station, r.wake = "queued", station, math.inf
-        r.pending = kind
+    def _queue(self, r: _Robot, station: str, kind: str, t: float) -> None:
+        self.enter(r, "queued", t)
+        r.station, r.wake, r.pending = station, math.inf, kind
         self.queue[station].append(r.idx)
 
     def _need(self, r: _Robot, target: Point, kind: str, station: str | None, t: float) -> None:
-        r.phase, r.target, r.kind, r.station, r.wake = "need", target, kind, station, t
+        self.enter(r, "need", t)
+        r.target, r.kind, r.station, r.wake = target, kind, station, t
 
-    def _free_spot(self, near: Point, r: _Robot) -> int:
-        """The free parking spot closest to ``near`` (reserved for r; its old one is kept until it
-        leaves)."""
-        spots = np.asarray(self.p.spots)
-        d = np.hypot(*(spots - np.asarray(near)).T)
-        for i in np.argsort(d, kind="stable"):
-            if self.spot_owner[i] is None:
-                self.spot_owner[i] = r.idx
-                r.reserved = int(i)
-                return int(i)
-        raise RuntimeError("no free parking spot left; more spots than robots are always chosen")
+    def retarget(self, r: _Robot, t: float) -> None:
+        """A waiting robot decides again how to get to its station."""
+        self._to_station(r, r.station, r.pending, t)
+
+    def _nearest_free_spot(self, near: Point) -> int | None:
+        """The free parking spot closest to ``near``, if any (robots heading for a spot hold two)."""
+        d = np.hypot(*(self._spots - np.asarray(near)).T)
+        return next((int(i) for i in np.argsort(d, kind="stable") if self.spot_owner[i] is None), None)
 
     # -- events ---------------------------------------------------------------------------------
     def left(self, r: _Robot, t: float) -> None:
@@ -438,16 +483,18 @@ class _Dispatch:
         r.since = t
         r.pos = r.target
         if r.kind in ("pick", "drop"):
-            r.phase, r.wake, r.here = "dock", t + self.p.dock_s, r.station if self.claims else None
+            self.enter(r, "dock", t)
+            r.wake, r.here = t + self.p.dock_s, r.station if self.claims else None
         elif r.kind == "hold":
             station = r.station
             if self.claim.get(station) is None:
                 self.claim[station] = r.idx
                 self._need(r, self.p.stations[station], r.pending, station, t)
             else:
-                self._queue(r, station, r.pending)
+                self._queue(r, station, r.pending, t)
         else:
-            r.phase, r.wake = "done", math.inf
+            self.enter(r, "done", t)
+            r.wake = math.inf
 
     def docked(self, r: _Robot, t: float) -> None:
         """r's docking time is over."""
@@ -545,7 +592,8 @@ def _simulate_central(problem: DeliveryProblem, method: str, cap_s: float, stall
         traj[r.idx] = leg
         legs[r.idx].append(leg.waypoints)
         d.left(r, now)
-        r.phase, r.wake = "drive", max(now, leg.arrival_time)
+        d.enter(r, "drive", now)
+        r.wake = max(now, leg.arrival_time)
         return True
 
     while True:
@@ -576,6 +624,8 @@ def _simulate_central(problem: DeliveryProblem, method: str, cap_s: float, stall
                 last_activity = t
                 if progress:
                     progress(d.completed, len(problem.tasks), t)
+            elif r.phase == "wait":
+                d.retarget(r, t)
             if r.phase == "need" and r.wake <= t:
                 if attempt(r, t):
                     last_activity = t
@@ -595,7 +645,8 @@ def _simulate_central(problem: DeliveryProblem, method: str, cap_s: float, stall
                           float(np.mean(driven)) / t if t > 0 else 0.0, plan_wall / max(n_legs, 1), "leg",
                           plan_wall, n_legs, failed, collisions, gap, d.deadlocked(t, no_progress_s, ("dock", "drive")),
                           time.perf_counter() - wall0, violations, paths,
-                          extra={"mean_leg_delay_s": delay / max(n_legs, 1)})
+                          extra={"mean_leg_delay_s": round(delay / max(n_legs, 1), 2), "hold_legs": d.hold_legs,
+                                 "mean_phase_s": d.mean_phase_s(t)})
 
 
 def _check_trajectories(problem: DeliveryProblem, paths: list[TimedPath]) -> tuple[int, float, list[str]]:
@@ -654,7 +705,8 @@ def _simulate_behavior(problem: DeliveryProblem, dt: float, cap_s: float, stall_
             decide_wall += time.perf_counter() - t0
         n_legs += 1
         d.left(r, now)
-        r.phase, r.best = "drive", math.inf
+        d.enter(r, "drive", now)
+        r.best = math.inf
 
     for r in robots:
         d.next_target(r, 0.0)
@@ -712,7 +764,7 @@ def _simulate_behavior(problem: DeliveryProblem, dt: float, cap_s: float, stall_
                           decide_wall, n_legs, failed, events, min_gap, d.deadlocked(t, no_progress_s, ("dock",)),
                           time.perf_counter() - wall0, [], None,
                           np.array(log) if record else None, np.array(times) if record else None,
-                          {k: v for k, v in asdict(stats).items() if k != "time"})
+                          {"mean_phase_s": d.mean_phase_s(t), **{k: v for k, v in asdict(stats).items() if k != "time"}})
 
 
 # ---------------------------------------------------------------------------------------------

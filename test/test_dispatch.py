@@ -271,7 +271,7 @@ def test_a_short_run_does_every_job_and_no_two_robots_ever_touch():
     driven_gap, *who = min_separation(sim.driven())
     assert driven_gap >= 0.0, who
     # the margin is what the robots' lag needs: more than the driven paths ever used of it
-    assert sim.fm.margin == pytest.approx(2 * max(lag_allowance(k, 0.5) for k in FAST.values()) + 0.05)
+    assert sim.fm.margin == pytest.approx(2 * max(lag_allowance(k, 0.9) for k in FAST.values()) + 0.05)
 
 
 def test_an_offline_robot_becomes_an_obstacle_and_its_job_goes_to_another_robot():

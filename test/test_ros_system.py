@@ -58,9 +58,9 @@ def test_planner_parameters_have_ranges_and_only_thresholds_change_at_run_time(f
     [ok] = node.set_parameters([Parameter("idle_s", value=7.5)])
     assert ok.successful and node.fleet.params.idle_s == 7.5
     [out_of_range] = node.set_parameters([Parameter("low_battery", value=1.5)])
-    [read_only] = node.set_parameters([Parameter("speed_factor", value=0.9)])
+    [read_only] = node.set_parameters([Parameter("speed_factor", value=0.5)])
     assert not out_of_range.successful and not read_only.successful
-    assert (node.fleet.params.low_battery, node.fleet.params.speed_factor) == (0.25, 0.5)
+    assert (node.fleet.params.low_battery, node.fleet.params.speed_factor) == (0.25, 0.9)
     node.set_parameters([Parameter("idle_s", value=5.0)])
 
 
