@@ -179,8 +179,9 @@ def plot(rows: list[Row], path: Path) -> None:
             mine = sorted((r for r in rows if r.map == m and r.method == method), key=lambda r: r.n)
             if not mine:
                 continue
-            line, = ax.plot([r.n for r in mine], [r.ctime for r in mine], "o-", label=method)
+            done = [r for r in mine if r.stop == "done"]
             bad = [r for r in mine if r.stop != "done"]
+            line, = ax.plot([r.n for r in done], [r.ctime for r in done], "o-", label=method)
             ax.plot([r.n for r in bad], [r.ctime for r in bad], "x", ms=12, mew=2, color=line.get_color())
         bound = sorted({(r.n, r.lower_bound) for r in rows if r.map == m and r.method == "md"} or
                        {(r.n, r.lower_bound) for r in rows if r.map == m})
@@ -209,10 +210,11 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
     res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress)
     if res.collisions or res.violations:
         bar.write(f"!!! FAIL: {label} seed={args.seed}: {res.collisions} overlapping pair(s), min gap "
-                  f"{res.min_gap:.4f} m; {'; '.join(res.violations[:3])}")
+                  f"{res.min_gap:.4f} m; {'; '.join(res.violations[:3])}", file=sys.stderr)
     elif res.stop != "done":
         bar.write(f"{label}: unfinished ({res.stop}) after {res.ctime:.0f} s simulated: "
-                  f"{res.completed}/{res.n_deliveries} deliveries, {res.deadlocks} robot(s) deadlocked")
+                  f"{res.completed}/{res.n_deliveries} deliveries, {res.deadlocks} robot(s) deadlocked",
+                  file=sys.stderr)
     return to_row(m, res)
 
 
@@ -229,7 +231,7 @@ def main(argv=None) -> int:
                 try:
                     problem = make_problem(m, n, args)   # the same problem for every method
                 except ValueError as exc:
-                    bar.write(f"{m} N={n}: skipped: {exc}")
+                    bar.write(f"{m} N={n}: skipped: {exc}", file=sys.stderr)
                     bar.update(len(args.methods))
                     continue
                 for method in args.methods:

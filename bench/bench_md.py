@@ -78,7 +78,8 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--maps-dir", type=Path, default=REPO.parent / "shared" / "data" / "maps",
                    help="MovingAI maps and .scen files (default: %(default)s)")
     p.add_argument("--maps", help="comma-separated map names (default: every warehouse-*.map in --maps-dir)")
-    p.add_argument("--scen", default="random-1", help="which .scen of each map: <map>-<SCEN>.scen (default: %(default)s)")
+    p.add_argument("--scen", default="random-1",
+                   help="which .scen of each map: <map>-<SCEN>.scen (default: %(default)s)")
     p.add_argument("--sizes", default="10,50,100,200,500", help="numbers of robots (default: %(default)s)")
     p.add_argument("--planners", default="md,md-box", help=f"of {', '.join(PLANNERS)} (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="radii and speeds (default: %(default)s)")
@@ -289,9 +290,9 @@ def main(argv=None) -> int:
             rows.append(row)
             if row.verdict.startswith("FAIL"):
                 bar.write(f"!!! FAIL: invalid plan on {inst.name} N={n} planner={planner} seed={args.seed}: "
-                          f"{row.detail}")
+                          f"{row.detail}", file=sys.stderr)
             elif row.verdict != "ok":
-                bar.write(f"{inst.name} N={n} {planner}: {row.verdict}: {row.detail.strip()}")
+                bar.write(f"{inst.name} N={n} {planner}: {row.verdict}: {row.detail.strip()}", file=sys.stderr)
     print(table(rows))
     if args.csv:
         write_csv(rows, args.csv)

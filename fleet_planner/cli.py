@@ -27,6 +27,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", type=Path, help="scenario YAML (map and robots)")
     p.add_argument("--out", type=Path, required=True, help="plan JSON to write")
     p.add_argument("--planner", choices=planner_names(), default="md", help="planner (default: %(default)s)")
+    p.add_argument("--mode", choices=["exact", "box"],
+                   help="md: collision test, exact regions (default) or the paper's boxes")
+    p.add_argument("--order", choices=["parking", "given", "shortest", "longest"],
+                   help="initial priority order (default: the planner's own; md: shortest, prior: given; "
+                        "parking is md only)")
+    p.add_argument("--margin", type=float,
+                   help="md, prior: metres added to every pair's sum of radii (default: 0.02)")
     p.add_argument("--plot", type=Path, help="also draw the plan to this PNG")
     p.add_argument("--check", action="store_true",
                    help="also report the checker's verdict and the smallest clearance between robots")
@@ -78,7 +85,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fleet-plan: {args.scenario}: {exc}", file=sys.stderr)
         return EXIT_INPUT
     grid, robots = scenario.grid, scenario.robots
-    planner = get_planner(args.planner)
+    # only what was asked for: each planner has its own defaults
+    options = {k: v for k, v in (("margin", args.margin), ("order", args.order), ("mode", args.mode))
+               if v is not None}
+    try:
+        planner = get_planner(args.planner, **options)
+    except TypeError as exc:   # an option this planner does not have
+        print(f"fleet-plan: --planner {args.planner} does not take that option ({exc})", file=sys.stderr)
+        return EXIT_INPUT
+    except ValueError as exc:
+        print(f"fleet-plan: {exc}", file=sys.stderr)
+        return EXIT_INPUT
     bar = _ProgressBar(not args.quiet and sys.stderr.isatty(), sys.stderr)
     try:
         plan = planner.plan(grid, robots, progress=bar)

@@ -17,13 +17,16 @@ Methods (:data:`METHODS`):
   path and the behaviours resolve conflicts locally, stepped with a fixed ``dt``.
 
 Station discipline of the central methods (the behaviour layer has its own, the docking arbiter):
-a station is *claimed* by one robot from the moment it decides to go there until it leaves it
-again, since a robot parked on a station would block every plan that ends there. So that a
-station is not held idle while its claimant drives from afar, a robot claims it only from within
-:data:`CLAIM_RADIUS`; from farther away, or when the station is claimed, it drives to a free
-parking spot near the station and queues there (first come first served). Parking spots are chosen so that a robot parked on one never cuts a passage
-(:func:`choose_spots`). A leg that cannot be planned is tried again a little later, once some
-other robot got a new leg.
+a planner needs a robot's goal to be free for ever after it arrives, so a station is *claimed* by
+one robot from the moment it sets off for it until its next leg is planned. So that a station is
+not held idle while its claimant drives from afar, a robot claims it only from within
+:data:`CLAIM_RADIUS`; from farther away, or when the station is claimed, it first drives to the
+free parking spot closest to the station (some spots are placed near the busy stations for this)
+and queues there, first come first served. A robot that would block a station others queue for
+(its next leg leaves more than :data:`EVACUATE_S` later, or cannot be planned) clears it for a
+parking spot when that is sooner. Parking spots are chosen so that a robot parked on one never
+cuts a passage (:func:`choose_spots`). A leg that cannot be planned is tried again a little later,
+once some other robot got a new leg. These rules are the simulation's, the same for md and prior.
 
 Measured per run (:class:`DeliveryResult`): CTime, a lower bound (each robot's own task sequence
 driven alone: shortest-path legs at top speed plus docking, maximum over robots), the average
@@ -55,11 +58,14 @@ DOCK_S = 5.0
 SPOT_MARGIN = 0.05
 #: parking spots keep this far from every station (outside the behaviour layer's docking region)
 STATION_CLEARANCE = 2.0
-#: central methods: a robot claims a station only from this close (m); from farther away it first
-#: drives to a parking spot near the station
+#: central methods: a robot claims a station only from this close (m, straight line; from a parking
+#: spot: driving distance); from farther away it first drives to a parking spot near the station
 CLAIM_RADIUS = 8.0
 #: central methods: a robot with no parking spot free to queue on decides again this much later (s)
 RETARGET_S = 5.0
+#: central methods: a robot on a station others queue for whose next leg would leave only this much
+#: later (s), or could not be planned, drives to a parking spot near it instead if that is sooner
+EVACUATE_S = 10.0
 
 #: progress callback: (deliveries done, deliveries in total, simulated time)
 SimProgress = Callable[[int, int, float], None]
@@ -180,10 +186,13 @@ def _stamp(mask: np.ndarray, col: int, row: int, footprint: np.ndarray) -> None:
 
 
 def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point] = (),
-                 radius: float = ROBOT_RADIUS) -> list[Point]:
-    """``count`` parking spots (cell centres, seeded random order) where a parked robot cuts no
-    passage, at least :data:`STATION_CLEARANCE` from every station and a disc apart from each
-    other. Raises ValueError when the map has fewer."""
+                 radius: float = ROBOT_RADIUS, queue: Sequence[int] = (), spare: int = 0) -> list[Point]:
+    """Parking spots where a parked robot cuts no passage, at least :data:`STATION_CLEARANCE`
+    from every station and a disc apart from each other: ``count`` at seeded random places (the
+    robots' homes), then ``queue[k]`` as close to ``stations[k]`` by driving distance as the map
+    allows (where robots wait for the station; picked first, so they get the closest places), then
+    up to ``spare`` more at random places where the map has room.
+    Raises ValueError when the map has fewer than ``count`` places left for the homes."""
     layout = _Layout(grid, radius)
     for p in stations:
         layout.take(*layout.cell(p))
@@ -192,17 +201,59 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
     if len(stations):
         far = cKDTree(np.asarray(stations, dtype=float)).query(centres)[0] >= STATION_CLEARANCE
         rows, cols = rows[far], cols[far]
-    order = np.random.default_rng(seed).permutation(len(rows))
-    spots: list[Point] = []
-    for i in order:
-        col, row = int(cols[i]), int(rows[i])
-        if layout.usable(col, row):
-            layout.take(col, row)
-            spots.append(grid.centre(col, row))
-            if len(spots) == count:
-                return spots
-    raise ValueError(f"{grid.name}: only {len(spots)} parking spots that cut no passage, {count} needed "
-                     f"(fewer robots or a larger map)")
+
+    def take(i: int) -> bool:
+        if layout.usable(int(cols[i]), int(rows[i])):
+            layout.take(int(cols[i]), int(rows[i]))
+            return True
+        return False
+
+    queued: list[Point] = []
+    if any(q > 0 for q in queue):
+        dist = driving_distances(grid, layout.free, stations)[:, rows * grid.width + cols]
+        ranked = [iter(np.argsort(d, kind="stable")) for d in dist]
+        left = list(queue)
+        for _ in range(max(queue)):           # round by round: every station gets its closest first
+            for k in range(len(left)):
+                if left[k] <= 0:
+                    continue
+                i = next((int(i) for i in ranked[k] if np.isfinite(dist[k, i]) and take(int(i))), None)
+                left[k] = 0 if i is None else left[k] - 1
+                if i is not None:
+                    queued.append(grid.centre(int(cols[i]), int(rows[i])))
+    homes: list[Point] = []
+    for i in np.random.default_rng(seed).permutation(len(rows)):
+        if len(homes) == count + spare:
+            break
+        if take(int(i)):
+            homes.append(grid.centre(int(cols[i]), int(rows[i])))
+    if len(homes) < count:
+        raise ValueError(f"{grid.name}: only {len(homes)} parking spots that cut no passage, {count} needed "
+                         f"(fewer robots or a larger map)")
+    return homes[:count] + queued + homes[count:]
+
+
+def driving_distances(grid: GridMap, free: np.ndarray, points: Sequence[Point]) -> np.ndarray:
+    """``(len(points), height * width)``: length of the shortest 8-connected drive (no corner
+    cutting) over the ``free`` cells from the cell of each point to every cell (inf: unreachable)."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    h, w = free.shape
+    idx = np.arange(h * w).reshape(h, w)
+    src, dst, length = [], [], []
+    for dc, dr in ((1, 0), (0, 1), (1, 1), (1, -1)):
+        r0, r1, c1 = max(0, -dr), h - max(0, dr), w - dc      # moves from [r0:r1, 0:c1] by (dr, dc)
+        ok = free[r0:r1, :c1] & free[r0 + dr:r1 + dr, dc:]
+        if dc and dr:   # a diagonal move needs both cells beside it
+            ok &= free[r0 + dr:r1 + dr, :c1] & free[r0:r1, dc:]
+        ia, ib = idx[r0:r1, :c1][ok], idx[r0 + dr:r1 + dr, dc:][ok]
+        src += [ia, ib]
+        dst += [ib, ia]
+        length.append(np.full(2 * len(ia), math.hypot(dc, dr) * grid.resolution))
+    graph = csr_matrix((np.concatenate(length), (np.concatenate(src), np.concatenate(dst))), shape=(h * w, h * w))
+    cells = [grid.cell_of(*p) for p in points]
+    return np.atleast_2d(dijkstra(graph, indices=[r * w + c for c, r in cells]))
 
 
 def spread_stations(grid: GridMap, count: int, seed: int, radius: float = ROBOT_RADIUS) -> dict[str, Point]:
@@ -231,11 +282,13 @@ def spread_stations(grid: GridMap, count: int, seed: int, radius: float = ROBOT_
 
 def delivery_problem(grid: GridMap, stations: dict[str, Point], n_robots: int, n_deliveries: int, seed: int,
                      pick: Sequence[str] | None = None, drop: Sequence[str] | None = None,
-                     name: str | None = None, spare_spots: int | None = None, radius: float = ROBOT_RADIUS,
+                     name: str | None = None, queue_spots: int | None = None, radius: float = ROBOT_RADIUS,
                      max_speed: float = TOP_SPEED, dock_s: float = DOCK_S) -> DeliveryProblem:
     """A seeded delivery problem: each task loads at a station of ``pick`` and unloads at a
-    different one of ``drop`` (both default to all stations). Parking spots: one home per robot
-    plus ``spare_spots`` (default N/4 + 8) to queue at."""
+    different one of ``drop`` (both default to all stations). Parking spots: one home per robot,
+    plus ``queue_spots`` (default N/2 + 8) close to the stations, shared out by how often the
+    tasks visit each station (at most 4 per station), plus up to N/2 spare ones where the map has
+    room (a robot on its way to a spot holds two)."""
     if n_deliveries < 1:
         raise ValueError(f"n_deliveries: must be >= 1 (got {n_deliveries})")
     pick = list(stations) if pick is None else list(pick)
@@ -248,8 +301,19 @@ def delivery_problem(grid: GridMap, stations: dict[str, Point], n_robots: int, n
         k, l = pick[int(rng.integers(len(pick)))], drop[int(rng.integers(len(drop)))]
         if k != l:
             tasks.append(Task(k, l))
-    spare = n_robots // 4 + 8 if spare_spots is None else spare_spots
-    spots = choose_spots(grid, n_robots + spare, seed, list(stations.values()), radius)
+    visits = {s: 0 for s in stations}
+    for task in tasks:
+        visits[task.pick] += 1
+        visits[task.drop] += 1
+    quota = {s: 0 for s in stations}
+    for _ in range(n_robots // 2 + 8 if queue_spots is None else queue_spots):
+        open_ = [s for s in stations if quota[s] < 4 and visits[s]]
+        if not open_:
+            break
+        best = max(open_, key=lambda s: visits[s] / (quota[s] + 1))   # D'Hondt: by demand
+        quota[best] += 1
+    spots = choose_spots(grid, n_robots, seed, list(stations.values()), radius, list(quota.values()),
+                         spare=n_robots // 2)
     return DeliveryProblem(name or grid.name, grid, dict(stations), tasks, spots, n_robots, radius,
                            max_speed, dock_s)
 
@@ -357,6 +421,11 @@ class _Dispatch:
         self.robots = [_Robot(i, rid, problem.spots[i], spot=i, lb_at=problem.spots[i])
                        for i, rid in enumerate(problem.robot_ids())]
         self._spots = np.asarray(problem.spots, dtype=float)
+        if claims:   # driving distance from each station to each parking spot, to queue close by
+            drive = driving_distances(problem.grid, self.leg_time.finder.free, list(problem.stations.values()))
+            cells = [problem.grid.cell_of(*p) for p in problem.spots]
+            at = [row * problem.grid.width + col for col, row in cells]
+            self.spot_dist = {s: drive[k, at] for k, s in enumerate(problem.stations)}
         self.spot_owner: list[int | None] = [None] * len(problem.spots)
         for r in self.robots:
             self.spot_owner[r.idx] = r.idx
@@ -397,7 +466,7 @@ class _Dispatch:
             self.lb_add(r, self.p.stations[r.task.drop])
             self._to_station(r, r.task.pick, "pick", t)
         else:
-            spot = self._nearest_free_spot(r.pos)
+            spot = self._nearest_free_spot(np.hypot(*(self._spots - np.asarray(r.pos)).T))
             if spot is None:                  # every spot taken or promised: stay (nothing left to do)
                 self.enter(r, "done", t)
                 r.wake = math.inf
@@ -418,26 +487,27 @@ class _Dispatch:
             self._need(r, goal, kind, station, t)
             return
         free = self.claim.get(station, r.idx) == r.idx
-        dist = math.dist(r.pos, goal)
-        spot = self._nearest_free_spot(goal)
+        drive = self.spot_dist[station]
+        spot = self._nearest_free_spot(drive)
         on_spot = r.spot is not None and r.here is None and r.pos == self.p.spots[r.spot]
-        if on_spot and (spot is None or dist <= max(CLAIM_RADIUS, math.dist(self.p.spots[spot], goal))):
-            if free:                          # close enough already: go from here
-                self.claim[station] = r.idx
-                self._need(r, goal, kind, station, t)
-            else:                             # queue right here
-                self._queue(r, station, kind, t)
-        elif free and (dist <= CLAIM_RADIUS or spot is None):
+        if on_spot:
+            close = drive[r.spot] <= CLAIM_RADIUS or (spot is not None and drive[r.spot] <= drive[spot])
+        else:
+            close = math.dist(r.pos, goal) <= CLAIM_RADIUS
+        if free and (close or (spot is None and not on_spot)):
+            # close, or standing on a station with nowhere to wait: better go than block it
             self.claim[station] = r.idx
             self._need(r, goal, kind, station, t)
-        elif spot is None:                    # nowhere to queue yet: decide again a little later
-            self.enter(r, "wait", t)
-            r.station, r.pending, r.wake = station, kind, t + RETARGET_S
-        else:
+        elif close and on_spot:
+            self._queue(r, station, kind, t)  # wait right here
+        elif spot is not None:
             self.spot_owner[spot] = r.idx
             r.reserved, r.pending = spot, kind
             self._need(r, self.p.spots[spot], "hold", station, t)
             self.hold_legs += 1
+        else:                                 # nowhere to queue yet: decide again a little later
+            self.enter(r, "wait", t)
+            r.station, r.pending, r.wake = station, kind, t + RETARGET_S
 
     def _queue(self, r: _Robot, station: str, kind: str, t: float) -> None:
         self.enter(r, "queued", t)
@@ -452,17 +522,33 @@ class _Dispatch:
         """A waiting robot decides again how to get to its station."""
         self._to_station(r, r.station, r.pending, t)
 
-    def _nearest_free_spot(self, near: Point) -> int | None:
-        """The free parking spot closest to ``near``, if any (robots heading for a spot hold two)."""
-        d = np.hypot(*(self._spots - np.asarray(near)).T)
-        return next((int(i) for i in np.argsort(d, kind="stable") if self.spot_owner[i] is None), None)
+    def _nearest_free_spot(self, dist: np.ndarray) -> int | None:
+        """The free parking spot of least ``dist`` (one entry per spot), if any is free."""
+        return next((int(i) for i in np.argsort(dist, kind="stable") if self.spot_owner[i] is None), None)
+
+    def queued_for_here(self, r: _Robot) -> bool:
+        """r stands on a station others queue for."""
+        return r.here is not None and bool(self.queue[r.here])
+
+    def spot_near_here(self, r: _Robot) -> int | None:
+        return self._nearest_free_spot(self.spot_dist[r.here])
+
+    def evacuate(self, r: _Robot, spot: int) -> None:
+        """r clears its station for the parking spot instead of going where it decided (that
+        decision is undone; it decides again on the spot)."""
+        if r.reserved is not None:
+            self.spot_owner[r.reserved] = None
+        if r.kind in ("pick", "drop") and r.station != r.here and self.claim.get(r.station) == r.idx:
+            self.release(r.station)
+        self.spot_owner[spot], r.reserved = r.idx, spot
+        r.target, r.kind, r.station = self.p.spots[spot], "evac", None
 
     # -- events ---------------------------------------------------------------------------------
     def left(self, r: _Robot, t: float) -> None:
         """r drove off from where it stood: free its spot and the station it stood on."""
         if r.spot is not None and self.spot_owner[r.spot] == r.idx:
             self.spot_owner[r.spot] = None
-        r.spot = r.reserved if r.kind in ("hold", "park") else None
+        r.spot = r.reserved if r.kind in ("hold", "park", "evac") else None
         r.reserved = None
         if r.here is not None:
             self.release(r.here)
@@ -492,6 +578,8 @@ class _Dispatch:
                 self._need(r, self.p.stations[station], r.pending, station, t)
             else:
                 self._queue(r, station, r.pending, t)
+        elif r.kind == "evac":
+            self.next_target(r, t)
         else:
             self.enter(r, "done", t)
             r.wake = math.inf
@@ -570,22 +658,34 @@ def _simulate_central(problem: DeliveryProblem, method: str, cap_s: float, stall
             tp = traj[q.idx] = TimedPath(q.id, problem.radius, [[*tp.waypoints[-1, :2], now]])
         return tp
 
+    def plan(r: _Robot, goal: Point, others: list[TimedPath], now: float) -> TimedPath | None:
+        nonlocal plan_wall, failed
+        spec = RobotSpec(r.id, problem.radius, problem.max_speed, r.pos, goal)
+        t0 = time.perf_counter()
+        try:
+            return planner.plan_incremental(problem.grid, [spec], others, now)[0]
+        except PlanningError:
+            failed += 1
+            return None
+        finally:
+            plan_wall += time.perf_counter() - t0
+
     def attempt(r: _Robot, now: float) -> bool:
-        nonlocal version, plan_wall, n_legs, failed, delay
+        nonlocal version, n_legs, delay
         if math.dist(r.pos, r.target) < 1e-9:
             d.arrived(r, now)
             return True
-        spec = RobotSpec(r.id, problem.radius, problem.max_speed, r.pos, r.target)
         others = [fixed(q, now) for q in robots if q is not r]
-        t0 = time.perf_counter()
-        try:
-            leg = planner.plan_incremental(problem.grid, [spec], others, now)[0]
-        except PlanningError:
-            plan_wall += time.perf_counter() - t0
-            failed += 1
+        leg = plan(r, r.target, others, now)
+        if d.queued_for_here(r) and (leg is None or leg.start_time > now + EVACUATE_S):
+            spot = d.spot_near_here(r)
+            evac = None if spot is None else plan(r, problem.spots[spot], others, now)
+            if evac is not None and (leg is None or evac.start_time < leg.start_time):
+                d.evacuate(r, spot)
+                leg = evac
+        if leg is None:
             tried[r.idx], last_try[r.idx], r.wake = version, now, now + 15 * retry_s
             return False
-        plan_wall += time.perf_counter() - t0
         version += 1
         n_legs += 1
         delay += leg.arrival_time - now - leg.length / problem.max_speed
@@ -764,7 +864,8 @@ def _simulate_behavior(problem: DeliveryProblem, dt: float, cap_s: float, stall_
                           decide_wall, n_legs, failed, events, min_gap, d.deadlocked(t, no_progress_s, ("dock",)),
                           time.perf_counter() - wall0, [], None,
                           np.array(log) if record else None, np.array(times) if record else None,
-                          {"mean_phase_s": d.mean_phase_s(t), **{k: v for k, v in asdict(stats).items() if k != "time"}})
+                          {"mean_phase_s": d.mean_phase_s(t),
+                           **{k: v for k, v in asdict(stats).items() if k != "time"}})
 
 
 # ---------------------------------------------------------------------------------------------
