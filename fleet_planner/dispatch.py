@@ -31,6 +31,17 @@ its job goes back to the queue (or fails, if it was carrying it with an empty ba
 whose legs pass near it re-plan; a robot more than ``lateness_tolerance_s`` behind its schedule
 re-plans the rest of its leg from where it is, around everyone else.
 
+Coordination (``coordination``, the same on both sides): ``central`` is all of the above. A
+central robot keeps a safety net of its own: before it drives on, it checks the other robots'
+reported discs against its critical area (:func:`~fleet_planner.behavior.safety_stop`), each
+grown by :data:`NET_MARGIN_M` and swept along where it may drive until the end of the step, the
+area reaching as far as it may drive itself; it waits (reporting ``waiting``) rather than drive
+into one, and if that lasts, it is late and the planner re-plans it. With ``behavior`` the robots avoid each other on their own (BBMRCA, paper
+002): the planner still allocates jobs and chargers, but a leg is only a goal (a plain A* path whose
+times bind nothing; no delays, no re-planning of late robots), and the robot plans its own path
+there and resolves conflicts with the behaviour rules from the others' statuses, which then
+carry their BBMRCA state, and wait messages (:class:`~fleet_planner.behavior.BehaviorController`).
+
 Times are seconds on one clock (the planner's ROS time): ``now`` is always passed in.
 """
 from __future__ import annotations
@@ -45,14 +56,18 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import yaml
 
-from msg_schemas.records import RecordError, RobotStatus, Schedule, Task, TaskEvent, robot_id_problem
+from msg_schemas.records import (RecordError, RobotStatus, Schedule, Task, TaskEvent, WaitMessageRecord,
+                                 robot_id_problem)
 
-from .model import RAMP_PIECES, Point, PlanningError, RobotSpec, TimedPath
+from .behavior import Behavior, BehaviorController, BehaviorParams, RobotView, WaitMessage, safety_stop
+from .model import RAMP_PIECES, Point, PlanningError, RobotSpec, TimedPath, timed_path_from_polyline
+from .paths import PathFinder
 from .planners.md import MDPlanner
 from .robots import RobotKind, RobotModel
 from .warehouse import Station, Warehouse, config_path
 
 PURPOSES = ("pick", "place", "charge", "park", "hold")
+COORDINATION = ("central", "behavior")
 ACTING = {"pick": "picking", "place": "placing"}
 FLEET_FILE = "fleet.yaml"
 
@@ -220,13 +235,19 @@ class FleetManager:
     """Keeps the fleet's state and turns tasks and statuses into legs and task events.
 
     ``kinds`` are the robot kinds robots may report (their sizes, speeds and abilities);
-    ``parking`` are extra places where idle robots may wait out of the way, besides the chargers.
+    ``parking`` are extra places where idle robots may wait out of the way, besides the chargers;
+    ``coordination`` is how the robots avoid each other (see the module doc).
     """
 
     def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
-                 params: DispatchParams | None = None, parking: Sequence[Point] = ()):
+                 params: DispatchParams | None = None, parking: Sequence[Point] = (),
+                 coordination: str = "central"):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
+        if coordination not in COORDINATION:
+            raise ValueError(f"coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
+        self.coordination = coordination
+        self._finders: dict[float, PathFinder] = {}
         self.warehouse = warehouse
         self.kinds = dict(kinds)
         self.params = params or DispatchParams()
@@ -374,6 +395,8 @@ class FleetManager:
             else:
                 job.state, job.robot, job.picked = "queued", None, False
                 d.notes.append(f"job {job.task.id} is queued again for another robot")
+        if self.coordination != "central":
+            return  # the robots see it and drive round it themselves
         for o in self.robots.values():
             if o is r or o.leg is None or o.immobile or o.target is None:
                 continue
@@ -408,6 +431,8 @@ class FleetManager:
             r.arrived_at, r.saw_action = None, False
 
     def _find_late(self, d: Decisions) -> None:
+        if self.coordination != "central":
+            return  # the times of a behaviour leg bind nothing
         for r in self.robots.values():
             if (r.target is not None and not r.replan and r.on_leg and r.status.mode != "error"
                     and r.status.lateness_s > self.params.lateness_tolerance_s):
@@ -436,7 +461,7 @@ class FleetManager:
         self._give(r, leg, d)
         r.conflict = False
         d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
-        for o in self.robots.values():
+        for o in self.robots.values() if self.coordination == "central" else ():
             if o is not r and o.leg is not None and not o.immobile and o.target is not None and \
                     _passes_near(o.leg.path, now, (x, y), o.radius + r.radius + self.margin):
                 o.replan = o.conflict = True
@@ -502,6 +527,14 @@ class FleetManager:
         start = self._start_of(r, t0)
         if math.dist(start, target.pose) < 1e-6:
             path = TimedPath(r.id, r.radius, [[*target.pose, t0]])
+        elif self.coordination == "behavior":
+            path = self._plain_leg(r, start, target.pose, t0)
+            if path is None:
+                why = f"no way to {target.name} on the map"
+                if why != r.trouble:
+                    d.notes.append(f"robot {r.id}: {why}")
+                r.trouble = why
+                return None
         else:
             spec = RobotSpec(r.id, r.radius, r.kind.max_speed * self.params.speed_factor, start,
                              target.pose, r.kind.name,
@@ -523,6 +556,16 @@ class FleetManager:
         r.target, r.trouble = target, ""
         return leg
 
+    def _plain_leg(self, r: _Robot, start: Point, goal: Point, t0: float) -> TimedPath | None:
+        """A behaviour leg: the robot's shortest path on the map, around nobody, timed at the
+        planned speed from ``t0``. Only its goal binds the robot, which plans its own way there."""
+        if r.radius not in self._finders:
+            self._finders[r.radius] = PathFinder(self.warehouse.grid, r.radius)
+        points = self._finders[r.radius].find(start, goal)
+        if points is None:
+            return None
+        return timed_path_from_polyline(r.id, r.radius, points, r.kind.max_speed * self.params.speed_factor, t0)
+
     def _give(self, r: _Robot, leg: Leg, d: Decisions) -> None:
         r.leg, r.last_path_id = leg, leg.path_id
         r.arrived_at, r.saw_action = None, False
@@ -536,6 +579,8 @@ class FleetManager:
         it at the speed its status shows (never beyond where its schedule is due); driving a path
         the manager does not know (back from offline), straight on at its velocity."""
         st = r.status
+        if self.coordination != "central":
+            return st.x, st.y  # it drives its own path: where it is now is all that is known
         if not r.on_leg:
             ahead = max(0.0, t0 - st.stamp) if st.mode == "driving" else 0.0
             return st.x + st.vx * ahead, st.y + st.vy * ahead
@@ -650,6 +695,19 @@ def samples_to_path(robot_id: str, radius: float, samples: Sequence[tuple[float,
 # -------------------------------------------------------------------------------------------------
 # the robot's side
 # -------------------------------------------------------------------------------------------------
+#: a robot's status older than this (s) says it stopped reporting: it counts as standing where it was
+STALE_S = 1.0
+#: the safety net of a central robot keeps this much (m) beyond the sum of radii (and beyond where
+#: the two may drive before the next status)
+NET_MARGIN_M = 0.05
+#: a behaviour-coordinated robot drives at most this long (s) per control step, however late the
+#: step comes: it never jumps further than its safety layer looked
+MAX_STEER_S = 2 * CONTROL_PERIOD_S
+#: the behaviour layer of a robot on its own: it hears the others a status period late, so its
+#: safety layer grows their discs (see BehaviorController.keeps_clear), and passes leave room for that
+AGENT_BEHAVIOR = BehaviorParams(safety_margin=0.05, avoid_margin=0.3)
+
+
 class RobotAgent:
     """A robot doing its jobs: it follows the legs it is sent with its :class:`RobotModel` and, where
     a leg ends, picks (at the chute of its job), places (at the storing site that holds the job's
@@ -657,15 +715,34 @@ class RobotAgent:
 
     It learns its job from the ``assigned`` task event naming it and the job's stations from the
     task itself (:meth:`on_task`); if it never saw the task, any chute or storing site will do.
+    It hears the other robots' statuses (:meth:`on_status`).
+
+    ``coordination="central"``: it drives each leg's timed path, with a safety net: it waits rather
+    than drive into a robot in its critical area (:meth:`tick` says how). ``"behavior"``: it takes
+    only the goal of each leg (and the station there, which it docks at one robot at a time), plans
+    its own path and drives it at its own speed with a :class:`BehaviorController`, from the other
+    robots' statuses and the wait messages addressed to it (:meth:`on_wait_message`; the ones it
+    sends come from :meth:`take_wait_messages`); its statuses carry its BBMRCA state.
     """
 
     KEEP_TASKS = 10_000  # task details remembered
 
-    def __init__(self, model: RobotModel, warehouse: Warehouse):
+    def __init__(self, model: RobotModel, warehouse: Warehouse, coordination: str = "central",
+                 params: BehaviorParams = AGENT_BEHAVIOR):
+        if coordination not in COORDINATION:
+            raise ValueError(f"coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
         self.model = model
         self.warehouse = warehouse
+        self.coordination = coordination
         self.tasks: dict[str, Task] = {}
         self.loaded = False
+        self.heard: dict[str, RobotStatus] = {}   # the other robots' last statuses
+        self.waits_for: str | None = None         # central: the robot its safety net stops for
+        self.controller = None if coordination == "central" else BehaviorController(
+            warehouse.grid, model.id, model.kind.radius, model.kind.max_speed, (model.x, model.y), params)
+        self._leg_length = 0.0
+        self._inbox: list[WaitMessage] = []
+        self._outbox: list[WaitMessageRecord] = []
         self._acting: str | None = None
         self._last: float | None = None
 
@@ -687,15 +764,46 @@ class RobotAgent:
                                             or event.event == "assigned" and event.robot_id != me):
             self.model.task_id, self.loaded = None, False
 
+    def on_status(self, status: RobotStatus) -> None:
+        """Another robot's status (its own and older ones than the last heard are ignored)."""
+        last = self.heard.get(status.id)
+        if status.id != self.model.id and (last is None or status.stamp >= last.stamp):
+            self.heard[status.id] = status
+
+    def on_wait_message(self, msg: WaitMessageRecord) -> None:
+        """A wait message on the topic: taken at the next tick if it is addressed to this robot."""
+        if self.controller is not None and msg.receiver == self.model.id:
+            self._inbox.append(WaitMessage(tuple(msg.waiting)))
+
+    def take_wait_messages(self) -> list[WaitMessageRecord]:
+        """The wait messages this robot sent since the last call, to publish."""
+        out, self._outbox = self._outbox, []
+        return out
+
     def on_path(self, path: TimedPath, t0: float, path_id: int) -> None:
-        """Follow a leg whose times count from ``t0``; ValueError if it cannot (see RobotModel.follow)."""
-        self.model.follow(path, t0, path_id)
+        """Follow a leg whose times count from ``t0``; ValueError if it cannot (see RobotModel.follow).
+        Under behaviour coordination only its goal counts: ValueError if there is no way there."""
+        if self.controller is None:
+            self.model.follow(path, t0, path_id)
+            return
+        goal = (float(path.waypoints[-1, 0]), float(path.waypoints[-1, 1]))
+        station = self._station_at(goal)
+        try:
+            self.controller.assign(goal, station.name if station else None, self._last if self._last is not None else t0)
+        except PlanningError as exc:
+            raise ValueError(f"robot {self.model.id!r}: {'; '.join(exc.failures.values())}") from None
+        self.model.steer(path_id)
+        self._leg_length = self.controller.view().remaining
 
     def tick(self, now: float) -> RobotStatus:
         """Advance to ``now``, start what is due where the robot stands, and report."""
         m = self.model
         if self._last is not None and now > self._last:
-            m.step(self._last, now - self._last)
+            dt = now - self._last
+            if self.controller is None:
+                m.step(self._last, dt, hold=self._must_wait(self._last, dt))
+            else:
+                self._steer(self._last, dt)
         if self._last is None or now > self._last:
             self._last = now
         if self._acting is not None and m.busy_until is None:
@@ -706,11 +814,61 @@ class RobotAgent:
             self._acting = None
         if m.mode == "idle" and m.speed == 0.0 and m.progress >= 1.0:
             self._act(now)
-        return RobotStatus(**m.status(now))
+        state = None if self.controller is None else behavior_state(self.controller.view())
+        return RobotStatus(**m.status(now), behavior=state)
 
+    # -- central: the safety net -------------------------------------------------------------------
+    def _must_wait(self, t: float, dt: float) -> bool:
+        """Whether the robot must hold this step rather than drive into another robot: one whose
+        reported disc, grown by :data:`NET_MARGIN_M` and swept along the way it drives from its
+        report to the end of the step (at its reported velocity), lies in the robot's critical
+        area reaching as far as it may drive in the step (:func:`~fleet_planner.behavior.safety_stop`).
+        Robots passing by at their planned distance are not in it: the net stays out of the plan's
+        way and only stops a robot that would otherwise drive into one (which the planner then
+        re-plans when it gets late)."""
+        m, k = self.model, self.model.kind
+        ahead = m.ahead()
+        self.waits_for = None
+        if ahead is None or m.busy_until is not None:
+            return False
+        step = min(k.max_speed, m.speed + k.max_accel * dt) * dt
+        others, sweep = [], {}
+        for st in self.heard.values():
+            if math.hypot(st.x - m.x, st.y - m.y) > k.radius + st.radius + step + 2 * k.max_speed * STALE_S:
+                continue
+            ahead_s = t + dt - st.stamp
+            ahead_s = ahead_s if 0.0 <= ahead_s <= STALE_S else 0.0   # a silent robot stands
+            sweep[st.id] = (st.vx * ahead_s, st.vy * ahead_s)
+            others.append(RobotView(st.id, (st.x, st.y), st.radius))
+        blocker = safety_stop(RobotView(m.id, (m.x, m.y), k.radius, next_waypoint=ahead), others, step,
+                              NET_MARGIN_M, sweep)
+        self.waits_for = blocker.id if blocker is not None else None
+        return blocker is not None
+
+    # -- behaviour coordination ---------------------------------------------------------------------
+    def _steer(self, t: float, dt: float) -> None:
+        """One step of the behaviour controller from ``t``; the model drives where it says."""
+        m, c, k = self.model, self.controller, self.model.kind
+        views, reach = [], {}
+        for st in self.heard.values():
+            standing = t - st.stamp > STALE_S
+            views.append(view_of_status(st, standing))
+            reach[st.id] = 0.0 if standing else math.hypot(st.vx, st.vy) * max(0.0, t + dt - st.stamp)
+        inbox, self._inbox = self._inbox, []
+        free = m.busy_until is None and m.battery > 0.0
+        speed = min(k.max_speed, m.speed + k.max_accel * dt)
+        for receiver, msg in c.step(t, min(dt, MAX_STEER_S), views, inbox, reach=reach, speed=speed, move=free):
+            self._outbox.append(WaitMessageRecord(sender=m.id, receiver=receiver, waiting=msg.waiting, stamp=t))
+        if c.arrived or self._leg_length <= 0:
+            progress = 1.0
+        else:  # below 1 until it arrives: the planner takes 1 for "there"
+            progress = min(0.999, max(0.0, 1.0 - c.view().remaining / self._leg_length))
+        m.step(t, dt, to=c.position, progress=progress)
+
+    # -- where a leg ends ---------------------------------------------------------------------------
     def _act(self, now: float) -> None:
         m = self.model
-        here = self._station_here()
+        here = self._station_at((m.x, m.y))
         task = self.tasks.get(self.job) if self.job else None
         if self.job is not None and here is not None:
             if not self.loaded and here.type == "chute" and (task is None or task.pick == here.name):
@@ -723,10 +881,31 @@ class RobotAgent:
         elif self.job is None and here is not None and here.type == "charger" and m.battery < 1.0:
             m.start_charging()
 
-    def _station_here(self) -> Station | None:
-        m = self.model
+    def _station_at(self, pose: Point) -> Station | None:
         return next((s for s in self.warehouse.stations.values()
-                     if math.hypot(s.x - m.x, s.y - m.y) < AT_STATION_M), None)
+                     if math.hypot(s.x - pose[0], s.y - pose[1]) < AT_STATION_M), None)
+
+
+def behavior_state(view: RobotView) -> dict[str, Any]:
+    """A robot's BBMRCA state as the ``behavior`` field of its status (``msg_schemas.records.BEHAVIOR_STATE``)."""
+    return {"name": view.behavior.value, "next": list(view.next_waypoint) if view.next_waypoint else None,
+            "remaining": view.remaining, "straight": view.straight, "station": view.station,
+            "partner": view.partner, "no_space": view.no_space, "docked_at": view.docked_at,
+            "dock_since": view.dock_since}
+
+
+def view_of_status(status: RobotStatus, standing: bool = False) -> RobotView:
+    """What a robot's status tells the behaviour layer about it. ``standing`` (it stopped reporting),
+    or a status without a BBMRCA state (a robot not coordinating by behaviours): a robot with no
+    path, an obstacle to drive round, unless it is seen moving (then heading where it moves)."""
+    b = status.behavior
+    pos = (status.x, status.y)
+    if standing or b is None:
+        moving = not standing and math.hypot(status.vx, status.vy) > 1e-3
+        ahead = (status.x + status.vx, status.y + status.vy) if moving else None
+        return RobotView(status.id, pos, status.radius, next_waypoint=ahead)
+    return RobotView(status.id, pos, status.radius, Behavior(b["name"]), b["next"], b["remaining"], b["straight"],
+                     b["station"], b["partner"], b["no_space"], b["docked_at"], b["dock_since"])
 
 
 # -------------------------------------------------------------------------------------------------
@@ -798,5 +977,6 @@ def load_fleet(path: str | Path | None = None, kinds: Mapping[str, RobotKind] | 
     return out
 
 
-__all__ = ["ACTING", "DispatchParams", "Decisions", "FleetError", "FleetManager", "FleetMember", "Leg",
-           "RobotAgent", "can_do", "lag_allowance", "load_fleet", "samples_to_path"]
+__all__ = ["ACTING", "AGENT_BEHAVIOR", "COORDINATION", "DispatchParams", "Decisions", "FleetError", "FleetManager",
+           "FleetMember", "Leg", "RobotAgent", "behavior_state", "can_do", "lag_allowance", "load_fleet",
+           "samples_to_path", "view_of_status"]

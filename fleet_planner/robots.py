@@ -7,6 +7,7 @@
   until departure, tracks the path's due position under its speed and acceleration limits (never
   ahead of schedule; ``lateness_s`` says how far behind), picks and places for set durations,
   drains its battery and charges at a charger. The agent node and the fleet simulation step it.
+  Under behaviour coordination a local controller steers it instead (:meth:`RobotModel.steer`).
 
 The timed-path contract (constant speed between waypoints, see :class:`~fleet_planner.model.TimedPath`)
 assumes instant speed changes, so a robot with finite acceleration lags a little after each
@@ -170,6 +171,7 @@ class RobotModel:
         self._stops: np.ndarray = np.zeros((0, 2))  # (arc length, absolute departure) of each halt
         self._action: tuple[str, float] | None = None  # (pick|place, absolute end time)
         self._charging = False
+        self._steered: float | None = None  # steered by a controller: the fraction of its leg done
 
     # -- commands ---------------------------------------------------------------------------------
     def follow(self, path: TimedPath, t0: float, path_id: int | None = None) -> None:
@@ -200,6 +202,17 @@ class RobotModel:
         self._s = 0.0
         self.x, self.y = float(wp[0, 0]), float(wp[0, 1])
         self._charging = False
+        self._steered = None
+
+    def steer(self, path_id: int | None = None) -> None:
+        """Drive leg ``path_id`` under a local controller (behaviour coordination) instead of a timed
+        path: each :meth:`step` is then given where the controller moves the robot (``to``) and how
+        much of the leg is done (``progress``). Ends charging and any timed path."""
+        self.path, self.path_id = None, path_id
+        self._S, self._s, self._stops = np.zeros(1), 0.0, np.zeros((0, 2))
+        self._charging = False
+        self._steered = 0.0
+        self.lateness_s = 0.0
 
     def start_action(self, action: str, t: float, duration: float | None = None) -> None:
         """Begin picking or placing at time ``t`` for ``duration`` s (default: the kind's)."""
@@ -233,23 +246,49 @@ class RobotModel:
 
     @property
     def progress(self) -> float:
-        """Fraction of the current path's length driven (1 when there is none or it has no length)."""
+        """Fraction of the current path's length driven (1 when there is none or it has no length);
+        steered, the fraction of its leg the controller reports done."""
+        if self._steered is not None:
+            return self._steered
         total = float(self._S[-1])
         return 1.0 if total <= 0 else min(1.0, self._s / total)
 
-    def step(self, t: float, dt: float) -> None:
-        """Advance the state from time ``t`` to ``t + dt``."""
+    def ahead(self) -> Point | None:
+        """The next waypoint of the timed path beyond the robot (where it drives next), or None at
+        its end or without one."""
+        if self.path is None:
+            return None
+        k = int(np.searchsorted(self._S, self._s + 1e-6, side="right"))
+        if k >= len(self._S):
+            return None
+        return float(self.path.waypoints[k, 0]), float(self.path.waypoints[k, 1])
+
+    def step(self, t: float, dt: float, *, hold: bool = False, to: Point | None = None,
+             progress: float | None = None) -> None:
+        """Advance the state from time ``t`` to ``t + dt``.
+
+        On a timed path, ``hold`` keeps the robot where it is for this step (an emergency stop: the
+        schedule goes on, so the robot gets late). Steered (:meth:`steer`), the robot drives
+        straight to ``to`` (ValueError if that is beyond its top speed) and ``progress`` (0..1) is
+        the fraction of its leg done.
+        """
         if not dt > 0:
             raise ValueError(f"robot {self.id!r}: dt must be > 0, got {dt!r}")
         end = t + dt
         moved = 0.0
+        if self._steered is not None and progress is not None:
+            self._steered = min(1.0, max(0.0, float(progress)))
         if self._charging:
             self.battery = min(1.0, self.battery + self.kind.charge_w * dt / 3600.0 / self.kind.battery_wh)
         elif self._action is not None:
             if end >= self._action[1]:
                 self._action = None
-        elif self.path is not None and self.battery > 0.0:  # an empty robot stands still
+        elif self.battery <= 0.0 or hold:  # an empty robot stands still
+            pass
+        elif self.path is not None:
             moved = self._track(end, dt)
+        elif self._steered is not None and to is not None:
+            moved = self._drive_to(to, dt)
         self.speed = moved / dt
         if moved > 0:
             self.yaw = math.atan2(self.vy, self.vx)
@@ -284,6 +323,19 @@ class RobotModel:
         self.x, self.y, self._s = x, y, s_new
         return s_new - s
 
+    def _drive_to(self, to: Point, dt: float) -> float:
+        """Move straight to ``to`` over ``dt``; returns the distance driven."""
+        x, y = float(to[0]), float(to[1])
+        d = math.hypot(x - self.x, y - self.y)
+        if not math.isfinite(d) or d > self.kind.max_speed * dt * (1 + 1e-6) + _EPS:
+            raise ValueError(f"robot {self.id!r}: cannot drive {d:.3f} m in {dt:g} s "
+                             f"(top speed {self.kind.max_speed:g} m/s)")
+        if d <= 0:
+            return 0.0
+        self.vx, self.vy = (x - self.x) / dt, (y - self.y) / dt
+        self.x, self.y = x, y
+        return d
+
     def _point_at(self, s: float) -> Point:
         S, wp = self._S, self.path.waypoints
         if s >= S[-1]:
@@ -310,6 +362,8 @@ class RobotModel:
         if moved > 0:
             return "driving"
         if self.path is not None and self._s < self._S[-1] - _EPS:
+            return "waiting"
+        if self._steered is not None and self._steered < 1.0:
             return "waiting"
         return "idle"
 

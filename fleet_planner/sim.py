@@ -140,15 +140,21 @@ class _Layout:
         self.k = int(math.ceil(reach / grid.resolution))
         dc, dr = np.meshgrid(np.arange(-self.k, self.k + 1), np.arange(-self.k, self.k + 1))
         self.footprint = np.hypot(dc, dr) * grid.resolution < reach
+        # the cells just outside a footprint: where a parked robot drives off to
+        ring = ndimage.binary_dilation(np.pad(self.footprint, 1), np.ones((3, 3), bool)) & ~np.pad(self.footprint, 1)
+        self.ring = np.argwhere(ring) - (self.k + 1)      # (drow, dcol) offsets
         self.window = self.k + max(2, int(math.ceil(1.0 / grid.resolution)))
+        self.centres: list[tuple[int, int]] = []          # (col, row) of every station and spot
 
     def take(self, col: int, row: int) -> None:
         _stamp(self.taken, col, row, self.footprint)
+        self.centres.append((col, row))
 
     def usable(self, col: int, row: int) -> bool:
         """The disc fits here, nothing is parked close, and parking here cuts no passage: within
         a window around the cell, the free cells on the window's border that were connected stay
-        connected and no free pocket is cut off."""
+        connected and no free pocket is cut off; and every robot parked close by (this one too)
+        can still drive off to the window's border when all the others are parked."""
         if not self.free[row, col] or self.taken[row, col]:
             return False
         m, h, w = self.window, self.grid.height, self.grid.width
@@ -168,7 +174,27 @@ class _Layout:
             if len(np.unique(lab_a[border & (lab_b == comp) & after])) > 1:
                 return False                          # border cells separated
         on_border = set(np.unique(lab_a[border & after]).tolist())
-        return all(a in on_border for a in range(1, n_a + 1))   # no pocket cut off
+        if not all(a in on_border for a in range(1, n_a + 1)):
+            return False                              # a pocket cut off
+        return self._all_can_leave(col, row)
+
+    def _all_can_leave(self, col: int, row: int) -> bool:
+        k, h, w = self.k, self.grid.height, self.grid.width
+        m = 3 * k + 2                                 # holds the rings of all parked neighbours
+        r0, r1, c0, c1 = max(0, row - m), min(h, row + m + 1), max(0, col - m), min(w, col + m + 1)
+        blocked = self.taken[r0:r1, c0:c1].copy()
+        _stamp(blocked, col - c0, row - r0, self.footprint)
+        lab, _ = ndimage.label(self.free[r0:r1, c0:c1] & ~blocked)
+        outer = np.unique(np.concatenate([lab[[0, -1], :].ravel(), lab[:, [0, -1]].ravel()]))
+        outer = outer[outer > 0]
+        for c, r in self.centres + [(col, row)]:
+            if abs(c - col) > 2 * k + 1 or abs(r - row) > 2 * k + 1:
+                continue
+            rr, cc = self.ring[:, 0] + r - r0, self.ring[:, 1] + c - c0
+            inside = (rr >= 0) & (rr < r1 - r0) & (cc >= 0) & (cc < c1 - c0)
+            if not np.isin(lab[rr[inside], cc[inside]], outer).any():
+                return False
+        return True
 
     def cell(self, p: Point) -> tuple[int, int]:
         return self.grid.cell_of(*p)
@@ -192,7 +218,11 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
     robots' homes), then ``queue[k]`` as close to ``stations[k]`` by driving distance as the map
     allows (where robots wait for the station; picked first, so they get the closest places), then
     up to ``spare`` more at random places where the map has room.
-    Raises ValueError when the map has fewer than ``count`` places left for the homes."""
+
+    The local rules of :meth:`_Layout.usable` are checked globally with the path finder: with a
+    robot on every spot and every station, each of them must still be able to drive to the most
+    open place of the map; spots that cannot (or that shut in a station) are dropped and others
+    picked instead. Raises ValueError when the map has fewer than ``count`` places for the homes."""
     layout = _Layout(grid, radius)
     for p in stations:
         layout.take(*layout.cell(p))
@@ -202,11 +232,11 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
         far = cKDTree(np.asarray(stations, dtype=float)).query(centres)[0] >= STATION_CLEARANCE
         rows, cols = rows[far], cols[far]
 
-    def take(i: int) -> bool:
+    def take(i: int) -> Point | None:
         if layout.usable(int(cols[i]), int(rows[i])):
             layout.take(int(cols[i]), int(rows[i]))
-            return True
-        return False
+            return grid.centre(int(cols[i]), int(rows[i]))
+        return None
 
     queued: list[Point] = []
     if any(q > 0 for q in queue):
@@ -217,20 +247,47 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
             for k in range(len(left)):
                 if left[k] <= 0:
                     continue
-                i = next((int(i) for i in ranked[k] if np.isfinite(dist[k, i]) and take(int(i))), None)
-                left[k] = 0 if i is None else left[k] - 1
-                if i is not None:
-                    queued.append(grid.centre(int(cols[i]), int(rows[i])))
+                spot = next((p for i in ranked[k] if np.isfinite(dist[k, i]) and (p := take(int(i)))), None)
+                left[k] = 0 if spot is None else left[k] - 1
+                if spot is not None:
+                    queued.append(spot)
+    order = iter(np.random.default_rng(seed).permutation(len(rows)).tolist())
     homes: list[Point] = []
-    for i in np.random.default_rng(seed).permutation(len(rows)):
-        if len(homes) == count + spare:
+    hub = None
+    for _ in range(_SPOT_ROUNDS):
+        while len(homes) < count + spare and (i := next(order, None)) is not None:
+            if (spot := take(i)) is not None:
+                homes.append(spot)
+        if hub is None:   # the most open place once the spots are there
+            open_space = ndimage.distance_transform_edt(layout.free & ~layout.taken)
+            hub_row, hub_col = np.unravel_index(int(np.argmax(open_space)), open_space.shape)
+            hub = grid.centre(int(hub_col), int(hub_row))
+        shut = set(_shut_in(grid, radius, list(stations), homes + queued, hub))
+        if not shut:
             break
-        if take(int(i)):
-            homes.append(grid.centre(int(cols[i]), int(rows[i])))
+        homes = [p for p in homes if p not in shut]
+        queued = [p for p in queued if p not in shut]
+    else:
+        raise ValueError(f"{grid.name}: no set of parking spots found that every robot can leave")
     if len(homes) < count:
         raise ValueError(f"{grid.name}: only {len(homes)} parking spots that cut no passage, {count} needed "
                          f"(fewer robots or a larger map)")
     return homes[:count] + queued + homes[count:]
+
+
+_SPOT_ROUNDS = 8
+
+
+def _shut_in(grid: GridMap, radius: float, stations: list[Point], spots: list[Point], hub: Point) -> list[Point]:
+    """Spots from which a robot cannot drive to ``hub`` while a robot stands on every other spot
+    and station, plus the spots around a station that is shut in that way."""
+    finder = PathFinder(grid, radius)
+    discs = [(p, 2 * radius + SPOT_MARGIN) for p in stations + spots]
+    out = [p for p in spots if finder.find(p, hub, avoid=discs) is None]
+    for st in stations:
+        if finder.find(st, hub, avoid=discs) is None:
+            out += [p for p in spots if math.dist(p, st) < STATION_CLEARANCE + 2 * radius + 1.0]
+    return out
 
 
 def driving_distances(grid: GridMap, free: np.ndarray, points: Sequence[Point]) -> np.ndarray:

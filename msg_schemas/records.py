@@ -20,9 +20,11 @@ import re
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, Callable, ClassVar, Mapping
 
+from fleet_planner.behavior import Behavior
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import CAPABILITIES, MODES
 
+BEHAVIORS = tuple(b.value for b in Behavior)
 TASK_EVENTS = ("accepted", "rejected", "assigned", "picked", "placed", "done", "failed", "cancelled")
 EVENTS_NEEDING_REASON = ("rejected", "failed")
 
@@ -100,6 +102,19 @@ def choice(options: tuple[str, ...]) -> Check:
             raise RecordError(f"{path}: must be one of {', '.join(options)} (got {_show(value)})")
         return value
     return check
+
+
+def boolean(value: Any, path: str) -> bool:
+    if not isinstance(value, bool):
+        raise RecordError(f"{path}: must be true or false (got {_show(value)})")
+    return value
+
+
+def point(value: Any, path: str) -> tuple[float, float]:
+    """A list ``[x, y]`` of two finite numbers."""
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise RecordError(f"{path}: must be a list [x, y] (got {_show(value)})")
+    return tuple(number()(v, f"{path}[{i}]") for i, v in enumerate(value))
 
 
 def optional(inner: Check) -> Check:
@@ -262,9 +277,22 @@ class TaskEvent(Record):
             raise RecordError(f"task_event.reason: required when event is {self.event!r}")
 
 
+#: ``robot_status.behavior``: a behaviour-coordinated robot's BBMRCA state, what the others' traffic
+#: rules need (``fleet_planner.behavior.RobotView``): its behaviour, where its path goes next
+#: (null: it stands), the length of the rest of its path and of the straight run ahead (m), the
+#: station it is bound for, the robot its behaviour is about, whether its Avoid / Exchange finds no
+#: room, the station it docks at and since when it asked to (s, ROS time). Every key is required
+#: (null where there is nothing).
+BEHAVIOR_STATE: dict[str, Check] = {
+    "name": choice(BEHAVIORS), "next": optional(point), "remaining": number(lo=0.0),
+    "straight": number(lo=0.0), "station": optional(nonempty), "partner": optional(ros_id),
+    "no_space": boolean, "docked_at": optional(nonempty), "dock_since": optional(number())}
+
+
 @dataclass(frozen=True)
 class RobotStatus(Record):
-    """A robot's state as its agent reports it (pose, velocity, battery, mode, schedule progress)."""
+    """A robot's state as its agent reports it (pose, velocity, battery, mode, schedule progress;
+    in behaviour coordination also its BBMRCA state)."""
 
     SCHEMA: ClassVar[str] = "fleet/robot_status@1"
     NAME: ClassVar[str] = "robot_status"
@@ -284,6 +312,8 @@ class RobotStatus(Record):
     task_id: str | None = spec(optional(nonempty), default=None)
     path_id: int | None = spec(optional(integer(lo=0)), default=None)  # which timed path it follows
     lateness_s: float = spec(number(lo=0.0), default=0.0)  # how far behind its due position
+    # robots coordinating by behaviours (paper 002) broadcast their BBMRCA state: see BEHAVIOR_STATE
+    behavior: dict[str, Any] | None = spec(optional(obj(BEHAVIOR_STATE)), default=None)
 
 
 @dataclass(frozen=True)
@@ -326,4 +356,26 @@ class Schedule(Record):
                     raise RecordError(f"{where}.{hi}: must be >= {lo} ({link[hi]:g} < {link[lo]:g})")
 
 
-RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule)
+@dataclass(frozen=True)
+class WaitMessageRecord(Record):
+    """A BBMRCA wait message (paper 002, IV.C) on its way from a waiting robot to the robot it waits
+    for: ``waiting`` lists the waiting robots it went through, the first sender first and this
+    sender last. A robot that finds its own id in it has found a wait cycle."""
+
+    SCHEMA: ClassVar[str] = "fleet/wait_message@1"
+    NAME: ClassVar[str] = "wait_message"
+
+    sender: str = spec(ros_id)
+    receiver: str = spec(ros_id)
+    waiting: tuple[str, ...] = spec(list_of(ros_id, unique=True))
+    stamp: float = spec(number())
+
+    def _check_together(self) -> None:
+        if not self.waiting or self.waiting[-1] != self.sender:
+            raise RecordError(f"wait_message.waiting: must end with the sender {self.sender!r} "
+                              f"(got {list(self.waiting)})")
+        if self.receiver == self.sender:
+            raise RecordError(f"wait_message.receiver: a robot does not wait for itself ({self.sender!r})")
+
+
+RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord)

@@ -12,6 +12,9 @@ QoS choices:
   supersedes the last, so a lost one costs nothing, and a slow planner never holds the agents
   back. A best-effort subscription also matches reliable publishers (``ros2 topic pub`` defaults).
   Tests must wait for a status that satisfies a condition, not count messages.
+* ``WAIT_MESSAGES`` (behaviour coordination): reliable, volatile, depth 100. A waiting robot
+  repeats its message every couple of seconds, but a wait cycle is only found when a message
+  gets all the way round it, so none should be lost on the way.
 * Latched state (``/robots/<id>/timed_path``, ``SCHEDULE``, ``MARKERS``, ``MAP``): reliable,
   transient local, depth 1: a late subscriber gets the current value at once.
 """
@@ -27,6 +30,7 @@ ROBOT_STATUS = "/fleet/robot_status"
 SCHEDULE = "/fleet/schedule"
 MARKERS = "/fleet/markers"
 MAP = "/map"
+WAIT_MESSAGES = "/fleet/wait_messages"
 
 
 def timed_path_topic(robot_id: str) -> str:
@@ -52,3 +56,4 @@ TIMED_PATH_QOS = LATCHED_QOS
 SCHEDULE_QOS = LATCHED_QOS
 MARKERS_QOS = LATCHED_QOS
 MAP_QOS = LATCHED_QOS
+WAIT_MESSAGES_QOS = _qos(100)

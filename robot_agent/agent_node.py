@@ -4,7 +4,10 @@ It follows the timed paths the planner sends on ``/robots/<id>/timed_path`` (wai
 clock for each departure), learns its jobs from ``/fleet/task_events`` (``assigned`` to its id) and
 their stations from ``/fleet/tasks``, picks, places and charges where its legs end, and publishes its
 status on ``/fleet/robot_status`` at ``status_rate_hz`` of ROS time (simulated time with
-``use_sim_time:=true``).
+``use_sim_time:=true``). It hears the other robots' statuses there too: for the safety net of a
+central robot (it waits rather than drive into one), and for the behaviours of a robot with
+``coordination:=behavior``, which takes only the goal of each leg, finds its own way there and
+resolves conflicts by the BBMRCA rules, with wait messages on ``/fleet/wait_messages``.
 
     ros2 run fleet_planner robot_agent --ros-args -p id:=r3 -p kind:=cargo_forklift -p x:=6.25 -p y:=22.75
 """
@@ -21,15 +24,13 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from fleet_planner.dispatch import RobotAgent
+from fleet_planner.dispatch import COORDINATION, RobotAgent
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns
-from msg_schemas.records import RecordError, Task, TaskEvent, robot_id_problem
-
-COORDINATION = ("central",)
+from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent, WaitMessageRecord, robot_id_problem
 
 
 def _range(description: str, lo: float, hi: float) -> ParameterDescriptor:
@@ -56,7 +57,8 @@ class AgentNode(Node):
         yaw = self.declare_parameter("yaw", 0.0, _fixed("start heading (rad)")).value
         battery = self.declare_parameter("battery", 1.0, _range("battery at start, fraction of full", 0.0, 1.0)).value
         mode = self.declare_parameter("coordination", "central", _fixed(
-            "how the robot avoids others: 'central' (follow the planner's timed paths)")).value
+            "how the robot avoids others: 'central' (follow the planner's timed paths, with a safety net) "
+            "or 'behavior' (BBMRCA: only each leg's goal binds; own path, behaviours, wait messages)")).value
         rate = self.declare_parameter("status_rate_hz", 10.0, _range("status messages per second of ROS time",
                                                                      0.1, 100.0)).value
         wh_file = self.declare_parameter("warehouse_file", "", _fixed(
@@ -76,15 +78,21 @@ class AgentNode(Node):
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         chargers = [s.pose for s in warehouse.stations_of("charger")]
         model = RobotModel(robot_id, kinds[kind], x, y, yaw, battery, chargers)
-        self.agent = RobotAgent(model, warehouse)
+        self.agent = RobotAgent(model, warehouse, mode)
         self.robot_id = robot_id
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
         self.create_subscription(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
         self.create_subscription(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        self._waits = None
+        if mode == "behavior":
+            self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
+            self.create_subscription(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
         self._timer = self.create_timer(1.0 / rate, self._on_timer)
-        self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}")
+        self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}, "
+                               f"{mode} coordination")
 
     # -- callbacks: none of them lets an exception out ----------------------------------------------
     def _on_path(self, msg: Path) -> None:
@@ -107,10 +115,24 @@ class AgentNode(Node):
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
 
+    def _on_status(self, msg: String) -> None:
+        try:
+            self.agent.on_status(RobotStatus.from_json(msg.data))
+        except RecordError as exc:
+            self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _on_wait_message(self, msg: String) -> None:
+        try:
+            self.agent.on_wait_message(WaitMessageRecord.from_json(msg.data))
+        except RecordError as exc:
+            self.get_logger().warning(f"wait message ignored: {exc}", throttle_duration_sec=5.0)
+
     def _on_timer(self) -> None:
         try:
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_json()))
+            for wait in self.agent.take_wait_messages():
+                self._waits.publish(String(data=wait.to_json()))
         except Exception as exc:  # keep reporting: the planner must not take a live robot for dead
             self.get_logger().error(f"robot step failed: {exc!r}", throttle_duration_sec=5.0)
 

@@ -23,6 +23,7 @@ from ..model import Plan, PlanningError, RobotSpec, TimedPath, drive_profile, ti
 from ..scheduler import MODES, Blocked, DelayScheduler, Network
 from .base import Planner, Progress
 
+_MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
 ORDERS = ("shortest", "longest", "given", "parking")
 
 
@@ -211,9 +212,9 @@ class _Session:
 
     def safe_path(self, x: int, partner: int | None = None) -> np.ndarray | None:
         """FINDINGS 1: avoid lower robots' starts and higher robots' goals; else goals only; else
-        none. Discs that x was found to block (``must``) are kept in every attempt but the last;
-        when those are too many to avoid together, the ones of ``partner`` (the robot of the
-        conflict being resolved) are tried alone."""
+        none. Discs that x was found to block (``must``) are kept in those attempts; when they are
+        too many to avoid together, as many as possible are kept, those of ``partner`` (the robot
+        of the conflict being resolved) first."""
         me, rank = self.robots[x], self.rank
         starts = [(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
                   if y != x and rank[y] > rank[x]]
@@ -221,23 +222,30 @@ class _Session:
                  if y != x and rank[y] < rank[x]]
         by_owner = self.must.get(x, {})
         must = [d for discs in by_owner.values() for d in discs]
-        levels = [starts + goals + must, goals + must]
-        if must:
-            levels.append(must)
-        if partner in by_owner and len(by_owner) > 1:
-            levels.append(by_owner[partner])
-        levels.append([])
-        hint = self.hints.pop(x, None)
-        if hint is not None and _keeps_off(hint, levels[0], me.start, me.goal):
-            return hint
         rounded = self.finder.get(me.radius)
-        for avoid in levels:
+
+        def find(avoid):
             path = rounded.find(me.start, me.goal, avoid=avoid)
             if path is None and rounded.radius != me.radius:
                 path = self.finder.get(me.radius, exact=True).find(me.start, me.goal, avoid=avoid)
+            return path
+
+        hint = self.hints.pop(x, None)
+        if hint is not None and _keeps_off(hint, starts + goals + must, me.start, me.goal):
+            return hint
+        for avoid in ([starts + goals + must, goals + must, must] if must else [starts + goals, goals]):
+            path = find(avoid)
             if path is not None:
                 return path
-        return None
+        # not all of ``must`` at once: keep as much of it as possible, the partner's discs first,
+        # then the others, most recently added first
+        owners = sorted(by_owner, key=lambda o: (o != partner, -list(by_owner).index(o)))
+        best, kept = find([]), []
+        for owner in owners:
+            path = find(kept + by_owner[owner])
+            if path is not None:
+                best, kept = path, kept + by_owner[owner]
+        return best
 
     def resolve(self, progress: Progress | None = None) -> None:
         """Schedule; where a delay cannot help, first re-route around the disc in the way, then
@@ -251,7 +259,7 @@ class _Session:
             j, i = blocked.j, blocked.blocker
             tries[(j, i)] = tries.get((j, i), 0) + 1
             why = f"blocked by {robots[i].id}, which {blocked.why}"
-            if tries[(j, i)] > 3 or self.reorders >= limit:
+            if tries[(j, i)] > _MAX_TRIES or self.reorders >= limit:
                 raise PlanningError({robots[j].id: f"{why}; re-routing and re-ordering did not help"},
                                     {robots[j].id: robots[i].id})
             # 1. re-route: the robot that moves keeps off the disc where the other one is parked

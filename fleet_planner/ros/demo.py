@@ -5,6 +5,8 @@ per robot of ``config/fleet.yaml``, then submits ``--jobs`` random pick-and-plac
 ``/fleet/tasks`` and shows progress until all are done. Nodes share one process and one executor
 (``--mode inproc``, the default) or run as separate processes (``--mode procs``: the console
 scripts, or ``python -m`` where a script is not installed, in the same ROS environment).
+``--coordination behavior`` runs the same fleet with the robots avoiding each other by the BBMRCA
+behaviours instead of timed paths (the planner only allocates and gives goals).
 
 At the end it prints a summary (jobs done, completion time, average speed, and the smallest
 distance ever seen between two robots against the sum of their radii, computed here from the
@@ -39,7 +41,7 @@ from std_msgs.msg import String
 from tqdm import tqdm
 
 from fleet_planner.checker import min_separation
-from fleet_planner.dispatch import FleetMember, load_fleet, samples_to_path
+from fleet_planner.dispatch import COORDINATION, FleetMember, load_fleet, samples_to_path
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.planner_node import DrainingExecutor, PlannerNode
@@ -147,17 +149,19 @@ class Fleet:
 
 
 def bring_up(context: Context, warehouse, kinds: Mapping, members: Sequence[FleetMember], rate: float,
-             planner_params: Sequence[Parameter] = (), params_file: str | Path | None = None) -> Fleet:
+             planner_params: Sequence[Parameter] = (), params_file: str | Path | None = None,
+             coordination: str = "central") -> Fleet:
     """Sim clock, planner, one agent per fleet member and a monitor, all on simulated time in
     ``context`` and on one executor. ``planner_params`` and ``params_file`` (a ros__parameters
-    YAML) configure the planner."""
+    YAML) configure the planner; ``coordination`` goes to the planner and every agent."""
     sim = [Parameter("use_sim_time", value=True)]
+    mode = [Parameter("coordination", value=coordination)]
     clock = SimClock(context=context, parameter_overrides=[Parameter("rate", value=float(rate))])
     cli = ["--ros-args", "--params-file", str(params_file)] if params_file else None
     planner = PlannerNode(context=context, warehouse=warehouse, kinds=kinds, cli_args=cli,
-                          parameter_overrides=sim + list(planner_params))
+                          parameter_overrides=sim + mode + list(planner_params))
     agents = {m.id: AgentNode(f"agent_{m.id}", context=context, warehouse=warehouse, kinds=kinds,
-                              parameter_overrides=sim + _agent_params(m)) for m in members}
+                              parameter_overrides=sim + mode + _agent_params(m)) for m in members}
     monitor = FleetMonitor(context=context, parameter_overrides=sim)
     fleet = Fleet(clock, planner, agents, monitor, DrainingExecutor(context=context))
     for node in fleet.nodes:
@@ -177,22 +181,23 @@ def node_command(script: str, module: str) -> list[str]:
 
 
 def start_processes(members: Sequence, rate: float, params_file: Path, warehouse_file: Path | None,
-                    kinds_file: Path | None = None, log_dir: Path | None = None) -> list[subprocess.Popen]:
+                    kinds_file: Path | None = None, log_dir: Path | None = None,
+                    coordination: str = "central") -> list[subprocess.Popen]:
     """Sim clock, planner and agents as processes in this environment (stop them with stop_processes)."""
-    files = []
+    common = ["-p", f"coordination:={coordination}"]
     if warehouse_file:
-        files += ["-p", f"warehouse_file:={warehouse_file}"]
+        common += ["-p", f"warehouse_file:={warehouse_file}"]
     if kinds_file:
-        files += ["-p", f"kinds_file:={kinds_file}"]
+        common += ["-p", f"kinds_file:={kinds_file}"]
     sim = ["-p", "use_sim_time:=true"]
     commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)],
                 "planner": node_command("planner", "fleet_planner.ros.planner_node")
-                + ["--ros-args", "--params-file", str(params_file)] + sim + files}
+                + ["--ros-args", "--params-file", str(params_file)] + sim + common}
     for m in members:
         commands[f"agent_{m.id}"] = node_command("robot_agent", "robot_agent.agent_node") + [
             "--ros-args", "-r", f"__node:=agent_{m.id}", "-p", f"id:={m.id}", "-p", f"kind:={m.kind}",
             "-p", f"x:={m.x!r}", "-p", f"y:={m.y!r}", "-p", f"yaw:={m.yaw!r}", "-p", f"battery:={m.battery!r}"] \
-            + sim + files
+            + sim + common
     procs = []
     try:
         for name, cmd in commands.items():
@@ -334,6 +339,9 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fleet-demo", description=__doc__.split("\n\n")[0])
     p.add_argument("--mode", choices=("inproc", "procs"), default="inproc",
                    help="nodes in this process on one executor (default), or one process each")
+    p.add_argument("--coordination", choices=COORDINATION, default="central",
+                   help="central: timed paths planned around each other (default); behavior: the robots "
+                        "get only goals and avoid each other by BBMRCA behaviours")
     p.add_argument("--jobs", type=int, default=20, help="how many jobs to submit (default 20)")
     p.add_argument("--interval", type=float, default=4.0, help="simulated seconds between jobs (default 4)")
     p.add_argument("--rate", type=float, default=10.0, help="simulated seconds per wall second, at most (default 10)")
@@ -371,7 +379,8 @@ def main(args: list[str] | None = None) -> None:
     fleet = monitor = None
     try:
         if opts.mode == "inproc":
-            fleet = bring_up(context, warehouse, kinds, members, opts.rate, params_file=params_file)
+            fleet = bring_up(context, warehouse, kinds, members, opts.rate, params_file=params_file,
+                             coordination=opts.coordination)
             executor, monitor, parking = fleet.executor, fleet.monitor, list(fleet.planner.fleet.parking.values())
             if not opts.verbose:
                 for node in fleet.nodes:
@@ -379,12 +388,13 @@ def main(args: list[str] | None = None) -> None:
         else:
             log_dir = opts.out / "logs"
             log_dir.mkdir(exist_ok=True)
-            procs = start_processes(members, opts.rate, params_file, opts.warehouse, log_dir=log_dir)
+            procs = start_processes(members, opts.rate, params_file, opts.warehouse, log_dir=log_dir,
+                                    coordination=opts.coordination)
             monitor = FleetMonitor(context=context, parameter_overrides=[Parameter("use_sim_time", value=True)])
             executor, parking = DrainingExecutor(context=context), _parking_of(params_file)
             executor.add_node(monitor)
         summary = _run(executor, monitor, members, jobs, opts)
-        title = (f"fleet-demo: {summary.done}/{summary.jobs} jobs, {len(members)} robots, "
+        title = (f"fleet-demo ({opts.coordination}): {summary.done}/{summary.jobs} jobs, {len(members)} robots, "
                  f"closest approach {summary.min_gap:+.2f} m beyond the sum of radii")
         png = opts.out / "fleet_demo.png"
         plot_run(warehouse, monitor.trajectories(), png, title, parking)

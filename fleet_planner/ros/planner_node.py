@@ -26,7 +26,7 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from fleet_planner.dispatch import Decisions, DispatchParams, FleetManager
+from fleet_planner.dispatch import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
@@ -93,6 +93,9 @@ class PlannerNode(Node):
             read_only=True)).value or []
         period = self.declare_parameter("step_period_s", 0.5, _range(
             "s of ROS time between planning steps", 0.05, 10.0)).value
+        coordination = self.declare_parameter("coordination", "central", ParameterDescriptor(
+            description="how the robots avoid each other: 'central' (timed paths with (M,D) delays) or "
+                        "'behavior' (legs bind only their goals; the robots use BBMRCA)", read_only=True)).value
         defaults = DispatchParams()
         values = {}
         for f in fields(DispatchParams):
@@ -104,8 +107,10 @@ class PlannerNode(Node):
 
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         kinds = kinds if kinds is not None else load_kinds(kinds_file or None)
+        if coordination not in COORDINATION:
+            raise ValueError(f"parameter coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
-                                  [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)])
+                                  [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
@@ -118,8 +123,9 @@ class PlannerNode(Node):
         self._timer = self.create_timer(period, self._on_timer)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
         self.get_logger().info(
-            f"planning for warehouse {warehouse.name!r} ({len(warehouse.stations)} stations), margin "
-            f"{self.fleet.margin:.2f} m, {len(self.fleet.parking)} parking spots, step every {period:g} s")
+            f"planning for warehouse {warehouse.name!r} ({len(warehouse.stations)} stations), {coordination} "
+            f"coordination, margin {self.fleet.margin:.2f} m, {len(self.fleet.parking)} parking spots, "
+            f"step every {period:g} s")
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
