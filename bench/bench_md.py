@@ -280,6 +280,9 @@ def main(argv=None) -> int:
         print(f"bench_md: no maps directory {args.maps_dir}: using a generated warehouse with random "
               f"start/goal pairs instead of MovingAI maps", file=sys.stderr)
         instances = [generated_instance(n_max, args.seed)]
+    for label in args.planners:   # import every planner now, so that all runs use the same code
+        name, options = PLANNERS[label]
+        get_planner(name, **options)
     rows: list[Row] = []
     jobs = [(inst, n, p) for inst in instances for n in args.sizes for p in args.planners]
     alone = {inst.name: AloneTimes(inst.grid) for inst in instances}

@@ -2,8 +2,9 @@
 
 A *task* is "drive to station k, dock there, drive to station l, dock there". Every robot takes the
 next task of one seeded sequence whenever it has finished its previous one; when the sequence is
-used up it drives to a free parking spot. The run ends when every delivery is done (its completion
-time is CTime), at a cap on simulated time, or when nothing has moved for a long time (a stall).
+used up it drives back to its home parking spot (or the closest free one). The run ends when every
+delivery is done (its completion time is CTime), at a cap on simulated time, or when nothing has
+moved for a long time (a stall).
 Everything runs in simulated time, much faster than real time, without ROS.
 
 Methods (:data:`METHODS`):
@@ -523,7 +524,9 @@ class _Dispatch:
             self.lb_add(r, self.p.stations[r.task.drop])
             self._to_station(r, r.task.pick, "pick", t)
         else:
-            spot = self._nearest_free_spot(np.hypot(*(self._spots - np.asarray(r.pos)).T))
+            # home, else the closest free spot (near a station, it would stand in others' way)
+            spot = r.idx if self.spot_owner[r.idx] is None else \
+                self._nearest_free_spot(np.hypot(*(self._spots - np.asarray(r.pos)).T))
             if spot is None:                  # every spot taken or promised: stay (nothing left to do)
                 self.enter(r, "done", t)
                 r.wake = math.inf
@@ -955,4 +958,5 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
 
 
 __all__ = ["DOCK_S", "METHODS", "ROBOT_RADIUS", "TOP_SPEED", "DeliveryProblem", "DeliveryResult", "Task",
-           "choose_spots", "delivery_problem", "simulate", "spread_stations", "warehouse_problem"]
+           "choose_spots", "delivery_problem", "driving_distances", "simulate", "spread_stations",
+           "warehouse_problem"]
