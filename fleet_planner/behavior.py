@@ -557,6 +557,10 @@ def virtual_wall_cells(grid: GridMap, ahead: Sequence[Point], goal: Point, radiu
 
 
 # -- one robot ----------------------------------------------------------------------------
+def _xy(p: np.ndarray) -> tuple[float, float]:
+    return float(p[0]), float(p[1])
+
+
 class HeardDocking:
     """The docking agreement of IV.A kept by one robot from what it hears, for robots running on
     their own (:meth:`BehaviorController.step`): every robot broadcasts the station it docks at
@@ -622,9 +626,11 @@ class BehaviorController:
     :meth:`step`, which adds the local safety layer (:meth:`keeps_clear`) and keeps the docking
     agreement from what it hears (:class:`HeardDocking`).
 
-    ``finders`` may be shared between controllers on the same map (one :class:`PathFinder` per
-    radius); ``first_message`` is when the robot first checks whether to send a WaitMessage
-    (robots' clocks are not synchronised: spread phases make waiting robots seldom send at once).
+    ``docking``: a :class:`DockingArbiter` shared by simulated robots, or None for a robot on its
+    own (a :class:`HeardDocking` of its own). ``finders`` may be shared between controllers on the
+    same map (one :class:`PathFinder` per radius); ``first_message`` is when the robot first checks
+    whether to send a WaitMessage (robots' clocks are not synchronised: spread phases make waiting
+    robots seldom send at once).
     """
 
     def __init__(self, grid: GridMap, robot_id: str, radius: float, max_speed: float, position: Point,
@@ -637,7 +643,7 @@ class BehaviorController:
         if start.shape != (2,) or not np.all(np.isfinite(start)):
             raise ValueError(f"robot {robot_id!r}: start must be a finite (x, y), got {position!r}")
         if not grid.disc_is_free(*start, radius):
-            raise ValueError(f"robot {robot_id!r}: start {tuple(start)} is not free for radius {radius}")
+            raise ValueError(f"robot {robot_id!r}: start {_xy(start)} is not free for radius {radius}")
         self.grid, self.params = grid, params
         self.id, self.radius, self.max_speed = robot_id, float(radius), float(max_speed)
         finders = {} if finders is None else finders
@@ -688,10 +694,10 @@ class BehaviorController:
         if g.shape != (2,) or not np.all(np.isfinite(g)):
             raise ValueError(f"robot {self.id!r}: goal must be a finite (x, y), got {goal!r}")
         if not self.grid.disc_is_free(*g, self.radius):
-            raise ValueError(f"robot {self.id!r}: goal {tuple(g)} is not free for radius {self.radius}")
+            raise ValueError(f"robot {self.id!r}: goal {_xy(g)} is not free for radius {self.radius}")
         path = self.finder.find(self.position, (float(g[0]), float(g[1])))
         if path is None:
-            raise PlanningError({self.id: f"no path from {self.position} to {tuple(g)}"})
+            raise PlanningError({self.id: f"no path from {self.position} to {_xy(g)}"})
         if self.station is not None and self.holds is None:
             self.docking.withdraw(self.station, self.id)
             self.dock_since = None
@@ -868,7 +874,11 @@ class BehaviorController:
             self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
             return
         if self.holds is not None:              # IV.B.5: Dock keeps moving, the others give way
-            self._set(B.DOCK, None)
+            rival = self._dock_rival(me, sensed)
+            self._set(B.DOCK if rival is None else B.WAIT_KEEP_DISTANCE, None if rival is None else rival.id)
+            if rival is None and self._leaving() and self._stalled() and any(
+                    not o.travelling and in_critical_area(me, o, self.params) for o in sensed):
+                self._replan(sensed)            # a standing robot in the way does not give way (IV.C.1)
             return
         if self.station is not None and self._docking():
             return
@@ -893,6 +903,32 @@ class BehaviorController:
         if self._failed(me, sensed, in_front):
             self._replan(sensed)
 
+    def _leaving(self) -> bool:
+        """Driving away from the station it still holds (until it is out of the docking region)."""
+        return self.holds is not None and self.holds[0] != self.station and self.path is not None
+
+    def _stalled(self) -> bool:
+        """The safety layer has refused the wanted motion for longer than ``blocked_timeout``."""
+        return self.blocked_since is not None and self.time - self.blocked_since > self.params.blocked_timeout
+
+    def _dock_rival(self, me: RobotView, sensed: list[RobotView]) -> RobotView | None:
+        """The Dock robot a robot leaving the station it still holds gives way to (or None).
+
+        Interpretation: the paper's Dock drives on while the others give way, so two robots
+        docking at once (here: leaving neighbouring stations towards each other) would block
+        each other for good. A robot leaving its station gives way (WaitKeepDistance, backing off)
+        to a moving Dock robot in its critical area that drives into its own station, or that is
+        leaving too and has the higher priority (:func:`low_order`). A leaving robot stopped for
+        ``blocked_timeout`` with a standing robot in its critical area (one that does not give way)
+        re-plans like a FollowWayPoint robot waiting for an obstacle (IV.C.1)."""
+        if not self._leaving():
+            return None
+        for o in robots_in_front(me, sensed, self.params):
+            if (o.behavior is B.DOCK and o.travelling and in_critical_area(me, o, self.params)
+                    and (o.docked_at == o.station or low_order(me, o))):
+                return o
+        return None
+
     def _complete(self, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> None:
         """End the running behaviour when its partner left the front area (IV.A), back to
         FollowWayPoint; WaitForGoThrough also ends when the partner stops going through."""
@@ -911,7 +947,7 @@ class BehaviorController:
     def _failed(self, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> bool:
         """The failures of IV.C, after which the robot re-plans with a virtual wall."""
         p = self.params
-        stalled = self.blocked_since is not None and self.time - self.blocked_since > p.blocked_timeout
+        stalled = self._stalled()
         no_progress = self.time - self.progress_at > p.avoid_timeout
         if self.behavior in (B.AVOID, B.EXCHANGE):                           # IV.C.2-3
             stalled = stalled or (no_progress and self.time - self.since > p.blocked_timeout)
@@ -1377,7 +1413,8 @@ def safety_stop(me: RobotView, others: Iterable[RobotView], step: float, margin:
     ``step`` metres on, or None: the closest one whose disc, grown by ``margin`` and swept along
     ``sweep[id]`` (where it may have driven by the end of the step, from its reported position: it
     may have stopped anywhere on the way), lies in my critical area reaching ``step`` beyond my
-    own disc (``me.next_waypoint``: where my path goes next).
+    own disc (``me.next_waypoint``: where my path goes next). The area is the paper's rectangle,
+    so a disc at its front corners stops me a little earlier than it strictly has to.
     """
     if step <= 0 or not me.travelling:
         return None

@@ -35,12 +35,13 @@ Coordination (``coordination``, the same on both sides): ``central`` is all of t
 central robot keeps a safety net of its own: before it drives on, it checks the other robots'
 reported discs against its critical area (:func:`~fleet_planner.behavior.safety_stop`), each
 grown by :data:`NET_MARGIN_M` and swept along where it may drive until the end of the step, the
-area reaching as far as it may drive itself; it waits (reporting ``waiting``) rather than drive
-into one, and if that lasts, it is late and the planner re-plans it. With ``behavior`` the robots avoid each other on their own (BBMRCA, paper
-002): the planner still allocates jobs and chargers, but a leg is only a goal (a plain A* path whose
-times bind nothing; no delays, no re-planning of late robots), and the robot plans its own path
-there and resolves conflicts with the behaviour rules from the others' statuses, which then
-carry their BBMRCA state, and wait messages (:class:`~fleet_planner.behavior.BehaviorController`).
+area reaching as far as the robot may drive itself; it waits (reporting ``waiting``) rather than
+drive into one, and if that lasts, it is late and the planner re-plans it. With ``behavior`` the
+robots avoid each other on their own (BBMRCA, paper 002): the planner still allocates jobs and
+chargers, but a leg is only a goal (a plain A* path whose times bind nothing; no delays, no
+re-planning of late robots), and the robot plans its own path there and resolves conflicts by the
+behaviour rules, from the others' statuses (which then carry their BBMRCA state) and wait
+messages (:class:`~fleet_planner.behavior.BehaviorController`).
 
 Times are seconds on one clock (the planner's ROS time): ``now`` is always passed in.
 """
@@ -789,7 +790,8 @@ class RobotAgent:
         goal = (float(path.waypoints[-1, 0]), float(path.waypoints[-1, 1]))
         station = self._station_at(goal)
         try:
-            self.controller.assign(goal, station.name if station else None, self._last if self._last is not None else t0)
+            self.controller.assign(goal, station.name if station else None,
+                                   self._last if self._last is not None else t0)
         except PlanningError as exc:
             raise ValueError(f"robot {self.model.id!r}: {'; '.join(exc.failures.values())}") from None
         self.model.steer(path_id)
