@@ -1,12 +1,15 @@
-"""The (M,D) collision-model planner of paper 001, with what we measured it needs (FINDINGS 1-3).
+"""The (M,D) collision-model planner of paper 001, with what we measured it needs (FINDINGS 1-5).
 
 1. Safe paths: each robot's path avoids the start discs of lower-priority robots and the goal discs
    of higher-priority robots where the map allows (falling back to goals only, then to nothing).
-2. The (M,D) network over those paths and priority-ordered departure delays (Eq. 3).
+   Robots with ``max_accel`` drive it with speed ramps (:func:`~fleet_planner.model.drive_profile`).
+2. The (M,D) network over those paths and priority-ordered departure delays (Eq. 3), with the
+   paper's collision boxes (``mode="box"``) or the exact regions (``mode="exact"``, default).
 3. Where a delay cannot help (a higher robot parks on its goal in the way, or passes a lower
-   robot's start while it is still parked), the blocked robot is moved just ahead of its blocker,
-   only the paths whose avoidance changed are re-planned, only their collision regions recomputed
-   and only the robots from the moved one on re-scheduled.
+   robot's start while it is still parked), the robot that moves is first re-routed around the
+   disc in the way, else the blocked robot is moved just ahead of its blocker; only the paths
+   whose avoidance changed are re-planned, only their collision regions recomputed and only the
+   robots whose constraints changed re-scheduled.
 """
 from __future__ import annotations
 
