@@ -130,11 +130,12 @@ class CollisionModel:
         self.radii = np.asarray(radii, dtype=float)
         self.margin = float(margin)
         self.paths = [np.asarray(p, dtype=float).reshape(-1, 2) for p in paths]
+        self.cumlen = [_cumlen(p) for p in self.paths]   # travelled length at each vertex
         if times is None:
             v = np.ones(len(self.paths)) if speeds is None else np.asarray(speeds, dtype=float)
-            times = [_cumlen(p) / v[x] for x, p in enumerate(self.paths)]
+            times = [c / v[x] for x, c in enumerate(self.cumlen)]
         self.times = [np.asarray(t, dtype=float) for t in times]
-        self.lengths = np.array([_length(p) for p in self.paths])
+        self.lengths = np.array([c[-1] for c in self.cumlen])
         self.travel = np.array([float(t[-1]) for t in self.times])
         self._regions: dict[tuple[int, int], list[Region]] = {}
         self._pieces: dict[tuple[int, int], np.ndarray] = {}
@@ -164,14 +165,15 @@ class CollisionModel:
     # -- updates --------------------------------------------------------------------------------
     def tau(self, x: int, s):
         """Time after its departure at which robot x has travelled ``s`` along its path."""
-        return np.interp(s, _cumlen(self.paths[x]), self.times[x])
+        return np.interp(s, self.cumlen[x], self.times[x])
 
     def set_paths(self, changed: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
         """Replace robots' (path, vertex times) and recompute only their pairs."""
         for x, (path, times) in changed.items():
             self.paths[x] = np.asarray(path, dtype=float).reshape(-1, 2)
             self.times[x] = np.asarray(times, dtype=float)
-            self.lengths[x] = _length(self.paths[x])
+            self.cumlen[x] = _cumlen(self.paths[x])
+            self.lengths[x] = self.cumlen[x][-1]
             self.travel[x] = float(self.times[x][-1])
         dirty = set(changed)
         self._regions = {k: v for k, v in self._regions.items() if k[0] not in dirty and k[1] not in dirty}
@@ -335,7 +337,3 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
 
 def _cumlen(path: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))]) if len(path) > 1 else np.zeros(1)
-
-
-def _length(path: np.ndarray) -> float:
-    return float(np.sum(np.hypot(*np.diff(path, axis=0).T))) if len(path) > 1 else 0.0

@@ -3,24 +3,15 @@ goals, the agents find their own ways and avoid each other from the statuses the
 small warehouse and mixed fleet as test_ros_system.py; contact is checked on the robots' own status
 reports, not by asking the planner."""
 import pytest
-from rclpy.parameter import Parameter
 
-from fleet_planner.ros.demo import bring_up, spin_until
+from fleet_planner.ros.demo import spin_until
 from msg_schemas.records import Task
-from test_ros_system import KINDS, MEMBERS, PARKING, RATE, WAIT, WH, ended, no_contact
+from test_ros_system import WAIT, ended, no_contact, running_fleet
 
 
 @pytest.fixture(scope="module")
 def fleet(ros_context):
-    fleet = bring_up(ros_context, WH, KINDS, MEMBERS, RATE, planner_params=[Parameter("parking", value=PARKING)],
-                     coordination="behavior")
-    try:
-        ids = {m.id for m in MEMBERS}
-        assert spin_until(fleet.executor, lambda: fleet.monitor.planner_ready() and ids <= set(fleet.monitor.status),
-                          WAIT)
-        yield fleet
-    finally:
-        fleet.destroy()
+    yield from running_fleet(ros_context, coordination="behavior")
 
 
 def test_robots_coordinating_by_behaviours_do_their_jobs_without_contact(fleet):

@@ -24,10 +24,10 @@ RATE = 20.0      # simulated seconds per wall second, at most (the clock slows d
 WAIT = 60.0      # wall seconds any one wait may take before the test gives up
 
 
-@pytest.fixture(scope="module")
-def fleet(ros_context):
-    fleet = bring_up(ros_context, WH, KINDS, MEMBERS, RATE, planner_params=[
-        Parameter("parking", value=PARKING), Parameter("offline_timeout_s", value=2.0)])
+def running_fleet(ros_context, planner_params=(), **options):
+    """The test fleet, up and heard by the planner; destroyed when the generator closes."""
+    fleet = bring_up(ros_context, WH, KINDS, MEMBERS, RATE,
+                     planner_params=[Parameter("parking", value=PARKING), *planner_params], **options)
     try:
         ids = {m.id for m in MEMBERS}
         assert spin_until(fleet.executor, lambda: fleet.monitor.planner_ready() and ids <= set(fleet.monitor.status),
@@ -35,6 +35,11 @@ def fleet(ros_context):
         yield fleet
     finally:
         fleet.destroy()
+
+
+@pytest.fixture(scope="module")
+def fleet(ros_context):
+    yield from running_fleet(ros_context, [Parameter("offline_timeout_s", value=2.0)])
 
 
 def wait_for(fleet, condition) -> bool:
