@@ -42,35 +42,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .grid import GridMap
-from .model import Point, PlanningError
+from .model import ACTIVE_BEHAVIORS, WAIT_BEHAVIORS, Behavior, Point, PlanningError
 from .paths import PathFinder
 
 
-class Behavior(enum.Enum):
-    """The 8 behaviours of paper 002, IV.A. The first five are *active* (the robot moves on its own
-    account), the last three are *Wait* behaviours (the robot holds, or only gives way)."""
-
-    FOLLOW_WAYPOINT = "FollowWayPoint"
-    AVOID = "Avoid"
-    EXCHANGE = "Exchange"
-    GO_THROUGH = "GoThrough"
-    DOCK = "Dock"
-    WAIT_KEEP_DISTANCE = "WaitKeepDistance"
-    WAIT_FOR_GO_THROUGH = "WaitForGoThrough"
-    WAIT_FOR_DOCKING = "WaitForDocking"
-
-    @property
-    def is_active(self) -> bool:
-        return self in ACTIVE
-
-    @property
-    def is_wait(self) -> bool:
-        return self in WAITS
-
-
 B = Behavior
-ACTIVE = frozenset({B.FOLLOW_WAYPOINT, B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.DOCK})
-WAITS = frozenset({B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH, B.WAIT_FOR_DOCKING})
+ACTIVE = ACTIVE_BEHAVIORS
+WAITS = WAIT_BEHAVIORS
 
 #: Collision classes by the angle between the two robots' travel directions (documented thresholds):
 #: below 45 degrees the robots go the same way (rear-end), above 135 degrees opposite ways (head-on),

@@ -61,6 +61,7 @@ from msg_schemas.records import (RecordError, RobotStatus, Schedule, Task, TaskE
                                  robot_id_problem)
 
 from .behavior import Behavior, BehaviorController, BehaviorParams, RobotView, WaitMessage, safety_stop
+from .geometry import point_at_arc, polyline_passes_near
 from .model import RAMP_PIECES, Point, PlanningError, RobotSpec, TimedPath, timed_path_from_polyline
 from .paths import PathFinder
 from .planners.md import MDPlanner
@@ -589,7 +590,7 @@ class FleetManager:
         arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
         due = float(np.interp(t0, wp[:, 2], arc))
         s = min(st.progress * arc[-1] + math.hypot(st.vx, st.vy) * max(0.0, t0 - st.stamp), due, arc[-1])
-        return _point_at(wp[:, :2], arc, s)
+        return point_at_arc(wp[:, :2], arc, s)
 
     def _occupant(self, pose: Point, radius: float, exclude: _Robot | None = None) -> _Robot | None:
         """A robot standing on, or bound for, a disc of ``radius`` at ``pose``."""
@@ -661,25 +662,12 @@ def _guess_id(raw: Any) -> str:
     return "?"
 
 
-def _point_at(pts: np.ndarray, arc: np.ndarray, s: float) -> Point:
-    """The point at arc length ``s`` along the polyline ``pts`` (``arc``: arc length at each point)."""
-    keep = np.concatenate([[True], np.diff(arc) > 0])
-    return float(np.interp(s, arc[keep], pts[keep, 0])), float(np.interp(s, arc[keep], pts[keep, 1]))
-
-
 def _passes_near(path: TimedPath, now: float, point: Point, dist: float) -> bool:
     """True if the part of ``path`` from ``now`` on comes closer than ``dist`` to ``point``."""
     wp = path.waypoints
     ahead = wp[wp[:, 2] > now, :2]
     pts = np.vstack([path.position(now), ahead]) if len(ahead) else np.array([path.position(now)])
-    p = np.asarray(point, dtype=float)
-    if len(pts) == 1:
-        return bool(math.dist(pts[0], p) < dist)
-    a, b = pts[:-1], pts[1:]
-    ab = b - a
-    denom = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(denom > 0, denom, 1.0), 0.0, 1.0)
-    return bool(np.min(np.hypot(*(a + ab * t[:, None] - p).T)) < dist)
+    return polyline_passes_near(pts, point, dist)
 
 
 def samples_to_path(robot_id: str, radius: float, samples: Sequence[tuple[float, float, float]]) -> TimedPath:

@@ -11,6 +11,7 @@ Times are seconds from the start of the plan, coordinates metres in the map fram
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field
 from typing import Any, Sequence
@@ -20,6 +21,37 @@ import numpy as np
 Point = tuple[float, float]
 
 ROBOT_KINDS = ("cargo", "manipulator", "cargo_forklift", "manipulator_forklift")
+#: what a robot kind can do beyond driving (a task's ``needs``)
+CAPABILITIES = ("manipulator", "forklift")
+#: what a robot reports it is doing (``mode`` of a robot status)
+STATUS_MODES = ("idle", "waiting", "driving", "picking", "placing", "charging", "offline", "error")
+
+
+class Behavior(enum.Enum):
+    """The 8 behaviours of paper 002, IV.A. The first five are *active* (the robot moves on its own
+    account), the last three are *Wait* behaviours (the robot holds, or only gives way)."""
+
+    FOLLOW_WAYPOINT = "FollowWayPoint"
+    AVOID = "Avoid"
+    EXCHANGE = "Exchange"
+    GO_THROUGH = "GoThrough"
+    DOCK = "Dock"
+    WAIT_KEEP_DISTANCE = "WaitKeepDistance"
+    WAIT_FOR_GO_THROUGH = "WaitForGoThrough"
+    WAIT_FOR_DOCKING = "WaitForDocking"
+
+    @property
+    def is_active(self) -> bool:
+        return self in ACTIVE_BEHAVIORS
+
+    @property
+    def is_wait(self) -> bool:
+        return self in WAIT_BEHAVIORS
+
+
+ACTIVE_BEHAVIORS = frozenset({Behavior.FOLLOW_WAYPOINT, Behavior.AVOID, Behavior.EXCHANGE, Behavior.GO_THROUGH,
+                              Behavior.DOCK})
+WAIT_BEHAVIORS = frozenset({Behavior.WAIT_KEEP_DISTANCE, Behavior.WAIT_FOR_GO_THROUGH, Behavior.WAIT_FOR_DOCKING})
 
 
 @dataclass(frozen=True)
@@ -122,11 +154,6 @@ class PlanningError(RuntimeError):
         self.blockers = dict(blockers or {})
         lines = [f"{rid}: {why}" for rid, why in self.failures.items()]
         super().__init__("no valid plan for %d robot(s):\n  %s" % (len(lines), "\n  ".join(lines)))
-
-
-def polyline_length(points: Sequence[Point] | np.ndarray) -> float:
-    pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    return float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) if len(pts) > 1 else 0.0
 
 
 #: constant-speed pieces per acceleration or braking ramp (a robot that accelerates at its limit

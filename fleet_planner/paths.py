@@ -26,14 +26,12 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
+from .geometry import segment_point_distance
 from .grid import GridMap
-from .model import polyline_length
 
 Point = tuple[float, float]
 Disc = tuple[Point, float]
 
-#: length of a polyline; the same function as :func:`fleet_planner.model.polyline_length`
-path_length = polyline_length
 
 _SQRT2 = math.sqrt(2.0)
 _TOL = 1e-9
@@ -179,7 +177,7 @@ class PathFinder:
             reach = discs[:, 2:]
             discs = discs[np.all((discs[:, :2] >= lo - reach) & (discs[:, :2] <= hi + reach), axis=1)]
         if len(discs):
-            dist = _seg_point_dist(a[:, None, :], b[:, None, :], discs[None, :, :2])
+            dist = segment_point_distance(a[:, None, :], b[:, None, :], discs[None, :, :2])
             ok &= np.all(dist > discs[None, :, 2], axis=1)
         if not ok.any():
             return ok
@@ -277,7 +275,7 @@ class PathFinder:
         centre, keep_out = discs[which, :2], discs[which, 2]
         out_flat, out_bits, out_which = [], [], []
         for dcol, drow, bit_tail, bit_head in self._half_moves:
-            hit = _seg_point_dist(tail, tail + (dcol * res, drow * res), centre) <= keep_out
+            hit = segment_point_distance(tail, tail + (dcol * res, drow * res), centre) <= keep_out
             t = flat[hit]
             out_flat += [t, t + dcol + drow * wp]
             out_bits += [np.full(len(t), bit_tail, np.uint8), np.full(len(t), bit_head, np.uint8)]
@@ -375,16 +373,6 @@ def _corners(path: list[int]) -> list[int]:
             out.append(b)
     out.append(path[-1])
     return out
-
-
-def _seg_point_dist(a: np.ndarray, b: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Distance from point(s) ``p`` to segment(s) ``a -> b`` (broadcasting over leading axes)."""
-    ab = b - a
-    ap = p - a
-    den = np.sum(ab * ab, axis=-1)
-    t = np.clip(np.sum(ap * ab, axis=-1) / np.where(den > 0, den, 1.0), 0.0, 1.0)
-    d = ap - t[..., None] * ab
-    return np.hypot(d[..., 0], d[..., 1])
 
 
 def _point(name: str, p) -> np.ndarray:

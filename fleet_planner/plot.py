@@ -21,6 +21,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .geometry import polyline_point_distances
 from .grid import GridMap
 from .model import Plan, RobotSpec, TimedPath
 
@@ -80,16 +81,6 @@ def travelled_length(path: TimedPath) -> tuple[np.ndarray, np.ndarray]:
     return times, length
 
 
-def _distance_to_polyline(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Distance from each point (shape (n, 2)) to the polyline (shape (m, 2))."""
-    a = poly[:-1] if len(poly) > 1 else poly
-    ab = (poly[1:] if len(poly) > 1 else poly) - a
-    denom = np.einsum("ij,ij->i", ab, ab)
-    rel = points[:, None, :] - a[None]
-    u = np.clip(np.einsum("kij,ij->ki", rel, ab) / np.where(denom > 0, denom, 1.0), 0.0, 1.0)
-    return np.hypot(*(rel - u[..., None] * ab[None]).transpose(2, 0, 1)).min(axis=1)
-
-
 def _by_id(paths: Sequence[TimedPath] | Mapping[str, TimedPath]) -> Mapping[str, TimedPath]:
     return paths if isinstance(paths, Mapping) else {p.robot_id: p for p in paths}
 
@@ -113,7 +104,7 @@ def blocker_map(paths: Sequence[TimedPath] | Mapping[str, TimedPath], j_id: str,
         # only the times at which i is within reach of j's path can matter: first the bounding
         # box (cheap), then the polyline itself
         cols = np.nonzero(np.all((p > lo - reach) & (p < hi + reach), axis=1))[0]
-        cols = cols[_distance_to_polyline(p[cols], pj.waypoints[:, :2]) < reach]
+        cols = cols[polyline_point_distances(p[cols], pj.waypoints[:, :2]) < reach]
         for a in range(0, len(cols), step):
             c = cols[a:a + step]
             d2 = (q[:, None, 0] - p[None, c, 0]) ** 2 + (q[:, None, 1] - p[None, c, 1]) ** 2

@@ -23,11 +23,9 @@ from typing import Any, Sequence
 import numpy as np
 import yaml
 
-from .model import ROBOT_KINDS, Point, TimedPath
+from .model import CAPABILITIES, ROBOT_KINDS, Point, TimedPath
 from .warehouse import config_path
 
-CAPABILITIES = ("manipulator", "forklift")
-MODES = ("idle", "waiting", "driving", "picking", "placing", "charging", "offline", "error")
 ACTIONS = ("pick", "place")
 
 KINDS_FILE = "robot_kinds.yaml"  # the shipped kinds, found by warehouse.config_path

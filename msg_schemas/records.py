@@ -20,9 +20,7 @@ import re
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, Callable, ClassVar, Mapping
 
-from fleet_planner.behavior import Behavior
-from fleet_planner.model import ROBOT_KINDS
-from fleet_planner.robots import CAPABILITIES, MODES
+from fleet_planner.model import CAPABILITIES, ROBOT_KINDS, STATUS_MODES, Behavior
 
 BEHAVIORS = tuple(b.value for b in Behavior)
 TASK_EVENTS = ("accepted", "rejected", "assigned", "picked", "placed", "done", "failed", "cancelled")
@@ -305,7 +303,7 @@ class RobotStatus(Record):
     vx: float = spec(number())
     vy: float = spec(number())
     battery: float = spec(number(0.0, 1.0))   # fraction of full charge
-    mode: str = spec(choice(MODES))
+    mode: str = spec(choice(STATUS_MODES))
     progress: float = spec(number(0.0, 1.0))  # fraction of the current timed path's length driven
     stamp: float = spec(number())
     radius: float = spec(number(lo=0.0))

@@ -7,7 +7,7 @@ import shapely
 from shapely.geometry import LineString, Point, box
 
 from fleet_planner.grid import GridMap
-from fleet_planner.model import polyline_length
+from fleet_planner.geometry import polyline_length
 from fleet_planner.paths import PathFinder
 
 

@@ -21,6 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from ..collision import CollisionModel
+from ..geometry import polyline_keeps_off, polyline_passes_near
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath, drive_profile, timed_path_from_profile
 from ..scheduler import MODES, Blocked, DelayScheduler, Network
@@ -284,7 +285,7 @@ class _Session:
             self.rank = {x: k for k, x in enumerate(self.order)}
             # robots between the blocker and j now have j above them: those crossing j's goal re-plan
             replan = [j] + [x for x in self.order[pos_i + 1:old_j + 1]
-                            if _passes_near(self.paths[x], robots[j].goal, self.keep_out(x, j))]
+                            if polyline_passes_near(self.paths[x], robots[j].goal, self.keep_out(x, j))]
             changed = {}
             for x in replan:
                 path = self.safe_path(x)
@@ -299,7 +300,7 @@ class _Session:
         """Re-plan x to keep off ``disc`` (the start or goal of ``owner``); True if x's path changed."""
         self.must.setdefault(x, {}).setdefault(owner, []).append(disc)
         path = self.safe_path(x, partner=owner)
-        if path is None or _passes_near(path, disc[0], disc[1]):
+        if path is None or polyline_passes_near(path, disc[0], disc[1]):
             return False
         self._set_route(x, path)
         self.reroutes += 1
@@ -389,30 +390,7 @@ def _keeps_off(path: np.ndarray, discs: list, start, goal) -> bool:
     r = np.array([d[1] for d in discs], dtype=float)
     ends = np.array([start, goal], dtype=float)
     unavoidable = (np.hypot(*(c[:, None, :] - ends[None, :, :]).transpose(2, 0, 1)) < r[:, None]).any(1)
-    c, r = c[~unavoidable], r[~unavoidable]
-    if len(c) == 0:
-        return True
-    a, b = path[:-1], path[1:]
-    if len(a) == 0:
-        a = b = path
-    ab = b - a
-    denom = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("kij,ij->ki", c[:, None, :] - a[None], ab) / np.where(denom > 0, denom, 1.0), 0, 1)
-    closest = a[None] + t[..., None] * ab[None]
-    return bool((np.hypot(*(closest - c[:, None, :]).transpose(2, 0, 1)) > r[:, None]).all())
-
-
-def _passes_near(path: np.ndarray, point: tuple[float, float], dist: float) -> bool:
-    """True if some point of the polyline is closer than ``dist`` to ``point``."""
-    p = np.asarray(point, dtype=float)
-    a, b = path[:-1], path[1:]
-    if len(a) == 0:
-        return bool(np.hypot(*(path[0] - p)) < dist)
-    ab = b - a
-    denom = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(denom > 0, denom, 1.0), 0.0, 1.0)
-    closest = a + ab * t[:, None]
-    return bool(np.min(np.hypot(*(closest - p).T)) < dist)
+    return polyline_keeps_off(path, c[~unavoidable], r[~unavoidable])
 
 
 def _check_endpoints(robots: list[RobotSpec], margin: float) -> None:

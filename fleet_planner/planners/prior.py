@@ -45,6 +45,7 @@ import shapely
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components, dijkstra
 
+from ..geometry import segment_point_distance_xy
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from .base import Planner, Progress
@@ -788,7 +789,7 @@ class _Session:
                     ax, ay = (col + 0.5) * res, (row + 0.5) * res
                     for nb, _ in rm.nbrs[row * width + col]:
                         bx, by = (nb % width + 0.5) * res, (nb // width + 0.5) * res
-                        if _segment_distance(ax, ay, bx, by, x, y) < reach:
+                        if segment_point_distance_xy(ax, ay, bx, by, x, y) < reach:
                             blocked.setdefault((row * width + col, nb), []).append(o)
         on_path = [o for move in zip(path[:-1], path[1:]) for o in blocked.get(move, ())]
         if not on_path:
@@ -884,14 +885,6 @@ def _latest(near: list[Piece], keep: list[float], ax: float, ay: float, wx: floa
                     return None
                 moved = True
     return tau
-
-
-def _segment_distance(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
-    """Distance from point p to the segment a-b."""
-    dx, dy = bx - ax, by - ay
-    dd = dx * dx + dy * dy
-    s = 0.0 if dd == 0.0 else min(max(((px - ax) * dx + (py - ay) * dy) / dd, 0.0), 1.0)
-    return math.hypot(ax + s * dx - px, ay + s * dy - py)
 
 
 def _complement(unsafe: list[tuple[float, float]]) -> list[tuple[float, float]]:

@@ -17,7 +17,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from fleet_planner.robots import CAPABILITIES
+from fleet_planner.model import CAPABILITIES
 from msg_schemas import topics
 from msg_schemas.records import RecordError, Task, TaskEvent
 
