@@ -89,7 +89,7 @@ def _enters_channel(me: RobotView, other: RobotView, params: BehaviorParams) -> 
     """The other robot's travel ray crosses my drive channel ahead of me within a front length."""
     c = front_coords(me, other)
     d_me, d_o = me.direction, other.direction
-    if c is None or d_o is None:
+    if c is None or d_me is None or d_o is None:
         return False
     s, l = c
     ds = d_o[0] * d_me[0] + d_o[1] * d_me[1]   # its direction in my frame

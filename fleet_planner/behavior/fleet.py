@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -41,7 +42,7 @@ class BehaviorFleet:
     Each robot plans its own path (A*, no schedule, other robots ignored), senses only robots
     within ``comm_range``, runs the front-area check and the traffic rules, and moves by its
     behaviour; WaitMessages reach robots within ``comm_range`` at the next step, and one shared
-    :class:`DockingArbiter` keeps the docking agreement. Beneath the behaviours a hard safety layer
+    :class:`~.docking.DockingArbiter` keeps the docking agreement. Beneath the behaviours a hard safety layer
     refuses any motion that would bring two discs closer than the sum of their radii (plus
     ``safety_margin`` unless moving apart) or a disc into a wall, so a simulated run never overlaps,
     whatever the rules decide.
@@ -69,12 +70,7 @@ class BehaviorFleet:
             self._index[rid] = k
             self._robots.append(BehaviorController(grid, rid, spec.radius, spec.max_speed, spec.start, params,
                                                    docking=self._arbiter, finders=finders, first_message=tick))
-        if self._robots:
-            reach = 2 * max(r.radius for r in self._robots)
-            for i, j in sorted(cKDTree(self.positions()).query_pairs(reach)):
-                a, b = self._robots[i], self._robots[j]
-                if math.dist(a.pos, b.pos) < a.radius + b.radius:
-                    raise ValueError(f"robots {a.id!r} and {b.id!r}: start discs overlap")
+        self._check_starts()
         self._inbox: list[tuple[str, str, WaitMessage]] = []   # (sender, receiver, message)
         self._refused = 0
         self._longest_stall = 0.0
@@ -109,7 +105,7 @@ class BehaviorFleet:
             msg = r.wait_message(self.time)
             if msg is not None:
                 self._inbox.append((r.id, *msg))
-        self._move(dt, sensed, near)
+        self._move(dt, sensed)
         self.time += dt
         for r in self._robots:
             r.track_progress(self.time)
@@ -137,6 +133,15 @@ class BehaviorFleet:
                           sum(r.replan_failures for r in self._robots), self._refused, stalled, self._longest_stall)
 
     # -- steps ----------------------------------------------------------------------------------
+    def _check_starts(self) -> None:
+        """ValueError when two robots' start discs overlap."""
+        if self._robots:
+            reach = 2 * max(r.radius for r in self._robots)
+            for i, j in sorted(cKDTree(self.positions()).query_pairs(reach)):
+                a, b = self._robots[i], self._robots[j]
+                if math.dist(a.pos, b.pos) < a.radius + b.radius:
+                    raise ValueError(f"robots {a.id!r} and {b.id!r}: start discs overlap")
+
     def _neighbours(self) -> list[list[int]]:
         """For each robot, the robots within communication range (a k-d tree, so the cost grows
         with the number of neighbours, not with the fleet squared)."""
@@ -158,7 +163,7 @@ class BehaviorFleet:
             if forward is not None:
                 self._inbox.append((r.id, *forward))
 
-    def _move(self, dt: float, sensed: list[list[RobotView]], near: list[list[int]]) -> None:
+    def _move(self, dt: float, sensed: list[list[RobotView]]) -> None:
         """Move every robot by its behaviour through the safety layer (in index order)."""
         n = len(self._robots)
         old = self.positions()
@@ -187,7 +192,7 @@ class BehaviorFleet:
             return True
 
         for k, r in enumerate(self._robots):
-            moved = r.move(self.time, dt, sensed[k], lambda q, k=k: clear_of_robots(k, q))
+            moved = r.move(self.time, dt, sensed[k], partial(clear_of_robots, k))
             if moved:
                 new[k] = r.pos
             elif moved is False:
