@@ -19,7 +19,7 @@ from ..model import Behavior, PlanningError, Point
 from ..paths import PathFinder
 from .areas import front_area_check, front_coords, in_critical_area, robots_in_front
 from .deadlock import WaitMessage, on_wait_message, virtual_wall_cells
-from .docking import DockingArbiter, HeardDocking
+from .docking import Docking, HeardDocking
 from .params import DEFAULT_PARAMS, EPS, BehaviorParams
 from .rules import id_key, low_order, select_behavior
 from .views import RobotView
@@ -33,6 +33,18 @@ def _xy(p: np.ndarray) -> tuple[float, float]:
     return float(p[0]), float(p[1])
 
 
+def _checked_start(grid: GridMap, robot_id: str, radius: float, max_speed: float, position: Point) -> np.ndarray:
+    """The robot's start as an array, once its figures are checked (ValueError names the bad one)."""
+    for name, value in (("radius", radius), ("max_speed", max_speed)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"robot {robot_id!r}: {name} must be a finite number > 0, got {value!r}")
+    start = np.asarray(position, dtype=float)
+    if start.shape != (2,) or not np.all(np.isfinite(start)):
+        raise ValueError(f"robot {robot_id!r}: start must be a finite (x, y), got {position!r}")
+    if not grid.disc_is_free(start[0], start[1], radius):
+        raise ValueError(f"robot {robot_id!r}: start {_xy(start)} is not free for radius {radius}")
+    return start
+
 
 class BehaviorController:
     """One BBMRCA robot: its own A* path, the traffic rules against the robots it senses, docking,
@@ -40,37 +52,32 @@ class BehaviorController:
 
     It knows only what one robot can know: its own state and path, the :class:`RobotView` of the
     robots within ``comm_range`` (what they broadcast) and the :class:`WaitMessage` s addressed to
-    it. :class:`BehaviorFleet` steps many of them in one simulation, with a shared
-    :class:`DockingArbiter` and an exact safety layer; a robot on its own (the agent node) calls
-    :meth:`step`, which adds the local safety layer (:meth:`keeps_clear`) and keeps the docking
-    agreement from what it hears (:class:`HeardDocking`).
+    it. :class:`~.fleet.BehaviorFleet` steps many of them in one simulation, with a shared
+    :class:`~.docking.DockingArbiter` and an exact safety layer; a robot on its own (the agent
+    node) calls :meth:`step`, which adds the local safety layer (:meth:`keeps_clear`) and keeps the
+    docking agreement from what it hears (:class:`~.docking.HeardDocking`).
 
-    ``docking``: a :class:`DockingArbiter` shared by simulated robots, or None for a robot on its
-    own (a :class:`HeardDocking` of its own). ``finders`` may be shared between controllers on the
-    same map (one :class:`PathFinder` per radius); ``first_message`` is when the robot first checks
-    whether to send a WaitMessage (robots' clocks are not synchronised: spread phases make waiting
-    robots seldom send at once).
+    ``docking``: a :class:`~.docking.DockingArbiter` shared by simulated robots, or None for a
+    robot on its own (a :class:`~.docking.HeardDocking` of its own). ``finders`` may be shared
+    between controllers on the same map (one :class:`~fleet_planner.paths.PathFinder` per radius);
+    ``first_message`` is when the robot first checks whether to send a WaitMessage (robots' clocks
+    are not synchronised: spread phases make waiting robots seldom send at once).
     """
 
     def __init__(self, grid: GridMap, robot_id: str, radius: float, max_speed: float, position: Point,
-                 params: BehaviorParams = DEFAULT_PARAMS, *, docking: DockingArbiter | HeardDocking | None = None,
+                 params: BehaviorParams = DEFAULT_PARAMS, *, docking: Docking | None = None,
                  finders: dict[float, PathFinder] | None = None, first_message: float = 0.0) -> None:
-        for name, value in (("radius", radius), ("max_speed", max_speed)):
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"robot {robot_id!r}: {name} must be a finite number > 0, got {value!r}")
-        start = np.asarray(position, dtype=float)
-        if start.shape != (2,) or not np.all(np.isfinite(start)):
-            raise ValueError(f"robot {robot_id!r}: start must be a finite (x, y), got {position!r}")
-        if not grid.disc_is_free(*start, radius):
-            raise ValueError(f"robot {robot_id!r}: start {_xy(start)} is not free for radius {radius}")
+        start = _checked_start(grid, robot_id, radius, max_speed, position)
         self.grid, self.params = grid, params
         self.id, self.radius, self.max_speed = robot_id, float(radius), float(max_speed)
         finders = {} if finders is None else finders
         if self.radius not in finders:
             finders[self.radius] = PathFinder(grid, self.radius)
         self.finder = finders[self.radius]
-        self._heard_docking = HeardDocking(robot_id) if docking is None else None
-        self.docking = docking if docking is not None else self._heard_docking
+        self._heard_docking: HeardDocking | None = None
+        if docking is None:
+            docking = self._heard_docking = HeardDocking(robot_id)
+        self.docking: Docking = docking
         self.time = 0.0                       # the robot's clock: the time of the last call
         self.pos = start
         self.msg_tick = float(first_message)  # next time to check whether to send a WaitMessage
@@ -104,15 +111,15 @@ class BehaviorController:
     def assign(self, goal: Point, station: str | None = None, now: float | None = None) -> None:
         """Go to ``goal`` (at ``station``, if given, which it docks at one robot at a time).
 
-        The robot plans its own path from where it is, ignoring the other robots (paper 002, II).
-        Raises ValueError for a bad goal and PlanningError when no path exists.
+        The robot plans its own path from where it is, ignoring the other robots (section II of
+        the paper). Raises ValueError for a bad goal and PlanningError when no path exists.
         """
         if now is not None:
             self.time = float(now)
         g = np.asarray(goal, dtype=float)
         if g.shape != (2,) or not np.all(np.isfinite(g)):
             raise ValueError(f"robot {self.id!r}: goal must be a finite (x, y), got {goal!r}")
-        if not self.grid.disc_is_free(*g, self.radius):
+        if not self.grid.disc_is_free(g[0], g[1], self.radius):
             raise ValueError(f"robot {self.id!r}: goal {_xy(g)} is not free for radius {self.radius}")
         path = self.finder.find(self.position, (float(g[0]), float(g[1])))
         if path is None:
@@ -129,6 +136,7 @@ class BehaviorController:
         """What the robot broadcasts about itself."""
         nxt, remaining, straight = None, 0.0, 0.0
         if self.path is not None:
+            assert self.tail is not None and self.run is not None   # set with the path
             nxt = (float(self.path[self.wp, 0]), float(self.path[self.wp, 1]))
             ahead = math.dist(self.pos, nxt)
             remaining, straight = ahead + float(self.tail[self.wp]), ahead + float(self.run[self.wp])
@@ -153,13 +161,7 @@ class BehaviorController:
         sensed = [v for v in heard if v.id != self.id and math.dist(v.position, self.pos) <= self.params.comm_range]
         if self._heard_docking is not None:
             self._heard_docking.hear(sensed)
-        out = []
-        in_range = {v.id for v in sensed}
-        for msg in inbox:
-            if msg.waiting and msg.waiting[-1] in in_range:
-                forward = self.receive(now, msg, sensed)
-                if forward is not None:
-                    out.append(forward)
+        out = self._read_inbox(now, inbox, sensed)
         self.decide(now, sensed)
         own = self.wait_message(now)
         if own is not None:
@@ -167,6 +169,18 @@ class BehaviorController:
         if move:
             self.move(now, dt, sensed, self.keeps_clear(sensed, reach or {}), speed)
         self.track_progress(now + dt)
+        return out
+
+    def _read_inbox(self, now: float, inbox: Sequence[WaitMessage],
+                    sensed: Sequence[RobotView]) -> list[tuple[str, WaitMessage]]:
+        """Receive the WaitMessages whose sender (the last id) is in range; the ones to forward."""
+        out = []
+        in_range = {v.id for v in sensed}
+        for msg in inbox:
+            if msg.waiting and msg.waiting[-1] in in_range:
+                forward = self.receive(now, msg, sensed)
+                if forward is not None:
+                    out.append(forward)
         return out
 
     def receive(self, now: float, msg: WaitMessage, sensed: Sequence[RobotView]) -> tuple[str, WaitMessage] | None:
@@ -177,7 +191,10 @@ class BehaviorController:
         if deadlock:
             self.deadlocks += 1
             self._replan(sensed)
-        return (self.partner, forward) if forward is not None else None
+        if forward is None:
+            return None
+        assert self.partner is not None   # only a robot waiting for a partner forwards
+        return self.partner, forward
 
     def decide(self, now: float, sensed: Sequence[RobotView]) -> None:
         """Sensing and behaviour selection from the views of the robots in range.
@@ -252,7 +269,10 @@ class BehaviorController:
     def track_progress(self, now: float) -> None:
         """Note when the robot last came closer to its goal (for the timeouts and the stall stats)."""
         self.time = float(now)
-        distance = math.dist(self.pos, self.goal) if self.path is not None else 0.0
+        distance = 0.0
+        if self.path is not None:
+            assert self.goal is not None   # a robot with a path has a goal
+            distance = math.dist(self.pos, self.goal)
         if distance < self.best_distance - _PROGRESS or self.path is None:
             self.best_distance, self.progress_at = distance, self.time
 
@@ -287,19 +307,18 @@ class BehaviorController:
 
     # -- decisions ------------------------------------------------------------------------------
     def _select(self, me: RobotView, sensed: list[RobotView]) -> None:
+        """My behaviour this step, in this order: a station lost to an earlier request, no path, a
+        station held, the station rules, a path repaired or short-cut, the end of the running
+        behaviour, the traffic rules, and a re-plan when the behaviour failed."""
         if self.holds is not None and not self.docking.keeps(self.holds[0], self.id):
             self.holds = None                   # another robot asked to dock earlier: queue again
         if self.path is None:                   # idle, or parked on its goal (docked if it holds)
             self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
             return
         if self.holds is not None:              # IV.B.5: Dock keeps moving, the others give way
-            rival = self._dock_rival(me, sensed)
-            self._set(B.DOCK if rival is None else B.WAIT_KEEP_DISTANCE, None if rival is None else rival.id)
-            if rival is None and self._leaving() and self._stalled() and any(
-                    not o.travelling and in_critical_area(me, o, self.params) for o in sensed):
-                self._replan(sensed)            # a standing robot in the way does not give way (IV.C.1)
+            self._select_holding(me, sensed)
             return
-        if self.station is not None and self._docking():
+        if self.station is not None and self._docking(self.station):
             return
         path = self.path
         if self.off_path:
@@ -310,17 +329,32 @@ class BehaviorController:
             me = self.view()
         in_front = robots_in_front(me, sensed, self.params)
         self._complete(me, sensed, in_front)
-        # traffic rules (IV.B) against the robot the front area check selects
-        other = front_area_check(me, in_front, self.params)
-        if other is not None:
-            me = replace(me, behavior=self.behavior, partner=self.partner)
-            new = select_behavior(me, other, in_front, self.params)
-            if new is not None:
-                self._set(new, other.id)
-            elif self.behavior is B.WAIT_KEEP_DISTANCE:
-                self.partner = other.id   # I wait for whoever blocks my front area now (WaitMessages go there)
+        me = self._apply_rules(me, in_front)
         if self._failed(me, sensed, in_front):
             self._replan(sensed)
+
+    def _select_holding(self, me: RobotView, sensed: list[RobotView]) -> None:
+        """A robot holding its station docks (IV.B.5), unless it leaves the station and must give
+        way to a rival (:meth:`_dock_rival`)."""
+        rival = self._dock_rival(me, sensed)
+        self._set(B.DOCK if rival is None else B.WAIT_KEEP_DISTANCE, None if rival is None else rival.id)
+        if rival is None and self._leaving() and self._stalled() and any(
+                not o.travelling and in_critical_area(me, o, self.params) for o in sensed):
+            self._replan(sensed)            # a standing robot in the way does not give way (IV.C.1)
+
+    def _apply_rules(self, me: RobotView, in_front: list[RobotView]) -> RobotView:
+        """The traffic rules (IV.B) against the robot the front area check selects; returns my view
+        as the rules saw it (with the behaviour left by :meth:`_complete`)."""
+        other = front_area_check(me, in_front, self.params)
+        if other is None:
+            return me
+        me = replace(me, behavior=self.behavior, partner=self.partner)
+        new = select_behavior(me, other, in_front, self.params)
+        if new is not None:
+            self._set(new, other.id)
+        elif self.behavior is B.WAIT_KEEP_DISTANCE:
+            self.partner = other.id   # I wait for whoever blocks my front area now (WaitMessages go there)
+        return me
 
     def _leaving(self) -> bool:
         """Driving away from the station it still holds (until it is out of the docking region)."""
@@ -385,6 +419,7 @@ class BehaviorController:
         """A robot pushed off its path (by avoiding or backing off) whose straight way to the next
         waypoint is walled off plans its path again from where it is (no virtual wall: the map,
         not a robot, is in the way)."""
+        assert self.goal is not None   # a robot with a path has a goal
         self.off_path = False
         path = self.finder.find(self.position, self.goal)
         if path is not None:
@@ -394,6 +429,7 @@ class BehaviorController:
         """Interpretation: a waypoint (not the goal) on which a robot stands cannot be reached; the
         robot heads for the next one instead if the straight way there is free of walls (it will
         avoid the standing robot on the way); otherwise the behaviours fail and it re-plans."""
+        assert self.path is not None
         skipped = False
         while self.wp < len(self.path) - 1 and any(
                 not o.travelling and math.dist(o.position, self.path[self.wp]) < self.radius + o.radius
@@ -404,22 +440,24 @@ class BehaviorController:
             skipped = True
         return skipped
 
-    def _docking(self) -> bool:
-        """Station rules (IV.A, IV.B.8); True when they decided the robot's behaviour."""
+    def _docking(self, station: str) -> bool:
+        """Station rules (IV.A, IV.B.8) at ``station``, the robot's goal; True when they decided the
+        robot's behaviour."""
+        assert self.goal is not None   # a robot with a path has a goal
         p = self.params
         dist = math.dist(self.pos, self.goal)
         if dist <= p.dock_region or (self.behavior is B.WAIT_FOR_DOCKING and dist <= p.dock_give_up):
             if self.dock_since is None:
                 self.dock_since = self.time
-            if self.docking.request(self.station, self.id, self.time):
-                self.holds = (self.station, np.array(self.goal))
+            if self.docking.request(station, self.id, self.time):
+                self.holds = (station, np.array(self.goal))
                 self._set(B.DOCK, None)
             else:
-                waiting_for = self.docking.holder(self.station) or self.docking.first_waiting(self.station)
+                waiting_for = self.docking.holder(station) or self.docking.first_waiting(station)
                 self._set(B.WAIT_FOR_DOCKING, waiting_for)
             return True
         if self.behavior is B.WAIT_FOR_DOCKING:  # pushed too far from the station: give up waiting
-            self.docking.withdraw(self.station, self.id)
+            self.docking.withdraw(station, self.id)
             self.dock_since = None
             self._set(B.FOLLOW_WAYPOINT, None)
         return False
@@ -437,7 +475,9 @@ class BehaviorController:
 
     def _sidestep(self, partner: RobotView, side: int) -> float:
         """Lateral offset (in my frame) that passes the partner on ``side`` with the margin."""
-        u, n = self._frame()
+        frame = self._frame()
+        assert frame is not None   # asked only while the robot has a direction
+        _, n = frame
         l_p = float(np.dot(np.asarray(partner.position) - self.pos, n))
         clear = self.radius + partner.radius + self.params.avoid_margin
         return min(0.0, l_p - clear) if side < 0 else max(0.0, l_p + clear)
@@ -445,7 +485,9 @@ class BehaviorController:
     def _side_is_free(self, partner: RobotView, side: int, sensed: list[RobotView]) -> bool:
         """Free space for the sidestep: my disc fits beside me and beside the partner, clear of
         the walls and of the other robots I sense."""
-        u, n = self._frame()
+        frame = self._frame()
+        assert frame is not None   # asked only while the robot has a direction
+        u, n = frame
         lat = self._sidestep(partner, side)
         s_p = max(0.0, float(np.dot(np.asarray(partner.position) - self.pos, u)))
         for s in (0.0, s_p):
@@ -466,28 +508,41 @@ class BehaviorController:
         partner = next((o for o in sensed if o.id == self.partner), None)
         if partner is None or self._frame() is None:
             return False
-        if self.behavior is B.EXCHANGE:
-            sides = [-1]                       # both pass on their right
-        else:
-            c = front_coords(me, partner)
-            away = -1 if c is None or c[1] >= 0 else 1
-            sides = [self.side] if self.side else []
-            sides += [s for s in (away, -away) if s not in sides]
         if not stalled:
-            for side in sides:
+            for side in self._sides_to_try(me, partner):
                 if self._side_is_free(partner, side, sensed):
                     self.side, self.no_space = side, False
                     return False
         self.side, self.no_space = 0, True
         if self.behavior is B.AVOID:
-            if not any(o.id != partner.id and o.travelling for o in in_front):
-                return True                    # IV.C.2: no free space, no robot but the partner in front
-            self._set(B.WAIT_KEEP_DISTANCE, partner.id)
-            return False
-        # IV.C.3: when both exchanging robots find no free space, the lower id re-plans and the
-        # higher id waits (still saying it found no space, so that the lower id learns it). A
-        # partner that has not tried yet gets its turn (it cooperates with my Exchange), one with
-        # room passes me while I hold still, and one that is not about me is waited for.
+            return self._no_space_to_avoid(partner, in_front)
+        return self._no_space_to_exchange(partner, stalled)
+
+    def _sides_to_try(self, me: RobotView, partner: RobotView) -> list[int]:
+        """The sides to pass the partner on, preferred first (+1 left, -1 right): an Exchange passes
+        on the right; an Avoid keeps the side it chose, then tries the side away from the partner,
+        then the other."""
+        if self.behavior is B.EXCHANGE:
+            return [-1]                        # both pass on their right
+        c = front_coords(me, partner)
+        away = -1 if c is None or c[1] >= 0 else 1
+        sides = [self.side] if self.side else []
+        sides += [s for s in (away, -away) if s not in sides]
+        return sides
+
+    def _no_space_to_avoid(self, partner: RobotView, in_front: list[RobotView]) -> bool:
+        """IV.C.2: an Avoid without free space fails (True: re-plan) when no robot but the partner
+        is in front; otherwise the robot waits for the partner."""
+        if not any(o.id != partner.id and o.travelling for o in in_front):
+            return True
+        self._set(B.WAIT_KEEP_DISTANCE, partner.id)
+        return False
+
+    def _no_space_to_exchange(self, partner: RobotView, stalled: bool) -> bool:
+        """IV.C.3: when both exchanging robots find no free space, the lower id re-plans (True) and
+        the higher id waits (still saying it found no space, so that the lower id learns it). A
+        partner that has not tried yet gets its turn (it cooperates with my Exchange), one with
+        room passes me while I hold still, and one that is not about me is waited for."""
         about_me = partner.partner == self.id
         if (about_me and partner.no_space) or stalled:
             if id_key(self.id) < id_key(partner.id):
@@ -529,6 +584,7 @@ class BehaviorController:
         closer than a front length, on along the path for a front length (interpretation: our
         straightened paths have few waypoints, and a wall shorter than the robot's front area
         leaves the blocked way open)."""
+        assert self.path is not None
         points, left = [self.position], self.params.front_length
         for q in self.path[self.wp:]:
             step = math.dist(points[-1], q)
@@ -544,6 +600,7 @@ class BehaviorController:
 
     def _find_detour(self, sensed: Sequence[RobotView]) -> np.ndarray | None:
         """The re-planned path, or None (counted as a failed re-plan)."""
+        assert self.goal is not None   # a robot with a path has a goal
         wall = virtual_wall_cells(self.grid, self._ahead(), self.goal, self.radius)
         reach = self.params.front_length + 2 * self.radius
 
@@ -580,6 +637,7 @@ class BehaviorController:
 
     def _along_path(self, distance: float) -> tuple[np.ndarray, int]:
         """The point ``distance`` further along the path and the index of the next waypoint there."""
+        assert self.path is not None
         p, wp = self.pos.copy(), self.wp
         while distance > EPS and wp < len(self.path):
             seg = self.path[wp] - p
@@ -601,30 +659,44 @@ class BehaviorController:
         partner = next((o for o in sensed if o.id == self.partner), None) if self.partner is not None else None
         if b in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK) or (b in (B.AVOID, B.EXCHANGE) and partner is None):
             return [self._along_path(step), self._along_path(step / 2)]
-        if b in (B.AVOID, B.EXCHANGE):
-            if not self.side:
-                return []
-            u, n = self._frame()
-            lat = max(-step, min(step, self._sidestep(partner, self.side)))
-            fwd = math.sqrt(max(step * step - lat * lat, 0.0))
-            out = []
-            for q in (self.pos + u * fwd + n * lat, self.pos + n * lat, self.pos + u * fwd / 2 + n * lat / 2):
-                # a waypoint passed close by while stepping aside counts as reached (not the goal)
-                passed = self.wp < len(self.path) - 1 and math.dist(q, self.path[self.wp]) <= step
-                out.append((q, self.wp + 1 if passed else -1))
-            return out
+        if b in (B.AVOID, B.EXCHANGE) and partner is not None:
+            return self._pass_motions(partner, step)
         if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.direction is not None:
-            # make the intersection free: leave the going-through robot's drive channel sideways
-            du = np.asarray(partner.direction)
-            rel = self.pos - np.asarray(partner.position)
-            lateral = float(rel[0] * -du[1] + rel[1] * du[0])
-            half = partner.radius + self.params.critical_margin / 2 + self.radius
-            if float(np.dot(rel, du)) > 0 and abs(lateral) < half:
-                away = np.array([-du[1], du[0]]) * (1.0 if lateral >= 0 else -1.0)
-                return [(self.pos + away * min(step, half - abs(lateral) + EPS), -1)]
+            leave = self._leave_channel(partner, step)
+            if leave is not None:
+                return leave
         # waits: hold, backing off from a robot closer than the kept gap
         others = [partner] if b is not B.WAIT_FOR_DOCKING and partner is not None else list(sensed)
         return self._back_off(others, step / 2)
+
+    def _pass_motions(self, partner: RobotView, step: float) -> list[tuple[np.ndarray, int]]:
+        """Avoid / Exchange: step aside towards the chosen side (at most ``step``), driving on with
+        what is left of ``step``; none while no side is free."""
+        if not self.side:
+            return []
+        frame = self._frame()
+        assert self.path is not None and frame is not None   # a side is chosen only with a direction
+        u, n = frame
+        lat = max(-step, min(step, self._sidestep(partner, self.side)))
+        fwd = math.sqrt(max(step * step - lat * lat, 0.0))
+        out = []
+        for q in (self.pos + u * fwd + n * lat, self.pos + n * lat, self.pos + u * fwd / 2 + n * lat / 2):
+            # a waypoint passed close by while stepping aside counts as reached (not the goal)
+            passed = self.wp < len(self.path) - 1 and math.dist(q, self.path[self.wp]) <= step
+            out.append((q, self.wp + 1 if passed else -1))
+        return out
+
+    def _leave_channel(self, partner: RobotView, step: float) -> list[tuple[np.ndarray, int]] | None:
+        """WaitForGoThrough: make the intersection free by leaving the going-through robot's drive
+        channel sideways, when I stand in it ahead of that robot (else None)."""
+        du = np.asarray(partner.direction)
+        rel = self.pos - np.asarray(partner.position)
+        lateral = float(rel[0] * -du[1] + rel[1] * du[0])
+        half = partner.radius + self.params.critical_margin / 2 + self.radius
+        if float(np.dot(rel, du)) > 0 and abs(lateral) < half:
+            away = np.array([-du[1], du[0]]) * (1.0 if lateral >= 0 else -1.0)
+            return [(self.pos + away * min(step, half - abs(lateral) + EPS), -1)]
+        return None
 
     def _back_off(self, others: Sequence[RobotView], step: float) -> list[tuple[np.ndarray, int]]:
         """Move away from the nearest of ``others`` if it is closer than ``keep_gap`` (or hold)."""
