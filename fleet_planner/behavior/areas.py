@@ -79,6 +79,8 @@ def front_area_check(me: RobotView, others: Iterable[RobotView],
 
 
 class Collision(enum.Enum):
+    """The class of a path collision, by the paper's names (see :func:`collision_type`)."""
+
     NONE = "none"
     REAR_END = "rearEndCollision"
     HEAD_ON = "headOnCollision"

@@ -88,8 +88,8 @@ class DockingArbiter:
 
 class HeardDocking:
     """The docking agreement of IV.A kept by one robot from what it hears, for robots running on
-    their own (:meth:`BehaviorController.step`): every robot broadcasts the station it docks at
-    (``RobotView.docked_at``) and since when it asked to (``RobotView.dock_since``).
+    their own (:meth:`~.controller.BehaviorController.step`): every robot broadcasts the station it
+    docks at (``RobotView.docked_at``) and since when it asked to (``RobotView.dock_since``).
 
     A robot may dock when nobody it hears docks at the station and no robot it hears waiting for
     it asked earlier (same time: the smaller id). Two robots that granted themselves the station

@@ -1,9 +1,8 @@
-"""The tuning of the behaviour layer: :class:`BehaviorParams` (metres, seconds) and the tolerance
-:data:`EPS` shared by its geometry.
+"""The tuning of the behaviour layer, :class:`BehaviorParams` (metres, seconds), and the length
+tolerance :data:`EPS` its geometry shares.
 
-The defaults follow Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance"
-(ICRA 2014) where the paper gives a figure (the 2 s WaitMessage period, the GoThrough timeout of
-IV.C.4); the others are ours, chosen for discs of radius 0.3-0.5 m at about 1 m/s on 1 m cells.
+"paper" in the comments is Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance"
+(ICRA 2014): a default marked "paper: ..." is the paper's figure, the others are ours.
 """
 from __future__ import annotations
 

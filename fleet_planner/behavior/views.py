@@ -1,5 +1,5 @@
 """:class:`RobotView`: what a robot knows of itself or hears from a neighbour (position, path,
-status), the only input of the traffic rules.
+status), all that the traffic rules read of a robot.
 
 Frames: a robot's *front frame* has its origin at the robot, axis ``u`` from the robot to its next
 waypoint (its heading is ignored, as in Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision
@@ -13,26 +13,24 @@ from dataclasses import dataclass
 from ..model import Behavior, Point
 from .params import EPS
 
-B = Behavior
-
 
 @dataclass(frozen=True)
 class RobotView:
     """What a robot knows of itself or hears from a neighbour: position, path, status.
 
     ``next_waypoint`` is None for a robot without a path (idle, or arrived): it stands still.
-    ``remaining`` is the length of the rest of its path (for :func:`low_order`), ``straight`` the
+    ``remaining`` is the length of the rest of its path (for :func:`~.rules.low_order`), ``straight`` the
     length of the straight run of it ahead (up to the next turn or the goal).
     ``partner`` is the id of the robot its current behaviour is about (the one it waits for,
     avoids, exchanges with...); ``no_space`` says its Avoid / Exchange finds no free space.
     ``docked_at`` is the station it docks at (it may be leaving it for its next goal already),
-    ``dock_since`` when it first asked to dock at its station (for :class:`HeardDocking`).
+    ``dock_since`` when it first asked to dock at its station (for :class:`~.docking.HeardDocking`).
     """
 
     id: str
     position: Point
     radius: float
-    behavior: Behavior = B.FOLLOW_WAYPOINT
+    behavior: Behavior = Behavior.FOLLOW_WAYPOINT
     next_waypoint: Point | None = None
     remaining: float = math.inf
     straight: float = math.inf
