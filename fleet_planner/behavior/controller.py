@@ -1,0 +1,720 @@
+"""One BBMRCA robot, :class:`BehaviorController` (Sun, Kleiner & Nebel, "Behavior-based
+Multi-Robot Collision Avoidance", ICRA 2014): its own A* path, the traffic rules of :mod:`.rules`
+against the robots it senses, docking (:mod:`.docking`), WaitMessages and re-planning
+(:mod:`.deadlock`), and the motion its behaviour wants. It knows only what one robot can know.
+
+Where the paper leaves a choice open, the choice and its reason are written where it is made
+("Interpretation").
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from ..grid import GridMap
+from ..model import Behavior, PlanningError, Point
+from ..paths import PathFinder
+from .areas import front_area_check, front_coords, in_critical_area, robots_in_front
+from .deadlock import WaitMessage, on_wait_message, virtual_wall_cells
+from .docking import Docking, HeardDocking
+from .params import DEFAULT_PARAMS, EPS, BehaviorParams
+from .rules import id_key, low_order, select_behavior
+from .views import RobotView
+
+B = Behavior
+_COS_STRAIGHT = math.cos(math.radians(10.0))  # a path bending less than this at a waypoint goes on straight
+_PROGRESS = 0.05  # m: coming this much closer to the goal (straight line) is progress (stats)
+
+
+def _xy(p: np.ndarray) -> tuple[float, float]:
+    return float(p[0]), float(p[1])
+
+
+def _checked_start(grid: GridMap, robot_id: str, radius: float, max_speed: float, position: Point) -> np.ndarray:
+    """The robot's start as an array, once its figures are checked (ValueError names the bad one)."""
+    for name, value in (("radius", radius), ("max_speed", max_speed)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"robot {robot_id!r}: {name} must be a finite number > 0, got {value!r}")
+    start = np.asarray(position, dtype=float)
+    if start.shape != (2,) or not np.all(np.isfinite(start)):
+        raise ValueError(f"robot {robot_id!r}: start must be a finite (x, y), got {position!r}")
+    if not grid.disc_is_free(start[0], start[1], radius):
+        raise ValueError(f"robot {robot_id!r}: start {_xy(start)} is not free for radius {radius}")
+    return start
+
+
+class BehaviorController:
+    """One BBMRCA robot: its own A* path, the traffic rules against the robots it senses, docking,
+    WaitMessages and re-planning, and the motion its behaviour wants.
+
+    It knows only what one robot can know: its own state and path, the :class:`RobotView` of the
+    robots within ``comm_range`` (what they broadcast) and the :class:`WaitMessage` s addressed to
+    it. :class:`~.fleet.BehaviorFleet` steps many of them in one simulation, with a shared
+    :class:`~.docking.DockingArbiter` and an exact safety layer; a robot on its own (the agent
+    node) calls :meth:`step`, which adds the local safety layer (:meth:`keeps_clear`) and keeps the
+    docking agreement from what it hears (:class:`~.docking.HeardDocking`).
+
+    ``docking``: a :class:`~.docking.DockingArbiter` shared by simulated robots, or None for a
+    robot on its own (a :class:`~.docking.HeardDocking` of its own). ``finders`` may be shared
+    between controllers on the same map (one :class:`~fleet_planner.paths.PathFinder` per radius);
+    ``first_message`` is when the robot first checks whether to send a WaitMessage (robots' clocks
+    are not synchronised: spread phases make waiting robots seldom send at once).
+    """
+
+    def __init__(self, grid: GridMap, robot_id: str, radius: float, max_speed: float, position: Point,
+                 params: BehaviorParams = DEFAULT_PARAMS, *, docking: Docking | None = None,
+                 finders: dict[float, PathFinder] | None = None, first_message: float = 0.0) -> None:
+        start = _checked_start(grid, robot_id, radius, max_speed, position)
+        self.grid, self.params = grid, params
+        self.id, self.radius, self.max_speed = robot_id, float(radius), float(max_speed)
+        finders = {} if finders is None else finders
+        if self.radius not in finders:
+            finders[self.radius] = PathFinder(grid, self.radius)
+        self.finder = finders[self.radius]
+        self._heard_docking: HeardDocking | None = None
+        if docking is None:
+            docking = self._heard_docking = HeardDocking(robot_id)
+        self.docking: Docking = docking
+        self.time = 0.0                       # the robot's clock: the time of the last call
+        self.pos = start
+        self.msg_tick = float(first_message)  # next time to check whether to send a WaitMessage
+        self.path: np.ndarray | None = None   # waypoints still ahead, path[wp] is the next one
+        self.tail: np.ndarray | None = None   # tail[k] = length of path[k:]
+        self.run: np.ndarray | None = None    # run[k] = length of the straight run of the path after path[k]
+        self.wp = 0
+        self.goal: Point | None = None
+        self.station: str | None = None
+        self.holds: tuple[str, np.ndarray] | None = None  # (station, its point) while docking there
+        self.dock_since: float | None = None  # when it first asked to dock at its station
+        self.arrived = False
+        self.behavior = B.FOLLOW_WAYPOINT
+        self.partner: str | None = None
+        self.since = 0.0                      # when the current behaviour began
+        self.replan_after = -math.inf         # no re-plan before this time
+        self.best_distance = math.inf         # closest it came to its goal since assigned
+        self.progress_at = 0.0                # when it last came closer by _PROGRESS (or was assigned)
+        self.side = 0                         # Avoid/Exchange: +1 pass the partner on the left, -1 right
+        self.no_space = False                 # Avoid/Exchange found no free space to pass the partner
+        self.blocked_since: float | None = None  # since when the wanted motion is refused
+        self.off_path = False                 # pushed off its path: the way to the next waypoint hits a wall
+        self.clear_at = (0.0, 0.0, -math.inf)  # (x, y, clearance there), a cache
+        self.deadlocks = self.replans = self.replan_failures = 0
+
+    # -- public ---------------------------------------------------------------------------
+    @property
+    def position(self) -> Point:
+        return float(self.pos[0]), float(self.pos[1])
+
+    def assign(self, goal: Point, station: str | None = None, now: float | None = None) -> None:
+        """Go to ``goal`` (at ``station``, if given, which it docks at one robot at a time).
+
+        The robot plans its own path from where it is, ignoring the other robots (section II of
+        the paper). Raises ValueError for a bad goal and PlanningError when no path exists.
+        """
+        if now is not None:
+            self.time = float(now)
+        g = np.asarray(goal, dtype=float)
+        if g.shape != (2,) or not np.all(np.isfinite(g)):
+            raise ValueError(f"robot {self.id!r}: goal must be a finite (x, y), got {goal!r}")
+        if not self.grid.disc_is_free(g[0], g[1], self.radius):
+            raise ValueError(f"robot {self.id!r}: goal {_xy(g)} is not free for radius {self.radius}")
+        path = self.finder.find(self.position, (float(g[0]), float(g[1])))
+        if path is None:
+            raise PlanningError({self.id: f"no path from {self.position} to {_xy(g)}"})
+        if self.station is not None and self.holds is None:
+            self.docking.withdraw(self.station, self.id)
+            self.dock_since = None
+        self.goal, self.station, self.arrived = (float(g[0]), float(g[1])), station, False
+        self._set_path(path)
+        self.best_distance, self.progress_at = math.dist(self.pos, g), self.time
+        self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
+
+    def view(self) -> RobotView:
+        """What the robot broadcasts about itself."""
+        nxt, remaining, straight = None, 0.0, 0.0
+        if self.path is not None:
+            assert self.tail is not None and self.run is not None   # set with the path
+            nxt = (float(self.path[self.wp, 0]), float(self.path[self.wp, 1]))
+            ahead = math.dist(self.pos, nxt)
+            remaining, straight = ahead + float(self.tail[self.wp]), ahead + float(self.run[self.wp])
+        return RobotView(self.id, self.position, self.radius, self.behavior, nxt, remaining, straight,
+                         self.station, self.partner, self.no_space,
+                         self.holds[0] if self.holds else None, self.dock_since)
+
+    def step(self, now: float, dt: float, heard: Sequence[RobotView], inbox: Sequence[WaitMessage] = (), *,
+             reach: Mapping[str, float] | None = None, speed: float | None = None,
+             move: bool = True) -> list[tuple[str, WaitMessage]]:
+        """One control step of a robot on its own, from ``now`` to ``now + dt``; returns the
+        WaitMessages to send, as ``(receiver, message)``.
+
+        ``heard``: the last views of the other robots (those beyond ``comm_range`` are ignored);
+        ``inbox``: WaitMessages addressed to this robot since the last step (one whose sender,
+        the last id in it, is out of range is dropped). ``reach``: how far each heard robot may
+        have moved from the position it reported by the end of this step (for the local safety
+        layer, :meth:`keeps_clear`). ``speed``: the speed it may drive at in this step (default:
+        its top speed), e.g. under an acceleration limit. ``move=False`` decides and talks but
+        does not move (the robot is busy, e.g. picking).
+        """
+        sensed = [v for v in heard if v.id != self.id and math.dist(v.position, self.pos) <= self.params.comm_range]
+        if self._heard_docking is not None:
+            self._heard_docking.hear(sensed)
+        out = self._read_inbox(now, inbox, sensed)
+        self.decide(now, sensed)
+        own = self.wait_message(now)
+        if own is not None:
+            out.append(own)
+        if move:
+            self.move(now, dt, sensed, self.keeps_clear(sensed, reach or {}), speed)
+        self.track_progress(now + dt)
+        return out
+
+    def _read_inbox(self, now: float, inbox: Sequence[WaitMessage],
+                    sensed: Sequence[RobotView]) -> list[tuple[str, WaitMessage]]:
+        """Receive the WaitMessages whose sender (the last id) is in range; the ones to forward."""
+        out = []
+        in_range = {v.id for v in sensed}
+        for msg in inbox:
+            if msg.waiting and msg.waiting[-1] in in_range:
+                forward = self.receive(now, msg, sensed)
+                if forward is not None:
+                    out.append(forward)
+        return out
+
+    def receive(self, now: float, msg: WaitMessage, sensed: Sequence[RobotView]) -> tuple[str, WaitMessage] | None:
+        """A WaitMessage addressed to me: the message to forward to the robot I wait for, or None.
+        A wait cycle through me (a deadlock) makes me re-plan (IV.C)."""
+        self.time = float(now)
+        deadlock, forward = on_wait_message(self.view(), msg)
+        if deadlock:
+            self.deadlocks += 1
+            self._replan(sensed)
+        if forward is None:
+            return None
+        assert self.partner is not None   # only a robot waiting for a partner forwards
+        return self.partner, forward
+
+    def decide(self, now: float, sensed: Sequence[RobotView]) -> None:
+        """Sensing and behaviour selection from the views of the robots in range.
+
+        A behaviour left and taken up again within the step on the same path (e.g. Avoid completed
+        for one partner and started for the next) keeps its start time, so the timeouts see one
+        behaviour.
+        """
+        self.time = float(now)
+        sensed = list(sensed)
+        before, path, since, blocked_since = self.behavior, self.path, self.since, self.blocked_since
+        self._select(self.view(), sensed)
+        if self.behavior is before and self.path is path:
+            self.since, self.blocked_since = since, blocked_since
+
+    def wait_message(self, now: float) -> tuple[str, WaitMessage] | None:
+        """The WaitMessage a waiting robot sends its partner every ``wait_msg_period``, when due."""
+        period = self.params.wait_msg_period
+        if now + EPS >= self.msg_tick:
+            self.msg_tick += period * (1 + math.floor((now - self.msg_tick) / period))
+            if self.behavior.is_wait and self.partner is not None:
+                return self.partner, WaitMessage((self.id,))
+        return None
+
+    def move(self, now: float, dt: float, sensed: Sequence[RobotView],
+             robot_ok: Callable[[np.ndarray], bool] | None = None, speed: float | None = None) -> bool | None:
+        """Move by the behaviour: the first motion it wants that keeps the disc in free space and
+        that ``robot_ok`` (the safety layer) accepts. True when it moved, False when every wanted
+        motion was refused, None when it wanted none."""
+        self.time = float(now)
+        candidates = self._candidates(dt, sensed, self.max_speed if speed is None else speed)
+        for n_tried, (q, wp) in enumerate(candidates):
+            if not self._map_clear(q):
+                if n_tried == 0 and self.behavior in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK):
+                    self.off_path = True     # the straight way to the next waypoint hits a wall
+                continue
+            if robot_ok is not None and not robot_ok(q):
+                continue
+            self.pos = q
+            self._advance(wp)
+            self.blocked_since = None
+            if self.holds is not None and math.dist(self.pos, self.holds[1]) > self.params.dock_region:
+                self.docking.release(self.holds[0], self.id)   # left the docking region
+                self.holds, self.dock_since = None, None
+                self._set(B.FOLLOW_WAYPOINT, None)
+            return True
+        if not candidates:
+            return None
+        if self.blocked_since is None:
+            self.blocked_since = self.time
+        return False
+
+    def keeps_clear(self, sensed: Sequence[RobotView], reach: Mapping[str, float]) -> Callable[[np.ndarray], bool]:
+        """The local safety layer of a robot on its own: may the disc move to ``q``?
+
+        Each other disc is grown by ``reach[id]`` (how far it may have moved since it reported)
+        plus ``safety_margin``: a move into a grown disc is refused unless it increases the
+        distance, a move closer than the sum of radii plus ``reach`` always. So whatever the
+        other robot did since its report, this robot's own move never brings the discs together.
+        """
+        margin = self.params.safety_margin
+        others = [(np.asarray(o.position), self.radius + o.radius + reach.get(o.id, 0.0)) for o in sensed]
+
+        def ok(q: np.ndarray) -> bool:
+            for p, hard in others:
+                d_new = math.dist(q, p)
+                if d_new < hard or (d_new < hard + margin and d_new < math.dist(self.pos, p)):
+                    return False
+            return True
+        return ok
+
+    def track_progress(self, now: float) -> None:
+        """Note when the robot last came closer to its goal (for the timeouts and the stall stats)."""
+        self.time = float(now)
+        distance = 0.0
+        if self.path is not None:
+            assert self.goal is not None   # a robot with a path has a goal
+            distance = math.dist(self.pos, self.goal)
+        if distance < self.best_distance - _PROGRESS or self.path is None:
+            self.best_distance, self.progress_at = distance, self.time
+
+    # -- state --------------------------------------------------------------------------------
+    def _set_path(self, path: np.ndarray) -> None:
+        path = np.asarray(path, dtype=float)
+        if len(path) and np.allclose(path[0], self.pos, atol=1e-9):
+            path = path[1:]
+        if not len(path):
+            self.path = self.tail = self.run = None
+            self.arrived = True
+            return
+        seg = np.hypot(*np.diff(path, axis=0).T)
+        self.path, self.wp = path, 0
+        self.tail = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])
+        # run[k]: how far the path goes on straight after waypoint k (0 where it turns)
+        self.run = np.zeros(len(path))
+        d = np.diff(np.vstack([self.pos, path]), axis=0)
+        for k in range(len(path) - 2, -1, -1):
+            a, b = d[k], d[k + 1]
+            cos = float(np.dot(a, b)) / max(math.hypot(*a) * math.hypot(*b), EPS)
+            self.run[k] = seg[k] + self.run[k + 1] if cos > _COS_STRAIGHT else 0.0
+        self.blocked_since = None
+
+    def _set(self, behavior: Behavior, partner: str | None) -> None:
+        if behavior is not self.behavior or partner != self.partner:
+            self.side, self.no_space = 0, False
+        if behavior is not self.behavior:
+            self.since = self.time
+            self.blocked_since = None
+        self.behavior, self.partner = behavior, partner
+
+    # -- decisions ------------------------------------------------------------------------------
+    def _select(self, me: RobotView, sensed: list[RobotView]) -> None:
+        """My behaviour this step, in this order: a station lost to an earlier request, no path, a
+        station held, the station rules, a path repaired or short-cut, the end of the running
+        behaviour, the traffic rules, and a re-plan when the behaviour failed."""
+        if self.holds is not None and not self.docking.keeps(self.holds[0], self.id):
+            self.holds = None                   # another robot asked to dock earlier: queue again
+        if self.path is None:                   # idle, or parked on its goal (docked if it holds)
+            self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
+            return
+        if self.holds is not None:              # IV.B.5: Dock keeps moving, the others give way
+            self._select_holding(me, sensed)
+            return
+        if self.station is not None and self._docking(self.station):
+            return
+        path = self.path
+        if self.off_path:
+            self._repair()
+            if self.path is None:
+                return
+        if self._skip_covered_waypoints(sensed) or self.path is not path:
+            me = self.view()
+        in_front = robots_in_front(me, sensed, self.params)
+        self._complete(me, sensed, in_front)
+        me = self._apply_rules(me, in_front)
+        if self._failed(me, sensed, in_front):
+            self._replan(sensed)
+
+    def _select_holding(self, me: RobotView, sensed: list[RobotView]) -> None:
+        """A robot holding its station docks (IV.B.5), unless it leaves the station and must give
+        way to a rival (:meth:`_dock_rival`)."""
+        rival = self._dock_rival(me, sensed)
+        self._set(B.DOCK if rival is None else B.WAIT_KEEP_DISTANCE, None if rival is None else rival.id)
+        if rival is None and self._leaving() and self._stalled() and any(
+                not o.travelling and in_critical_area(me, o, self.params) for o in sensed):
+            self._replan(sensed)            # a standing robot in the way does not give way (IV.C.1)
+
+    def _apply_rules(self, me: RobotView, in_front: list[RobotView]) -> RobotView:
+        """The traffic rules (IV.B) against the robot the front area check selects; returns my view
+        as the rules saw it (with the behaviour left by :meth:`_complete`)."""
+        other = front_area_check(me, in_front, self.params)
+        if other is None:
+            return me
+        me = replace(me, behavior=self.behavior, partner=self.partner)
+        new = select_behavior(me, other, in_front, self.params)
+        if new is not None:
+            self._set(new, other.id)
+        elif self.behavior is B.WAIT_KEEP_DISTANCE:
+            self.partner = other.id   # I wait for whoever blocks my front area now (WaitMessages go there)
+        return me
+
+    def _leaving(self) -> bool:
+        """Driving away from the station it still holds (until it is out of the docking region)."""
+        return self.holds is not None and self.holds[0] != self.station and self.path is not None
+
+    def _stalled(self) -> bool:
+        """The safety layer has refused the wanted motion for longer than ``blocked_timeout``."""
+        return self.blocked_since is not None and self.time - self.blocked_since > self.params.blocked_timeout
+
+    def _dock_rival(self, me: RobotView, sensed: list[RobotView]) -> RobotView | None:
+        """The Dock robot a robot leaving the station it still holds gives way to (or None).
+
+        Interpretation: the paper's Dock drives on while the others give way, so two robots
+        docking at once (here: leaving neighbouring stations towards each other) would block
+        each other for good. A robot leaving its station gives way (WaitKeepDistance, backing off)
+        to a moving Dock robot in its critical area that drives into its own station, or that is
+        leaving too and has the higher priority (:func:`low_order`). A leaving robot stopped for
+        ``blocked_timeout`` with a standing robot in its critical area (one that does not give way)
+        re-plans like a FollowWayPoint robot waiting for an obstacle (IV.C.1)."""
+        if not self._leaving():
+            return None
+        for o in robots_in_front(me, sensed, self.params):
+            if (o.behavior is B.DOCK and o.travelling and in_critical_area(me, o, self.params)
+                    and (o.docked_at == o.station or low_order(me, o))):
+                return o
+        return None
+
+    def _complete(self, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> None:
+        """End the running behaviour when its partner left the front area (IV.A), back to
+        FollowWayPoint; WaitForGoThrough also ends when the partner stops going through."""
+        b = self.behavior
+        if b not in (B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH):
+            return
+        partner = next((o for o in sensed if o.id == self.partner), None)
+        done = partner is None or all(o.id != partner.id for o in in_front)
+        if b is B.AVOID and partner is not None and not partner.travelling:
+            done = not in_critical_area(me, partner, self.params)  # a standing obstacle: once my channel is clear
+        if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.behavior is not B.GO_THROUGH:
+            done = True
+        if done:
+            self._set(B.FOLLOW_WAYPOINT, None)
+
+    def _failed(self, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> bool:
+        """The failures of IV.C, after which the robot re-plans with a virtual wall."""
+        p = self.params
+        stalled = self._stalled()
+        no_progress = self.time - self.progress_at > p.avoid_timeout
+        if self.behavior in (B.AVOID, B.EXCHANGE):                           # IV.C.2-3
+            stalled = stalled or (no_progress and self.time - self.since > p.blocked_timeout)
+            if self._pass_or_fail(me, sensed, in_front, stalled):
+                return True
+        elif self.behavior is B.GO_THROUGH:                                  # IV.C.4
+            return self.time - self.since > p.go_through_timeout
+        elif self.behavior is B.FOLLOW_WAYPOINT:                             # IV.C.1
+            return stalled and not in_front
+        # Interpretation: waiting for a standing robot in my channel that I could not drive round
+        # is waiting for an obstacle (IV.C.1)
+        return (self.behavior is B.WAIT_KEEP_DISTANCE and no_progress
+                and any(o.id == self.partner and not o.travelling and in_critical_area(me, o, p) for o in in_front))
+
+    def _repair(self) -> None:
+        """A robot pushed off its path (by avoiding or backing off) whose straight way to the next
+        waypoint is walled off plans its path again from where it is (no virtual wall: the map,
+        not a robot, is in the way)."""
+        assert self.goal is not None   # a robot with a path has a goal
+        self.off_path = False
+        path = self.finder.find(self.position, self.goal)
+        if path is not None:
+            self._set_path(path)
+
+    def _skip_covered_waypoints(self, sensed: list[RobotView]) -> bool:
+        """Interpretation: a waypoint (not the goal) on which a robot stands cannot be reached; the
+        robot heads for the next one instead if the straight way there is free of walls (it will
+        avoid the standing robot on the way); otherwise the behaviours fail and it re-plans."""
+        assert self.path is not None
+        skipped = False
+        while self.wp < len(self.path) - 1 and any(
+                not o.travelling and math.dist(o.position, self.path[self.wp]) < self.radius + o.radius
+                for o in sensed):
+            if not self.finder.segment_free(self.position, tuple(self.path[self.wp + 1])):
+                break
+            self.wp += 1
+            skipped = True
+        return skipped
+
+    def _docking(self, station: str) -> bool:
+        """Station rules (IV.A, IV.B.8) at ``station``, the robot's goal; True when they decided the
+        robot's behaviour."""
+        assert self.goal is not None   # a robot with a path has a goal
+        p = self.params
+        dist = math.dist(self.pos, self.goal)
+        if dist <= p.dock_region or (self.behavior is B.WAIT_FOR_DOCKING and dist <= p.dock_give_up):
+            if self.dock_since is None:
+                self.dock_since = self.time
+            if self.docking.request(station, self.id, self.time):
+                self.holds = (station, np.array(self.goal))
+                self._set(B.DOCK, None)
+            else:
+                waiting_for = self.docking.holder(station) or self.docking.first_waiting(station)
+                self._set(B.WAIT_FOR_DOCKING, waiting_for)
+            return True
+        if self.behavior is B.WAIT_FOR_DOCKING:  # pushed too far from the station: give up waiting
+            self.docking.withdraw(station, self.id)
+            self.dock_since = None
+            self._set(B.FOLLOW_WAYPOINT, None)
+        return False
+
+    def _frame(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(u, n) of the robot's front frame."""
+        if self.path is None:
+            return None
+        d = self.path[self.wp] - self.pos
+        length = math.hypot(*d)
+        if length < EPS:
+            return None
+        u = d / length
+        return u, np.array([-u[1], u[0]])
+
+    def _sidestep(self, partner: RobotView, side: int) -> float:
+        """Lateral offset (in my frame) that passes the partner on ``side`` with the margin."""
+        frame = self._frame()
+        assert frame is not None   # asked only while the robot has a direction
+        _, n = frame
+        l_p = float(np.dot(np.asarray(partner.position) - self.pos, n))
+        clear = self.radius + partner.radius + self.params.avoid_margin
+        return min(0.0, l_p - clear) if side < 0 else max(0.0, l_p + clear)
+
+    def _side_is_free(self, partner: RobotView, side: int, sensed: list[RobotView]) -> bool:
+        """Free space for the sidestep: my disc fits beside me and beside the partner, clear of
+        the walls and of the other robots I sense."""
+        frame = self._frame()
+        assert frame is not None   # asked only while the robot has a direction
+        u, n = frame
+        lat = self._sidestep(partner, side)
+        s_p = max(0.0, float(np.dot(np.asarray(partner.position) - self.pos, u)))
+        for s in (0.0, s_p):
+            q = self.pos + u * s + n * lat
+            if not self.grid.disc_is_free(float(q[0]), float(q[1]), self.radius):
+                return False
+            if any(math.dist(q, o.position) < self.radius + o.radius + self.params.safety_margin
+                   for o in sensed if o.id != partner.id):
+                return False
+        return True
+
+    def _pass_or_fail(self, me: RobotView, sensed: list[RobotView], in_front: list[RobotView], stalled: bool) -> bool:
+        """Avoid / Exchange: pick the side to pass the partner on; True when the behaviour failed
+        and the robot must re-plan (IV.C.2-3). A sidestep refused by the safety layer for
+        ``blocked_timeout``, or a behaviour running for that long while the robot came no closer
+        to its goal for ``avoid_timeout``, counts as no free space. Robots standing without a path
+        are obstacles like the partner, not "other robots"."""
+        partner = next((o for o in sensed if o.id == self.partner), None)
+        if partner is None or self._frame() is None:
+            return False
+        if not stalled:
+            for side in self._sides_to_try(me, partner):
+                if self._side_is_free(partner, side, sensed):
+                    self.side, self.no_space = side, False
+                    return False
+        self.side, self.no_space = 0, True
+        if self.behavior is B.AVOID:
+            return self._no_space_to_avoid(partner, in_front)
+        return self._no_space_to_exchange(partner, stalled)
+
+    def _sides_to_try(self, me: RobotView, partner: RobotView) -> list[int]:
+        """The sides to pass the partner on, preferred first (+1 left, -1 right): an Exchange passes
+        on the right; an Avoid keeps the side it chose, then tries the side away from the partner,
+        then the other."""
+        if self.behavior is B.EXCHANGE:
+            return [-1]                        # both pass on their right
+        c = front_coords(me, partner)
+        away = -1 if c is None or c[1] >= 0 else 1
+        sides = [self.side] if self.side else []
+        sides += [s for s in (away, -away) if s not in sides]
+        return sides
+
+    def _no_space_to_avoid(self, partner: RobotView, in_front: list[RobotView]) -> bool:
+        """IV.C.2: an Avoid without free space fails (True: re-plan) when no robot but the partner
+        is in front; otherwise the robot waits for the partner."""
+        if not any(o.id != partner.id and o.travelling for o in in_front):
+            return True
+        self._set(B.WAIT_KEEP_DISTANCE, partner.id)
+        return False
+
+    def _no_space_to_exchange(self, partner: RobotView, stalled: bool) -> bool:
+        """IV.C.3: when both exchanging robots find no free space, the lower id re-plans (True) and
+        the higher id waits (still saying it found no space, so that the lower id learns it). A
+        partner that has not tried yet gets its turn (it cooperates with my Exchange), one with
+        room passes me while I hold still, and one that is not about me is waited for."""
+        about_me = partner.partner == self.id
+        if (about_me and partner.no_space) or stalled:
+            if id_key(self.id) < id_key(partner.id):
+                return True
+            self._set(B.WAIT_KEEP_DISTANCE, partner.id)
+            self.no_space = True
+        elif not about_me:
+            self._set(B.WAIT_KEEP_DISTANCE, partner.id)
+        return False
+
+    def _replan(self, sensed: Sequence[RobotView]) -> None:
+        """IV.C: a new path to the goal with a virtual wall between the robot and its next waypoint.
+
+        Interpretation: the new path also keeps out of the robots standing in range (parked robots
+        do not give way) and, where possible, of those waiting close by (what the behaviour failed
+        on), by enough to keep them out of its critical area.
+
+        A robot re-plans at most once per ``blocked_timeout``; when it cannot (or finds no path)
+        it keeps its path and waits for its partner if it has one: a wait cycle is then found by
+        WaitMessages and another robot in it re-plans. (Otherwise the robot the rules pick, e.g.
+        the lower id of an Exchange, may re-plan back and forth between two blocked ways.)
+        """
+        if self.path is None or self.goal is None:
+            return
+        path = None
+        if self.time >= self.replan_after:
+            path = self._find_detour(sensed)
+            self.replan_after = self.time + self.params.blocked_timeout
+        if path is None:
+            if self.partner is not None and self.behavior.is_active:
+                self._set(B.WAIT_KEEP_DISTANCE, self.partner)
+            return
+        self.replans += 1
+        self._set_path(path)
+        self._set(B.FOLLOW_WAYPOINT, None)
+
+    def _ahead(self) -> list[Point]:
+        """Where the virtual wall goes: from the robot to its next waypoint and, when that is
+        closer than a front length, on along the path for a front length (interpretation: our
+        straightened paths have few waypoints, and a wall shorter than the robot's front area
+        leaves the blocked way open)."""
+        assert self.path is not None
+        points, left = [self.position], self.params.front_length
+        for q in self.path[self.wp:]:
+            step = math.dist(points[-1], q)
+            if step >= left and len(points) > 1:
+                (x, y), t = points[-1], left / step
+                points.append((x + (q[0] - x) * t, y + (q[1] - y) * t))
+                break
+            points.append((float(q[0]), float(q[1])))
+            left -= step
+            if left <= 0:
+                break
+        return points
+
+    def _find_detour(self, sensed: Sequence[RobotView]) -> np.ndarray | None:
+        """The re-planned path, or None (counted as a failed re-plan)."""
+        assert self.goal is not None   # a robot with a path has a goal
+        wall = virtual_wall_cells(self.grid, self._ahead(), self.goal, self.radius)
+        reach = self.params.front_length + 2 * self.radius
+
+        def keep_out(with_waiting: bool) -> list[tuple[Point, float]]:
+            return [(o.position, self.radius + o.radius + self.params.critical_margin) for o in sensed
+                    if not o.travelling or (with_waiting and o.behavior.is_wait
+                                            and math.dist(o.position, self.pos) <= reach + o.radius)]
+
+        path = self.finder.find(self.position, self.goal, avoid=keep_out(True), blocked_cells=wall)
+        if path is None:
+            path = self.finder.find(self.position, self.goal, avoid=keep_out(False), blocked_cells=wall)
+        if path is None:
+            self.replan_failures += 1
+        return path
+
+    # -- motion ---------------------------------------------------------------------------------
+    def _map_clear(self, q: np.ndarray) -> bool:
+        """The disc at ``q`` is in free space (the clearance measured last is reused while it settles it)."""
+        if self.clear_at[2] - math.dist(q, self.clear_at[:2]) < self.radius:   # not sure from the last measurement
+            self.clear_at = (float(q[0]), float(q[1]), self.grid.clearance(float(q[0]), float(q[1])))
+            if self.clear_at[2] < self.radius - EPS:
+                return False
+        return True
+
+    def _advance(self, wp: int) -> None:
+        """Commit the waypoint index after a move; arriving at the goal ends the path."""
+        if self.path is None or wp < 0:
+            return
+        self.wp = wp
+        if wp >= len(self.path):
+            self.path = self.tail = self.run = None
+            self.arrived = True
+            self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
+
+    def _along_path(self, distance: float) -> tuple[np.ndarray, int]:
+        """The point ``distance`` further along the path and the index of the next waypoint there."""
+        assert self.path is not None
+        p, wp = self.pos.copy(), self.wp
+        while distance > EPS and wp < len(self.path):
+            seg = self.path[wp] - p
+            length = math.hypot(*seg)
+            if length <= distance:
+                p, distance, wp = self.path[wp].copy(), distance - length, wp + 1
+            else:
+                p = p + seg * (distance / length)
+                distance = 0.0
+        return p, wp
+
+    def _candidates(self, dt: float, sensed: Sequence[RobotView], speed: float) -> list[tuple[np.ndarray, int]]:
+        """Motions the behaviour wants this step, preferred first: ``(new position, next waypoint
+        index after it)``, index -1 when the move leaves the path index unchanged."""
+        if self.path is None:
+            return []
+        step = speed * dt
+        b = self.behavior
+        partner = next((o for o in sensed if o.id == self.partner), None) if self.partner is not None else None
+        if b in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK) or (b in (B.AVOID, B.EXCHANGE) and partner is None):
+            return [self._along_path(step), self._along_path(step / 2)]
+        if b in (B.AVOID, B.EXCHANGE) and partner is not None:
+            return self._pass_motions(partner, step)
+        if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.direction is not None:
+            leave = self._leave_channel(partner, step)
+            if leave is not None:
+                return leave
+        # waits: hold, backing off from a robot closer than the kept gap
+        others = [partner] if b is not B.WAIT_FOR_DOCKING and partner is not None else list(sensed)
+        return self._back_off(others, step / 2)
+
+    def _pass_motions(self, partner: RobotView, step: float) -> list[tuple[np.ndarray, int]]:
+        """Avoid / Exchange: step aside towards the chosen side (at most ``step``), driving on with
+        what is left of ``step``; none while no side is free."""
+        if not self.side:
+            return []
+        frame = self._frame()
+        assert self.path is not None and frame is not None   # a side is chosen only with a direction
+        u, n = frame
+        lat = max(-step, min(step, self._sidestep(partner, self.side)))
+        fwd = math.sqrt(max(step * step - lat * lat, 0.0))
+        out = []
+        for q in (self.pos + u * fwd + n * lat, self.pos + n * lat, self.pos + u * fwd / 2 + n * lat / 2):
+            # a waypoint passed close by while stepping aside counts as reached (not the goal)
+            passed = self.wp < len(self.path) - 1 and math.dist(q, self.path[self.wp]) <= step
+            out.append((q, self.wp + 1 if passed else -1))
+        return out
+
+    def _leave_channel(self, partner: RobotView, step: float) -> list[tuple[np.ndarray, int]] | None:
+        """WaitForGoThrough: make the intersection free by leaving the going-through robot's drive
+        channel sideways, when I stand in it ahead of that robot (else None)."""
+        du = np.asarray(partner.direction)
+        rel = self.pos - np.asarray(partner.position)
+        lateral = float(rel[0] * -du[1] + rel[1] * du[0])
+        half = partner.radius + self.params.critical_margin / 2 + self.radius
+        if float(np.dot(rel, du)) > 0 and abs(lateral) < half:
+            away = np.array([-du[1], du[0]]) * (1.0 if lateral >= 0 else -1.0)
+            return [(self.pos + away * min(step, half - abs(lateral) + EPS), -1)]
+        return None
+
+    def _back_off(self, others: Sequence[RobotView], step: float) -> list[tuple[np.ndarray, int]]:
+        """Move away from the nearest of ``others`` if it is closer than ``keep_gap`` (or hold)."""
+        nearest, gap = None, math.inf
+        for o in others:
+            g = math.dist(self.pos, o.position) - self.radius - o.radius
+            if g < gap:
+                nearest, gap = o, g
+        if nearest is None or gap >= self.params.keep_gap:
+            return []
+        away = self.pos - np.asarray(nearest.position)
+        length = math.hypot(*away)
+        if length < EPS:
+            return []
+        away /= length
+        dist = min(step, self.params.keep_gap - gap)
+        out = []
+        for angle in (0.0, math.pi / 4, -math.pi / 4):
+            c, s = math.cos(angle), math.sin(angle)
+            out.append((self.pos + dist * np.array([c * away[0] - s * away[1], s * away[0] + c * away[1]]), -1))
+        return out
