@@ -18,7 +18,7 @@ controller, and many robots make a steppable fleet. By concern, innermost first:
   virtual wall (:func:`virtual_wall_cells`);
 * :mod:`.controller` - :class:`BehaviorController`, one robot (the agent node in
   ``coordination:=behavior`` calls its ``step``);
-* :mod:`.fleet`      - :class:`BehaviorFleet`, the decentralised fleet as one simulation;
+* :mod:`.simulation` - :class:`BehaviorFleet`, the decentralised fleet as one simulation;
 * :mod:`.safety`     - :func:`safety_stop`, the critical area as the safety net of a robot that
   follows a central plan.
 
@@ -41,7 +41,7 @@ from .areas import (
 from .controller import BehaviorController
 from .deadlock import WaitMessage, on_wait_message, virtual_wall_cells
 from .docking import Docking, DockingArbiter, HeardDocking
-from .fleet import BehaviorFleet, FleetStats
+from .simulation import BehaviorFleet, FleetStats
 from .params import DEFAULT_PARAMS, BehaviorParams
 from .rules import (
     cooperate,
