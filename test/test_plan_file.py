@@ -46,8 +46,7 @@ robots:
 """
 
 SCENARIOS = ("corridor", "crossing", "default")
-#: plan-file label -> registry name and options
-PLANNERS = {"md": ("md", {}), "md-box": ("md", {"mode": "box"}), "prior": ("prior", {})}
+PLANNERS = ("md", "md-box", "prior")
 
 
 def scenario(name: str) -> Scenario:
@@ -56,10 +55,9 @@ def scenario(name: str) -> Scenario:
     return parse_scenario(yaml.safe_load({"corridor": CORRIDOR, "crossing": CROSSING}[name]), ROOT)
 
 
-def write(scenario_name: str, label: str, path: Path) -> None:
+def write(scenario_name: str, planner: str, path: Path) -> None:
     sc = scenario(scenario_name)
-    name, options = PLANNERS[label]
-    plan = get_planner(name, **options).plan(sc.grid, sc.robots)
+    plan = get_planner(planner).plan(sc.grid, sc.robots)
     plan.planning_time_s = 0.125
     write_plan(plan, path)
 
@@ -67,16 +65,16 @@ def write(scenario_name: str, label: str, path: Path) -> None:
 CASES = [(s, p) for s in SCENARIOS for p in PLANNERS]
 
 
-@pytest.mark.parametrize("scenario_name,label", CASES, ids=[f"{s}-{p}" for s, p in CASES])
-def test_write_plan_writes_the_pinned_bytes(tmp_path, scenario_name, label):
+@pytest.mark.parametrize("scenario_name,planner", CASES, ids=[f"{s}-{p}" for s, p in CASES])
+def test_write_plan_writes_the_pinned_bytes(tmp_path, scenario_name, planner):
     out = tmp_path / "plan.json"
-    write(scenario_name, label, out)
-    assert out.read_bytes() == (DATA / f"{scenario_name}-{label}.json").read_bytes()
+    write(scenario_name, planner, out)
+    assert out.read_bytes() == (DATA / f"{scenario_name}-{planner}.json").read_bytes()
 
 
-@pytest.mark.parametrize("scenario_name,label", CASES, ids=[f"{s}-{p}" for s, p in CASES])
-def test_a_plan_file_read_back_is_written_unchanged(tmp_path, scenario_name, label):
-    pinned = DATA / f"{scenario_name}-{label}.json"
+@pytest.mark.parametrize("scenario_name,planner", CASES, ids=[f"{s}-{p}" for s, p in CASES])
+def test_a_plan_file_read_back_is_written_unchanged(tmp_path, scenario_name, planner):
+    pinned = DATA / f"{scenario_name}-{planner}.json"
     write_plan(read_plan(pinned), tmp_path / "again.json")
     assert (tmp_path / "again.json").read_bytes() == pinned.read_bytes()
 
