@@ -33,7 +33,9 @@ from . import collision as C
 from .collision import EPS, CollisionModel
 
 INF = math.inf
-MODES = ("box", "exact")
+#: how a lower robot is kept clear of a higher one: out of its collision boxes (the paper) or out of
+#: the exact collision regions (the ``mode`` of the scheduler and of the md planner)
+COLLISION_TESTS = ("box", "exact")
 
 
 @dataclass
@@ -106,8 +108,8 @@ class DelayScheduler:
     """
 
     def __init__(self, model: CollisionModel, mode: str = "box"):
-        if mode not in MODES:
-            raise ValueError(f"mode: must be one of {', '.join(MODES)} (got {mode!r})")
+        if mode not in COLLISION_TESTS:
+            raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.model = model
         self.delays = np.zeros(len(model.paths))
         self.mode = mode

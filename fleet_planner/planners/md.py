@@ -24,7 +24,7 @@ from ..collision import CollisionModel
 from ..geometry import polyline_keeps_off, polyline_passes_near
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath, drive_profile, timed_path_from_profile
-from ..scheduler import MODES, Blocked, DelayScheduler, Network
+from ..scheduler import COLLISION_TESTS, Blocked, DelayScheduler, Network
 from .base import Planner, Progress
 
 _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
@@ -32,7 +32,7 @@ ORDERS = ("shortest", "longest", "given", "parking")
 
 
 @dataclass
-class Schedule:
+class DepartureSchedule:
     """Result of scheduling fixed paths: delays by robot index, the network, the final order."""
 
     order: list[int]
@@ -43,7 +43,7 @@ class Schedule:
 
 def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Sequence[float],
                    speeds: Sequence[float], order: Sequence[int] | None = None,
-                   margin: float = 0.0, mode: str = "box") -> Schedule:
+                   margin: float = 0.0, mode: str = "box") -> DepartureSchedule:
     """Departure delays for robots on the given paths (no re-planning): the bare method of the paper.
 
     ``order`` lists robot indices from highest to lowest priority (default: as given); ``mode`` is
@@ -52,7 +52,7 @@ def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Seque
     model = CollisionModel(paths, radii, margin, speeds)
     sched = DelayScheduler(model, mode)
     blocked = sched.schedule(order)
-    return Schedule(order, sched.delays.copy(), sched.network(order, ids), blocked)
+    return DepartureSchedule(order, sched.delays.copy(), sched.network(order, ids), blocked)
 
 
 class MDPlanner(Planner):
@@ -70,8 +70,8 @@ class MDPlanner(Planner):
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
                  mode: str = "exact"):
-        if mode not in MODES:
-            raise ValueError(f"mode: must be one of {', '.join(MODES)} (got {mode!r})")
+        if mode not in COLLISION_TESTS:
+            raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.mode = mode
         if order not in ORDERS:
             raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
