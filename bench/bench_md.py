@@ -164,7 +164,7 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], name: str) -> None:
         t0 = time.perf_counter()
         plan = get_planner(name).plan(grid, robots)
         elapsed = time.perf_counter() - t0
-        plan.info.pop("network", None)   # large and not needed here
+        plan.network = None   # large and not needed here
         results.put(("ok", elapsed, plan))
     except PlanningError as exc:
         results.put(("no plan", time.perf_counter() - t0, str(exc).splitlines()[1].strip()))

@@ -17,7 +17,7 @@ from typing import Sequence, TextIO
 
 from .checker import check_plan, min_separation
 from .grid import MapError
-from .model import Plan, PlanningError, RobotSpec
+from .model import COLLISION_TESTS, Plan, PlanningError, RobotSpec
 from .planners import get_planner, planner_names, planner_summary
 from .scenario import ScenarioError, load_scenario, write_plan
 
@@ -31,8 +31,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", choices=planner_names(), default="md",
                    help="planner (default: %(default)s): " + "; ".join(
                        f"{name}: {planner_summary(name)}" for name in planner_names()))
-    p.add_argument("--mode", choices=["exact", "box"],
-                   help="md: collision test, exact regions (default) or the paper's boxes")
+    p.add_argument("--mode", choices=sorted(COLLISION_TESTS, reverse=True),
+                   help="md: collision test, exact regions (default) or the paper's boxes (as md-box)")
     p.add_argument("--order", choices=["parking", "given", "shortest", "longest"],
                    help="initial priority order (default: the planner's own; md: shortest, prior: given; "
                         "parking is md only)")

@@ -15,12 +15,12 @@ scheduler's business (:mod:`fleet_planner.scheduler`).
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
-EPS = 1e-9
+from .model import EPS
 
 
 @dataclass(frozen=True)

@@ -24,63 +24,16 @@ never larger than the box answer, and exact for constant-speed robots.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import collision as C
-from .collision import EPS, CollisionModel
+from .collision import CollisionModel
+from .model import COLLISION_TESTS, EPS, Link, Network
 
 INF = math.inf
-#: how a lower robot is kept clear of a higher one: out of its collision boxes (the paper) or out of
-#: the exact collision regions (the ``mode`` of the scheduler and of the md planner)
-COLLISION_TESTS = ("box", "exact")
-
-
-@dataclass
-class Link:
-    """A link (i -> j, k) of the network with its collision box and (M, D) under the final delays.
-
-    ``paper_tuple`` is the paper's (lower, higher, k) notation, e.g. (3, 1, 2)."""
-
-    i: str          # higher priority
-    j: str          # lower priority
-    k: int          # 1-based index of the region along j's path
-    M: float
-    D: float
-    ks: float       # T1: i enters the region (absolute time)
-    ke: float       # T4: i leaves it (inf if i parks in it)
-    ls: float       # smallest travelled length of j inside the region
-    le: float       # largest
-
-    @property
-    def paper_tuple(self) -> tuple[str, str, int]:
-        return (self.j, self.i, self.k)
-
-    @property
-    def dangerous(self) -> bool:
-        return self.M > EPS and self.D > EPS
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"i": self.i, "j": self.j, "k": self.k, "M": _num(self.M), "D": _num(self.D),
-                "ks": _num(self.ks), "ke": _num(self.ke), "ls": self.ls, "le": self.le}
-
-
-@dataclass
-class Network:
-    """The paper's (V, E, C, T, P) as plain data: nodes with (T_delayed, T_traveled), links with
-    (M, D) and boxes, and the priority order."""
-
-    priority: list[str]
-    delay: dict[str, float]
-    travel: dict[str, float]
-    links: list[Link] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"priority": list(self.priority),
-                "nodes": {r: {"delay": self.delay[r], "travel": self.travel[r]} for r in self.priority},
-                "links": [link.to_dict() for link in self.links]}
 
 
 @dataclass
@@ -92,11 +45,6 @@ class Blocked:
     blocker: int
     why: str
     kind: str = "goal"   # "goal": blocker parks in j's way; "start": blocker passes j's start too early
-
-
-def _num(x: float) -> float | None:
-    """JSON has no infinity: an unbounded time is written as null."""
-    return None if math.isinf(x) else float(x)
 
 
 class DelayScheduler:
@@ -257,7 +205,7 @@ class DelayScheduler:
         """The network under the current delays (links listed by lower robot, then k)."""
         rank = {x: n for n, x in enumerate(order)}
         net = Network([ids[x] for x in order], {ids[x]: float(self.delays[x]) for x in order},
-                      {ids[x]: self.travel(x) for x in order})
+                      {ids[x]: self.travel(x) for x in order}, mode=self.mode)
         for j in order:
             rows = self._inlet(j, rank)
             rows.sort(key=lambda r: (r[3], r[0]))

@@ -137,9 +137,9 @@ def test_unknown_planner_is_a_usage_error(scenario, tmp_path):
 def test_planner_variants_come_from_the_registry(scenario, tmp_path, capsys):
     path, out = scenario(CROSSING), tmp_path / "plan.json"
     assert cli.main([str(path), "--out", str(out), "--planner", "md-box", "--quiet"]) == cli.EXIT_OK
-    assert read_plan(out).info["mode"] == "box"
+    assert read_plan(out).network.mode == "box"
     assert cli.main([str(path), "--out", str(out), "--planner", "md", "--mode", "box", "--quiet"]) == cli.EXIT_OK
-    assert read_plan(out).info["mode"] == "box"
+    assert read_plan(out).network.mode == "box"
     out.unlink()
     assert cli.main([str(path), "--out", str(out), "--planner", "md-box", "--mode", "exact"]) == cli.EXIT_INPUT
     assert not out.exists()

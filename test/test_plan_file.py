@@ -17,8 +17,9 @@ import yaml
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from fleet_planner.model import Network, Plan  # noqa: E402
 from fleet_planner.planners import get_planner  # noqa: E402
-from fleet_planner.scenario import Scenario, load_scenario, parse_scenario, read_plan, write_plan  # noqa: E402
+from fleet_planner.scenario import Scenario, load_scenario, parse_scenario, plan_to_dict, read_plan, write_plan  # noqa: E402
 
 DATA = Path(__file__).resolve().parent / "data" / "plan_files"
 
@@ -77,6 +78,28 @@ def test_a_plan_file_read_back_is_written_unchanged(tmp_path, scenario_name, pla
     pinned = DATA / f"{scenario_name}-{planner}.json"
     write_plan(read_plan(pinned), tmp_path / "again.json")
     assert (tmp_path / "again.json").read_bytes() == pinned.read_bytes()
+
+
+
+@pytest.mark.parametrize("planner", ["md", "md-box"])
+def test_the_network_read_back_is_the_planners(planner):
+    sc = scenario("corridor")
+    plan = get_planner(planner).plan(sc.grid, sc.robots)
+    back = read_plan(DATA / f"corridor-{planner}.json")
+    assert isinstance(back.network, Network) and back.network == plan.network
+    assert back.network.mode == ("box" if planner == "md-box" else "exact")
+    assert any(float("inf") in (link.M, link.D, link.ke) for link in back.network.links)   # written as null
+    assert back.info == plan.info == {"reorders": plan.info["reorders"], "reroutes": plan.info["reroutes"],
+                                      "regions": plan.info["regions"]}
+
+
+def test_the_network_is_not_an_info_entry():
+    plan = read_plan(DATA / "crossing-md.json")
+    with pytest.raises(ValueError, match="the network is Plan.network"):
+        Plan("md", plan.paths, 0.0, {"network": plan_to_dict(plan)["info"]["network"]})
+    plan.info["mode"] = "box"
+    with pytest.raises(ValueError, match="mode belong to the plan's network"):
+        plan_to_dict(plan)
 
 
 if __name__ == "__main__":

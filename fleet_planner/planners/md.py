@@ -23,8 +23,9 @@ import numpy as np
 from ..collision import CollisionModel
 from ..geometry import polyline_keeps_off, polyline_passes_near
 from ..grid import GridMap
-from ..model import Plan, PlanningError, RobotSpec, TimedPath, drive_profile, timed_path_from_profile
-from ..scheduler import COLLISION_TESTS, Blocked, DelayScheduler, Network
+from ..model import (COLLISION_TESTS, Network, Plan, PlanningError, RobotSpec, TimedPath, drive_profile,
+                     timed_path_from_profile)
+from ..scheduler import Blocked, DelayScheduler
 from .base import Planner, Progress
 
 _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
@@ -93,8 +94,8 @@ class MDPlanner(Planner):
         session.resolve(progress)
         network = session.sched.network(session.order, [r.id for r in robots])
         return Plan("md", session.timed_paths(), time.perf_counter() - t_start,
-                    {"network": network.to_dict(), "mode": self.mode, "reorders": session.reorders,
-                     "reroutes": session.reroutes, "regions": session.model.region_count})
+                    {"reorders": session.reorders, "reroutes": session.reroutes,
+                     "regions": session.model.region_count}, network)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
                          t0: float) -> list[TimedPath]:
