@@ -67,3 +67,17 @@ def test_every_variant_plans_a_leg_around_a_driven_trajectory(name):
     assert [p.robot_id for p in leg] == ["b"]
     assert tuple(leg[0].waypoints[0]) == (7.5, 0.5, 1.0)
     assert tuple(leg[0].waypoints[-1, :2]) == (0.5, 0.5)
+
+
+def test_md_keeps_its_path_finders_itself_not_on_the_map():
+    grid = GridMap.from_rows(["." * 8] * 3)
+    robots = [RobotSpec("a", 0.4, 1.0, (0.5, 1.5), (7.5, 1.5)), RobotSpec("b", 0.3, 1.0, (7.5, 0.5), (0.5, 0.5))]
+    planner = get_planner("md", order="parking")
+    first = planner.plan(grid, robots)
+    assert not any(key.startswith("_md") for key in vars(grid))
+    finders = planner._finders.of(grid)
+    again = planner.plan(GridMap(grid.blocked.copy(), grid.resolution), robots)   # same map, another object
+    assert planner._finders.of(grid) is finders
+    assert [p.waypoints.tolist() for p in again.paths] == [p.waypoints.tolist() for p in first.paths]
+    other = GridMap.from_rows(["." * 8] * 4)
+    assert planner._finders.of(other) is not finders

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from ..model import (COLLISION_TESTS, Network, Plan, PlanningError, RobotSpec, T
                      timed_path_from_profile)
 from ..scheduler import Blocked, DelayScheduler
 from .base import Planner, Progress
+
+if TYPE_CHECKING:
+    from ..paths import PathFinder
 
 _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
 ORDERS = ("shortest", "longest", "given", "parking")
@@ -81,6 +85,7 @@ class MDPlanner(Planner):
         self.margin = float(margin)
         self.order = order
         self.max_reorders = max_reorders
+        self._finders = _FinderCache()
 
     # ------------------------------------------------------------------------------------------
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
@@ -88,8 +93,8 @@ class MDPlanner(Planner):
         robots = list(robots)
         _check_endpoints(robots, self.margin)
         shortest: dict[int, np.ndarray] = {}
-        session = _Session(self, grid, robots, self._initial_order(grid, robots, shortest), fixed=0)
-        session.hints = shortest
+        order = self._initial_order(grid, robots, shortest)
+        session = _Session(self, grid, robots, order, fixed=0, hints=shortest)
         session.route(progress)
         session.resolve(progress)
         network = session.sched.network(session.order, [r.id for r in robots])
@@ -112,8 +117,8 @@ class MDPlanner(Planner):
         _check_endpoints(specs[nf:], self.margin)
         shortest: dict[int, np.ndarray] = {}
         order = list(range(nf)) + [nf + x for x in self._initial_order(grid, robots, shortest)]
-        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept])
-        session.hints = {nf + x: path for x, path in shortest.items()}
+        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept],
+                           hints={nf + x: path for x, path in shortest.items()})
         session.route()
         session.sched.delays[:nf] = [delay for _, _, delay in kept]
         session.resolve()
@@ -130,12 +135,12 @@ class MDPlanner(Planner):
         if self.order == "given" or len(robots) < 2:
             return idx
         if self.order == "parking":
-            return _parking_order(_Finders.of(grid), robots, self.margin, shortest)
+            return _parking_order(self._finders.of(grid), robots, self.margin, shortest)
         dist = [float(np.hypot(r.goal[0] - r.start[0], r.goal[1] - r.start[1])) for r in robots]
         return sorted(idx, key=lambda x: dist[x], reverse=self.order == "longest")
 
 
-def _parking_order(finders: "_Finders", robots: list[RobotSpec], margin: float,
+def _parking_order(finders: _Finders, robots: list[RobotSpec], margin: float,
                    shortest: dict[int, np.ndarray] | None = None) -> list[int]:
     """Priority from where robots park (FINDINGS 1 turned into an order): score = how many other
     robots' shortest paths pass a robot's start disc minus how many pass its goal disc; the
@@ -174,11 +179,12 @@ class _Session:
     delays), their paths, the priority order, the collision model and the scheduler."""
 
     def __init__(self, planner: MDPlanner, grid: GridMap, robots: list[RobotSpec], order: list[int],
-                 fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = ()):
+                 fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+                 hints: dict[int, np.ndarray] | None = None):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
         self.margin = planner.margin
         self.rank = {x: k for k, x in enumerate(order)}
-        self.finder = _Finders.of(grid)
+        self.finder = planner._finders.of(grid)
         #: per robot its path and the times (from its departure) at which it passes the vertices
         self.paths: list[np.ndarray | None] = [p for p, _ in fixed_paths] + [None] * (len(robots) - fixed)
         self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
@@ -187,7 +193,7 @@ class _Session:
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {}
         self.reorders = self.reroutes = 0
         #: shortest paths already known (robot -> path): kept when they avoid what they must
-        self.hints: dict[int, np.ndarray] = {}
+        self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
     def keep_out(self, x: int, y: int) -> float:
         return self.robots[x].radius + self.robots[y].radius + self.margin
@@ -313,22 +319,13 @@ class _Session:
 
 
 class _Finders:
-    """One path finder per distinct radius (its inflated map is computed once)."""
+    """One path finder per distinct radius of one map (its inflated map is computed once)."""
 
     def __init__(self, grid: GridMap):
         self.grid = grid
-        self._by_radius: dict[float, object] = {}
+        self._by_radius: dict[float, PathFinder] = {}
 
-    @classmethod
-    def of(cls, grid: GridMap) -> "_Finders":
-        """The finders of a map, kept on the map object so every planning call on the same map
-        (the fleet node re-plans many times a minute) reuses the inflated maps and disc caches."""
-        finders = grid.__dict__.get("_md_finders")
-        if finders is None:
-            finders = grid.__dict__["_md_finders"] = cls(grid)
-        return finders
-
-    def get(self, radius: float, exact: bool = False):
+    def get(self, radius: float, exact: bool = False) -> PathFinder:
         """A finder for a disc of ``radius`` or a slightly larger one (radii rounded up to the
         centimetre share one inflated map, which stays valid for the smaller disc); ``exact``
         gives the robot's own radius, for when the rounding closes a passage."""
@@ -338,6 +335,28 @@ class _Finders:
         if key not in self._by_radius:
             self._by_radius[key] = PathFinder(self.grid, key)
         return self._by_radius[key]
+
+
+class _FinderCache:
+    """The path finders of the maps a planner has planned on, owned by the planner: every call on
+    the same map (the fleet manager plans a leg many times a minute) reuses the inflated maps and
+    disc caches. Keyed by map content and resolution, as the prior planner keys its roadmaps (a
+    GridMap is a mutable dataclass, so neither hashable nor a weak key, and the finders refer to
+    their map, which would keep a weak key alive); the few most recent maps are kept."""
+
+    MAX_MAPS = 4
+
+    def __init__(self) -> None:
+        self._by_map: dict[tuple, _Finders] = {}
+
+    def of(self, grid: GridMap) -> _Finders:
+        key = (grid.blocked.shape, grid.resolution, grid.blocked.tobytes())
+        finders = self._by_map.get(key)
+        if finders is None:
+            if len(self._by_map) >= self.MAX_MAPS:
+                self._by_map.clear()
+            finders = self._by_map[key] = _Finders(grid)
+        return finders
 
 
 def _apply(model: CollisionModel, changed: dict[int, tuple[np.ndarray, np.ndarray]], moved: int) -> set[int]:
