@@ -1,7 +1,8 @@
-"""Collision regions and collision boxes of paper 001, in continuous geometry.
+"""Collision regions and collision boxes of You & Ji, "Design of a Multi-robot Bin Packing System in
+an Automatic Warehouse", in continuous geometry.
 
 For two robots x and y on fixed polyline paths, the set of travelled-length pairs ``(a, b)`` at which
-their discs overlap, ``|p_x(a) - p_y(b)| < r_x + r_y``, is what paper 001 calls the collision region
+their discs overlap, ``|p_x(a) - p_y(b)| < r_x + r_y``, is what the paper calls the collision region
 (drawn there in time x travelled-length coordinates; with a known velocity profile the two views are
 the same set). For one segment of each path that set is convex, so its extent along each path is
 one interval: the part of the segment inside the *capsule* of radius ``R`` around the other
@@ -121,8 +122,9 @@ class CollisionModel:
     ``radii`` are the robots' radii; two discs are in conflict when closer than
     ``r_x + r_y + margin``. How each robot drives its path is given either by constant ``speeds``
     or by ``times``: per robot, the time (from its departure) at which it passes each vertex
-    (a speed profile with ramps, :func:`fleet_planner.model.drive_profile`). ``set_path`` replaces one robot's path and recomputes only its pairs
-    (re-ordering robots re-plans one or two paths; everything else is kept).
+    (a speed profile with ramps, :func:`fleet_planner.model.drive_profile`). ``set_path`` replaces
+    one robot's path and recomputes only its pairs (re-ordering robots re-plans one or two paths;
+    everything else is kept).
     """
 
     def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0,

@@ -39,8 +39,9 @@ EPS = 1e-9
 
 
 class Behavior(enum.Enum):
-    """The 8 behaviours of paper 002, IV.A. The first five are *active* (the robot moves on its own
-    account), the last three are *Wait* behaviours (the robot holds, or only gives way)."""
+    """The 8 behaviours of Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance",
+    IV.A. The first five are *active* (the robot moves on its own account), the last three are
+    *Wait* behaviours (the robot holds, or only gives way)."""
 
     FOLLOW_WAYPOINT = "FollowWayPoint"
     AVOID = "Avoid"

@@ -1,4 +1,5 @@
-"""Pictures of a plan: the map, the (M,D) view of paper 001 (its Fig. 4) and the schedule.
+"""Pictures of a plan: the map, the (M,D) view of You & Ji, "Design of a Multi-robot Bin Packing
+System in an Automatic Warehouse" (its Fig. 4), and the schedule.
 
 * Map (left): drawn like the ``.map`` file (row 0 on top, y downwards), one colour per robot,
   hollow start discs, filled goal discs, ids at the starts.
@@ -16,8 +17,9 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -280,7 +282,7 @@ def _draw_tlvstc(ax, rid: str, paths: Mapping[str, TimedPath], network: Network 
         [Rectangle((ks, ls), max(min(ke, 2 * t_end) - ks, 1e-3), max(le - ls, 1e-3)) for ks, ke, ls, le in boxes],
         facecolors="none", edgecolors=[colour.get(lk.i, "grey") for lk in links], linewidths=1.1,
         linestyles=[(0, (4, 2))], zorder=2), autolim=False)
-    for n, (lk, (ks, ke, ls, le)) in enumerate(zip(links, boxes)):
+    for n, (lk, (ks, ke, _, le)) in enumerate(zip(links, boxes)):
         c = colour.get(lk.i, "grey")
         if n in named:
             ax.annotate(f"({lk.i},{lk.j},{lk.k})", ((ks + min(ke, t_end)) / 2, le), xytext=(0, 2),
@@ -316,7 +318,7 @@ def _tlvstc_legend(ax, undelayed: bool, boxes: bool) -> None:
     if undelayed:
         handles.insert(1, Line2D([], [], ls=":", color="grey", lw=1.2, label="same, without the delay"))
     if boxes:
-        handles.append(Patch(fill=False, ec="dimgrey", ls=(0, (4, 2)), label="collision box (paper 001)"))
+        handles.append(Patch(fill=False, ec="dimgrey", ls=(0, (4, 2)), label="collision box (You & Ji)"))
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncols=2, fontsize=7,
               frameon=False)
 
@@ -406,7 +408,8 @@ def plot_plan(grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, path_png: 
         focus = [rid for rid in most_constrained(network) if rid in paths]
     else:
         wait = {rid: waiting_time(p) for rid, p in paths.items()}
-        focus = [rid for rid in sorted(wait, key=lambda r: (-wait[r], _natural(r))) if wait[rid] > 0][:MAX_TLVSTC_PANELS]
+        by_wait = sorted(wait, key=lambda r: (-wait[r], _natural(r)))
+        focus = [rid for rid in by_wait if wait[rid] > 0][:MAX_TLVSTC_PANELS]
     focus = [rid for rid in focus if paths[rid].length > 0]
     w, h = grid.size_m
     map_w = 7.5

@@ -1,4 +1,6 @@
-"""The (M,D) network of paper 001 and its priority-ordered delay planner (Section 4, Eq. 3).
+"""The (M,D) network of You & Ji, "Design of a Multi-robot Bin Packing System in an Automatic
+Warehouse", and its priority-ordered delay planner (Section 4, Eq. 3); the network itself
+(:class:`~fleet_planner.model.Network`) is vocabulary: docs/ARCHITECTURE.md, "The (M,D) vocabulary".
 
 Notation (paper Table 1), for a link from a higher-priority robot ``i`` to a lower one ``j`` in
 collision region ``k``: T1 / T4 = when i enters / leaves the region (reaches / leaves the part
@@ -9,13 +11,13 @@ Parked robots are part of the trajectories: a robot sits on its start from t = 0
 departs and on its goal for ever after it arrives. So a region that touches i's goal has T4 = inf,
 one that touches j's start has T2 = 0 whatever j's delay, and one that touches j's goal has T3 = inf.
 A dangerous link of the first two kinds cannot be fixed by delaying j: the scheduler reports it
-(:class:`Blocked`) and the planner re-orders the two robots (FINDINGS 2).
+(:class:`Blocked`) and the planner re-orders the two robots (docs/ARCHITECTURE.md, measured fact 2).
 
 The planner (Eq. 3): take robots in priority order; while any inlet link of robot j is dangerous,
 delay j by the largest D over its dangerous inlet links.
 
-Beyond the paper (``mode="exact"``, FINDINGS 4-5): a collision box makes a whole shared stretch
-exclusive, so a robot can never follow another down an aisle. The exact mode uses the collision
+Beyond the paper (``mode="exact"``, measured facts 4-5): a collision box makes a whole shared
+stretch exclusive, so a robot can never follow another down an aisle. The exact mode uses the collision
 region itself: for each convex piece of a region, the set of delays of j at which j's trajectory
 meets it is an open interval (the range of t_i(a) - t_j(b) over the piece, shifted by i's delay),
 and parked phases add half-lines. j gets the smallest delay outside the union of those intervals:

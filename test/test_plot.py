@@ -12,8 +12,17 @@ matplotlib.use("Agg")
 from fleet_planner.grid import GridMap  # noqa: E402
 from fleet_planner.model import Network, Plan, RobotSpec, TimedPath, timed_path_from_polyline  # noqa: E402
 from fleet_planner.planners import get_planner  # noqa: E402
-from fleet_planner.plot import (MAX_GANTT_ROWS, blocker_map, collision_map, plot_plan, plot_schedule,  # noqa: E402
-                                positions_at, schedule_rows, travelled_length, waiting_time)
+from fleet_planner.plot import (  # noqa: E402
+    MAX_GANTT_ROWS,
+    blocker_map,
+    collision_map,
+    plot_plan,
+    plot_schedule,
+    positions_at,
+    schedule_rows,
+    travelled_length,
+    waiting_time,
+)
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

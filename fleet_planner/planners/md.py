@@ -1,4 +1,5 @@
-"""The (M,D) collision-model planner of paper 001, with what we measured it needs (FINDINGS 1-5).
+"""The (M,D) collision-model planner of You & Ji, "Design of a Multi-robot Bin Packing System in an
+Automatic Warehouse", with what we measured it needs (docs/ARCHITECTURE.md, measured facts 1-5).
 
 1. Safe paths: each robot's path avoids the start discs of lower-priority robots and the goal discs
    of higher-priority robots where the map allows (falling back to goals only, then to nothing).
@@ -24,8 +25,16 @@ import numpy as np
 from ..collision import CollisionModel
 from ..geometry import polyline_keeps_off, polyline_passes_near
 from ..grid import GridMap
-from ..model import (COLLISION_TESTS, Network, Plan, PlanningError, RobotSpec, TimedPath, drive_profile,
-                     timed_path_from_profile)
+from ..model import (
+    COLLISION_TESTS,
+    Network,
+    Plan,
+    PlanningError,
+    RobotSpec,
+    TimedPath,
+    drive_profile,
+    timed_path_from_profile,
+)
 from ..scheduler import Blocked, DelayScheduler
 from .base import Planner, Progress
 
@@ -64,12 +73,12 @@ class MDPlanner(Planner):
     """Central planner: safe paths, (M,D) network, departure delays, re-ordering on deadlock.
 
     ``margin`` (m) is added to every pair's sum of radii; ``order`` is the initial priority:
-    "shortest" (default; the best sum of arrival times on every map we measured, FINDINGS 4) and
+    "shortest" (default; the best sum of arrival times on every map we measured, measured fact 4) and
     "longest" sort by straight-line distance to the goal (longest first tends to the shorter
     makespan), "given" keeps the list order, "parking" puts first the robots whose start lies on
     many others' shortest paths and last those whose goal does (fewest re-orderings in crowds);
     ``max_reorders`` bounds the re-ordering attempts (default 4 N); ``mode`` picks the collision
-    test: "exact" (default; robots may follow each other) or "box" (paper 001 as written)."""
+    test: "exact" (default; robots may follow each other) or "box" (You & Ji as written)."""
 
     name = "md"
 
@@ -142,7 +151,7 @@ class MDPlanner(Planner):
 
 def _parking_order(finders: _Finders, robots: list[RobotSpec], margin: float,
                    shortest: dict[int, np.ndarray] | None = None) -> list[int]:
-    """Priority from where robots park (FINDINGS 1 turned into an order): score = how many other
+    """Priority from where robots park (measured fact 1 turned into an order): score = how many other
     robots' shortest paths pass a robot's start disc minus how many pass its goal disc; the
     highest score goes first, ties keep the list order. Robots standing in busy aisles then
     leave before the others come through, and robots parking in them arrive after."""
@@ -169,7 +178,8 @@ def _parking_order(finders: _Finders, robots: list[RobotSpec], margin: float,
         other = owner[ti]
         keep = other != qi
         qi, ti, other = qi[keep], ti[keep], other[keep]
-        near = shapely.distance(shapely.points(pts[qi]), np.asarray(lines, dtype=object)[ti]) < radii[qi] + radii[other] + margin
+        near = (shapely.distance(shapely.points(pts[qi]), np.asarray(lines, dtype=object)[ti])
+                < radii[qi] + radii[other] + margin)
         np.add.at(score, qi[near], sign)
     return sorted(range(len(robots)), key=lambda x: -score[x])
 
@@ -222,10 +232,10 @@ class _Session:
         return {x: (self.paths[x], self.times[x])}
 
     def safe_path(self, x: int, partner: int | None = None) -> np.ndarray | None:
-        """FINDINGS 1: avoid lower robots' starts and higher robots' goals; else goals only; else
-        none. Discs that x was found to block (``must``) are kept in those attempts; when they are
-        too many to avoid together, as many as possible are kept, those of ``partner`` (the robot
-        of the conflict being resolved) first."""
+        """Measured fact 1 (docs/ARCHITECTURE.md): avoid lower robots' starts and higher robots'
+        goals; else goals only; else none. Discs that x was found to block (``must``) are kept in
+        those attempts; when they are too many to avoid together, as many as possible are kept,
+        those of ``partner`` (the robot of the conflict being resolved) first."""
         me, rank = self.robots[x], self.rank
         starts = [(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
                   if y != x and rank[y] > rank[x]]
@@ -260,7 +270,7 @@ class _Session:
 
     def resolve(self, progress: Progress | None = None) -> None:
         """Schedule; where a delay cannot help, first re-route around the disc in the way, then
-        move the blocked robot just ahead of its blocker (FINDINGS 2), re-planning only the paths
+        move the blocked robot just ahead of its blocker (measured fact 2), re-planning only the paths
         whose avoidance changed and re-scheduling only what that changes."""
         robots, n = self.robots, len(self.robots)
         limit = 4 * n if self.planner.max_reorders is None else self.planner.max_reorders

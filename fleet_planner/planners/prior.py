@@ -37,8 +37,8 @@ from __future__ import annotations
 import heapq
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import shapely
@@ -138,7 +138,7 @@ class PriorPlanner(Planner):
         dist = [math.dist(r.start, r.goal) for r in robots]
         return sorted(idx, key=lambda x: dist[x], reverse=self.order == "longest")
 
-    def _roadmap(self, grid: GridMap, radius: float) -> "_Roadmap":
+    def _roadmap(self, grid: GridMap, radius: float) -> _Roadmap:
         """Roadmaps are cached by map content and radius (the delivery benchmark calls us often)."""
         key = (grid.blocked.shape, grid.resolution, hash(grid.blocked.tobytes()), float(radius))
         rm = self._roadmaps.get(key)
@@ -448,7 +448,8 @@ class _Session:
             cx, cy = grid.centre(col, row)
             if (cx, cy) != (x, y) and shapely.distance(grid.obstacle_geometry,
                                                        shapely.LineString([(x, y), (cx, cy)])) < radius - 1e-9:
-                return f"cannot drive from its {what} ({x:.6g}, {y:.6g}) to its cell's centre without touching an obstacle"
+                return (f"cannot drive from its {what} ({x:.6g}, {y:.6g}) to its cell's centre without "
+                        "touching an obstacle")
             cells.append(row * grid.width + col)
         if rm.component[cells[0]] != rm.component[cells[1]]:
             return f"no way from start to goal on this map for radius {radius:.6g}"
@@ -593,7 +594,8 @@ class _Session:
         for o, x, y, reach in discs:
             pad = reach + math.sqrt(2) * res
             c0, c1 = max(0, math.ceil((x - pad) / res - 0.5)), min(width - 1, math.floor((x + pad) / res - 0.5))
-            r0, r1 = max(0, math.ceil((y - pad) / res - 0.5)), min(self.grid.height - 1, math.floor((y + pad) / res - 0.5))
+            r0 = max(0, math.ceil((y - pad) / res - 0.5))
+            r1 = min(self.grid.height - 1, math.floor((y + pad) / res - 0.5))
             for row in range(r0, r1 + 1):
                 for col in range(c0, c1 + 1):
                     ax, ay = (col + 0.5) * res, (row + 0.5) * res
@@ -688,7 +690,8 @@ class _RobotSearch:
         self.h_start = (s_off + float(self.dist[cs]) + g_off) / speed
         self.bound = self.t0 + self.h_start + session.p.max_wait_s
         self.d_max = max(math.sqrt(2) * res, s_off, g_off) / speed   # the longest move, in seconds
-        self.lim = max(self.keep) + self.d_max * speed   # pieces farther than this from a node cannot meet a move from it
+        # pieces farther than this from a node cannot meet a move from it
+        self.lim = max(self.keep) + self.d_max * speed
         self._safe: dict[int, list[tuple[float, float]]] = {}   # node -> its safe intervals
         self.best: dict[_State, float] = {}
         self.parent: dict[_State, tuple[_State, float] | None] = {}
