@@ -68,7 +68,7 @@ def _segments(paths: Sequence[np.ndarray], times: Sequence[np.ndarray]):
             np.concatenate(offset), first, last, np.concatenate(t0), np.concatenate(speed))
 
 
-def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray):
+def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Parameters s with |w + s*u| < R for unit u: roots of s^2 + 2 s (u.w) + |w|^2 - R^2."""
     b = np.einsum("ij,ij->i", u, w)
     c = np.einsum("ij,ij->i", w, w) - R * R
@@ -334,7 +334,7 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
                     changed = True
                     break
     comps.sort(key=lambda c: c[0])
-    return [tuple(c) for c in comps]
+    return [(c[0], c[1], c[2], c[3]) for c in comps]
 
 
 def _cumlen(path: np.ndarray) -> np.ndarray:

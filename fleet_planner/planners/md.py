@@ -157,17 +157,17 @@ def _parking_order(finders: _Finders, robots: list[RobotSpec], margin: float,
     leave before the others come through, and robots parking in them arrive after."""
     import shapely
 
-    lines, owner = [], []
+    lines, owners = [], []
     for x, r in enumerate(robots):
         path = finders.get(r.radius).find(r.start, r.goal)
         if shortest is not None and path is not None:
             shortest[x] = path
         if path is not None and len(path) > 1:
             lines.append(shapely.LineString(path))
-            owner.append(x)
+            owners.append(x)
     if not lines:
         return list(range(len(robots)))
-    owner = np.array(owner)
+    owner = np.array(owners)
     tree = shapely.STRtree(lines)
     reach = 2 * max(r.radius for r in robots) + margin
     radii = np.array([r.radius for r in robots])
@@ -219,7 +219,9 @@ class _Session:
                    for x in free if self.paths[x] is None}
         if missing:
             raise PlanningError(missing)
-        self.model = CollisionModel(self.paths, [r.radius for r in self.robots], self.margin, times=self.times)
+        routes = [self.route_of(x) for x in range(len(self.robots))]
+        self.model = CollisionModel([p for p, _ in routes], [r.radius for r in self.robots], self.margin,
+                                    times=[t for _, t in routes])
         self.sched = DelayScheduler(self.model, self.planner.mode)
 
     def _set_route(self, x: int, path: np.ndarray | None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
@@ -228,8 +230,15 @@ class _Session:
             self.paths[x] = self.times[x] = None
             return {}
         r = self.robots[x]
-        self.paths[x], self.times[x] = drive_profile(path, r.max_speed, r.max_accel)
-        return {x: (self.paths[x], self.times[x])}
+        points, times = drive_profile(path, r.max_speed, r.max_accel)
+        self.paths[x], self.times[x] = points, times
+        return {x: (points, times)}
+
+    def route_of(self, x: int) -> tuple[np.ndarray, np.ndarray]:
+        """Robot x's path and the times at which it passes the vertices (once it has a path)."""
+        path, times = self.paths[x], self.times[x]
+        assert path is not None and times is not None, f"robot {self.robots[x].id!r} has no path yet"
+        return path, times
 
     def safe_path(self, x: int, partner: int | None = None) -> np.ndarray | None:
         """Measured fact 1 (docs/ARCHITECTURE.md): avoid lower robots' starts and higher robots'
@@ -261,7 +270,8 @@ class _Session:
         # not all of ``must`` at once: keep as much of it as possible, the partner's discs first,
         # then the others, most recently added first
         owners = sorted(by_owner, key=lambda o: (o != partner, -list(by_owner).index(o)))
-        best, kept = find([]), []
+        best = find([])
+        kept: list[tuple[tuple[float, float], float]] = []
         for owner in owners:
             path = find(kept + by_owner[owner])
             if path is not None:
@@ -288,8 +298,7 @@ class _Session:
             other = j if mover == i else i
             if tries[(j, i)] == 1 and mover >= self.fixed and self._reroute(mover, other, (disc, self.keep_out(i, j))):
                 blocked = self.sched.schedule(self.order, start_at=self.rank[mover],
-                                              dirty=_apply(self.model, {mover: (self.paths[mover], self.times[mover])},
-                                                           mover))
+                                              dirty=_apply(self.model, {mover: self.route_of(mover)}, mover))
                 continue
             # 2. re-order: j goes just ahead of i (never ahead of a fixed robot)
             if i < self.fixed:
@@ -302,7 +311,7 @@ class _Session:
             self.rank = {x: k for k, x in enumerate(self.order)}
             # robots between the blocker and j now have j above them: those crossing j's goal re-plan
             replan = [j] + [x for x in self.order[pos_i + 1:old_j + 1]
-                            if polyline_passes_near(self.paths[x], robots[j].goal, self.keep_out(x, j))]
+                            if polyline_passes_near(self.route_of(x)[0], robots[j].goal, self.keep_out(x, j))]
             changed = {}
             for x in replan:
                 path = self.safe_path(x)
@@ -324,7 +333,7 @@ class _Session:
         return True
 
     def timed_paths(self) -> list[TimedPath]:
-        return [timed_path_from_profile(r.id, r.radius, self.paths[x], self.times[x], float(self.sched.delays[x]))
+        return [timed_path_from_profile(r.id, r.radius, *self.route_of(x), float(self.sched.delays[x]))
                 for x, r in enumerate(self.robots)]
 
 

@@ -206,7 +206,7 @@ class _Space:
     that cell's bucket, as the whole move stays within one diagonal of the cell's centre.
     """
 
-    def __init__(self, grid: GridMap, radii: Sequence[float], reach: float):
+    def __init__(self, grid: GridMap, radii: Sequence[float] | np.ndarray, reach: float):
         self.res, self.width, self.height = grid.resolution, grid.width, grid.height
         self.radii = list(radii)
         self.reach = reach
@@ -608,8 +608,8 @@ class _Session:
             return None
         graph = rm.graph.copy()
         for src, dst in blocked:
-            row = slice(graph.indptr[src], graph.indptr[src + 1])
-            graph.data[row][graph.indices[row] == dst] = 0.0
+            out_of_src = slice(graph.indptr[src], graph.indptr[src + 1])
+            graph.data[out_of_src][graph.indices[out_of_src] == dst] = 0.0
         graph.eliminate_zeros()
         if path[-1] in set(breadth_first_order(graph, path[0], return_predecessors=False).tolist()):
             return None
@@ -873,12 +873,12 @@ class _RobotSearch:
             latest = new
             choices.append(pick)
         choices.reverse()
-        iu = next((k for k, (s, e) in enumerate(intervals(nodes[0])) if s <= t0 <= e), None)
+        at = next((k for k, (s, e) in enumerate(intervals(nodes[0])) if s <= t0 <= e), None)
         taus = []
         for pick in choices:
-            if iu not in pick:
+            if at not in pick:
                 return None
-            iu, tau = pick[iu]
+            at, tau = pick[at]
             taus.append(tau)
         return taus
 
