@@ -32,7 +32,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", choices=planner_names(), default="md",
                    help="planner (default: %(default)s): " + "; ".join(
                        f"{name}: {planner_summary(name)}" for name in planner_names()))
-    p.add_argument("--mode", choices=sorted(COLLISION_TESTS, reverse=True),
+    p.add_argument("--mode", choices=sorted(COLLISION_TESTS, reverse=True),   # exact first: md's default
                    help="md: collision test, exact regions (default) or the paper's boxes (as md-box)")
     p.add_argument("--order", choices=["parking", "given", "shortest", "longest"],
                    help="initial priority order (default: the planner's own; md: shortest, prior: given; "
