@@ -41,11 +41,9 @@ from fleet_planner.checker import check_plan  # noqa: E402
 from fleet_planner.grid import GridMap  # noqa: E402
 from fleet_planner.model import PlanningError, RobotSpec  # noqa: E402
 from fleet_planner.paths import PathFinder  # noqa: E402
-from fleet_planner.planners import get_planner  # noqa: E402
+from fleet_planner.planners import get_planner, planner_names  # noqa: E402
 from fleet_planner.scenario import ScenarioError, scenario_from_movingai  # noqa: E402
 
-#: planner label -> (registry name, options)
-PLANNERS = {"md": ("md", {}), "md-box": ("md", {"mode": "box"}), "prior": ("prior", {})}
 RADIUS = (0.35, 0.45)
 SPEED = (0.7, 1.0)
 
@@ -81,7 +79,7 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--scen", default="random-1",
                    help="which .scen of each map: <map>-<SCEN>.scen (default: %(default)s)")
     p.add_argument("--sizes", default="10,50,100,200,500", help="numbers of robots (default: %(default)s)")
-    p.add_argument("--planners", default="md,md-box", help=f"of {', '.join(PLANNERS)} (default: %(default)s)")
+    p.add_argument("--planners", default="md,md-box", help=f"of {', '.join(planner_names())} (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="radii and speeds (default: %(default)s)")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds per planning run (default: %(default)s)")
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
@@ -94,9 +92,9 @@ def _args(argv=None) -> argparse.Namespace:
     if not args.sizes or args.sizes[0] < 1:
         p.error("--sizes: numbers of robots must be >= 1")
     args.planners = [s.strip() for s in args.planners.split(",") if s.strip()]
-    unknown = [s for s in args.planners if s not in PLANNERS]
+    unknown = [s for s in args.planners if s not in planner_names()]
     if unknown or not args.planners:
-        p.error(f"--planners: unknown {unknown}; choose from {', '.join(PLANNERS)}")
+        p.error(f"--planners: unknown {unknown}; choose from {', '.join(planner_names())}")
     if not args.timeout > 0:
         p.error("--timeout: must be > 0")
     return args
@@ -161,13 +159,12 @@ class AloneTimes:
 # ---------------------------------------------------------------------------------------------
 # one planning run, in a child process
 # ---------------------------------------------------------------------------------------------
-def _child(results, grid: GridMap, robots: list[RobotSpec], label: str) -> None:
-    name, options = PLANNERS[label]
+def _child(results, grid: GridMap, robots: list[RobotSpec], name: str) -> None:
     try:
         t0 = time.perf_counter()
-        plan = get_planner(name, **options).plan(grid, robots)
+        plan = get_planner(name).plan(grid, robots)
         elapsed = time.perf_counter() - t0
-        plan.info.pop("network", None)   # large and not needed here
+        plan.network = None   # large and not needed here
         results.put(("ok", elapsed, plan))
     except PlanningError as exc:
         results.put(("no plan", time.perf_counter() - t0, str(exc).splitlines()[1].strip()))
@@ -175,12 +172,12 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], label: str) -> None:
         results.put(("error", None, traceback.format_exc(limit=3)))
 
 
-def run_one(inst: Instance, n: int, label: str, timeout: float, alone: AloneTimes) -> Row:
+def run_one(inst: Instance, n: int, planner: str, timeout: float, alone: AloneTimes) -> Row:
     robots = inst.robots[:n]
-    row = Row(inst.name, n, label)
+    row = Row(inst.name, n, planner)
     ctx = mp.get_context("fork")
     results = ctx.Queue()
-    proc = ctx.Process(target=_child, args=(results, inst.grid, robots, label), daemon=True)
+    proc = ctx.Process(target=_child, args=(results, inst.grid, robots, planner), daemon=True)
     proc.start()
     try:
         status, elapsed, payload = results.get(timeout=timeout)
@@ -280,9 +277,8 @@ def main(argv=None) -> int:
         print(f"bench_md: no maps directory {args.maps_dir}: using a generated warehouse with random "
               f"start/goal pairs instead of MovingAI maps", file=sys.stderr)
         instances = [generated_instance(n_max, args.seed)]
-    for label in args.planners:   # import every planner now, so that all runs use the same code
-        name, options = PLANNERS[label]
-        get_planner(name, **options)
+    for name in args.planners:   # import every planner now, so that all runs use the same code
+        get_planner(name)
     rows: list[Row] = []
     jobs = [(inst, n, p) for inst in instances for n in args.sizes for p in args.planners]
     alone = {inst.name: AloneTimes(inst.grid) for inst in instances}

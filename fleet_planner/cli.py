@@ -1,6 +1,8 @@
 """``fleet-plan``: plan a scenario file offline and write the plan file.
 
-    fleet-plan SCENARIO.yaml --out PLAN.json [--planner md|prior] [--plot PLAN.png] [--check] [--quiet]
+    fleet-plan SCENARIO.yaml --out PLAN.json [--planner md|md-box|prior] [--plot PLAN.png] [--check] [--quiet]
+
+The planners are the registered variants (:func:`fleet_planner.planners.planner_names`).
 
 Every plan goes through the independent checker before it is written; a plan that fails it is a
 planner bug and is never written. Exit codes: 0 plan written, 2 bad input or no plan possible
@@ -10,13 +12,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence, TextIO
+from typing import TextIO
 
 from .checker import check_plan, min_separation
 from .grid import MapError
-from .model import Plan, PlanningError, RobotSpec
-from .planners import get_planner, planner_names
+from .model import COLLISION_TESTS, Plan, PlanningError, RobotSpec
+from .planners import get_planner, planner_names, planner_summary
 from .scenario import ScenarioError, load_scenario, write_plan
 
 EXIT_OK, EXIT_INPUT, EXIT_INVALID_PLAN = 0, 2, 3
@@ -26,9 +29,11 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fleet-plan", description="Plan collision-free timed paths for a robot fleet.")
     p.add_argument("scenario", type=Path, help="scenario YAML (map and robots)")
     p.add_argument("--out", type=Path, required=True, help="plan JSON to write")
-    p.add_argument("--planner", choices=planner_names(), default="md", help="planner (default: %(default)s)")
-    p.add_argument("--mode", choices=["exact", "box"],
-                   help="md: collision test, exact regions (default) or the paper's boxes")
+    p.add_argument("--planner", choices=planner_names(), default="md",
+                   help="planner (default: %(default)s): " + "; ".join(
+                       f"{name}: {planner_summary(name)}" for name in planner_names()))
+    p.add_argument("--mode", choices=sorted(COLLISION_TESTS, reverse=True),   # exact first: md's default
+                   help="md: collision test, exact regions (default) or the paper's boxes (as md-box)")
     p.add_argument("--order", choices=["parking", "given", "shortest", "longest"],
                    help="initial priority order (default: the planner's own; md: shortest, prior: given; "
                         "parking is md only)")

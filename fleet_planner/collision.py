@@ -1,7 +1,8 @@
-"""Collision regions and collision boxes of paper 001, in continuous geometry.
+"""Collision regions and collision boxes of You & Ji, "Design of a Multi-robot Bin Packing System in
+an Automatic Warehouse", in continuous geometry.
 
 For two robots x and y on fixed polyline paths, the set of travelled-length pairs ``(a, b)`` at which
-their discs overlap, ``|p_x(a) - p_y(b)| < r_x + r_y``, is what paper 001 calls the collision region
+their discs overlap, ``|p_x(a) - p_y(b)| < r_x + r_y``, is what the paper calls the collision region
 (drawn there in time x travelled-length coordinates; with a known velocity profile the two views are
 the same set). For one segment of each path that set is convex, so its extent along each path is
 one interval: the part of the segment inside the *capsule* of radius ``R`` around the other
@@ -15,12 +16,12 @@ scheduler's business (:mod:`fleet_planner.scheduler`).
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
-EPS = 1e-9
+from .model import EPS
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ def _segments(paths: Sequence[np.ndarray], times: Sequence[np.ndarray]):
             np.concatenate(offset), first, last, np.concatenate(t0), np.concatenate(speed))
 
 
-def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray):
+def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Parameters s with |w + s*u| < R for unit u: roots of s^2 + 2 s (u.w) + |w|^2 - R^2."""
     b = np.einsum("ij,ij->i", u, w)
     c = np.einsum("ij,ij->i", w, w) - R * R
@@ -121,8 +122,9 @@ class CollisionModel:
     ``radii`` are the robots' radii; two discs are in conflict when closer than
     ``r_x + r_y + margin``. How each robot drives its path is given either by constant ``speeds``
     or by ``times``: per robot, the time (from its departure) at which it passes each vertex
-    (a speed profile with ramps, :func:`fleet_planner.model.drive_profile`). ``set_path`` replaces one robot's path and recomputes only its pairs
-    (re-ordering robots re-plans one or two paths; everything else is kept).
+    (a speed profile with ramps, :func:`fleet_planner.model.drive_profile`). ``set_path`` replaces
+    one robot's path and recomputes only its pairs (re-ordering robots re-plans one or two paths;
+    everything else is kept).
     """
 
     def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0,
@@ -332,7 +334,7 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
                     changed = True
                     break
     comps.sort(key=lambda c: c[0])
-    return [tuple(c) for c in comps]
+    return [(c[0], c[1], c[2], c[3]) for c in comps]
 
 
 def _cumlen(path: np.ndarray) -> np.ndarray:

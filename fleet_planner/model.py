@@ -4,7 +4,11 @@
 * :class:`TimedPath`  - what a planner hands a robot: waypoints ``(x, y, t)``; the robot sits on the
   first one until its time, moves at constant speed between consecutive ones and stays on the last
   one for ever after.
-* :class:`Plan`       - one timed path per robot, the planner's name and how long it took.
+* :class:`Plan`       - one timed path per robot, the planner's name and how long it took, and the
+  :class:`Network` it was scheduled on when the planner builds one (md).
+* :class:`Network`, :class:`Link` - the (M,D) network of You & Ji, "Design of a Multi-robot Bin
+  Packing System in an Automatic Warehouse": priority order, per robot its delay and travel time,
+  per collision region a link with its (M, D) and collision box.
 * :class:`PlanningError` - raised when no valid plan could be made; names the robots and the reason.
 
 Times are seconds from the start of the plan, coordinates metres in the map frame.
@@ -13,8 +17,9 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -25,11 +30,18 @@ ROBOT_KINDS = ("cargo", "manipulator", "cargo_forklift", "manipulator_forklift")
 CAPABILITIES = ("manipulator", "forklift")
 #: what a robot reports it is doing (``mode`` of a robot status)
 STATUS_MODES = ("idle", "waiting", "driving", "picking", "placing", "charging", "offline", "error")
+#: how the (M,D) scheduler keeps a lower robot clear of a higher one: out of the higher robot's
+#: collision boxes (as in You & Ji) or out of the exact collision regions (a :class:`Network`'s
+#: ``mode``, the md planner's ``mode`` option)
+COLLISION_TESTS = ("box", "exact")
+#: tolerance (s, m) of the (M,D) network: a link is dangerous when both M and D exceed it
+EPS = 1e-9
 
 
 class Behavior(enum.Enum):
-    """The 8 behaviours of paper 002, IV.A. The first five are *active* (the robot moves on its own
-    account), the last three are *Wait* behaviours (the robot holds, or only gives way)."""
+    """The 8 behaviours of Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance",
+    IV.A. The first five are *active* (the robot moves on its own account), the last three are
+    *Wait* behaviours (the robot holds, or only gives way)."""
 
     FOLLOW_WAYPOINT = "FollowWayPoint"
     AVOID = "Avoid"
@@ -124,14 +136,148 @@ class TimedPath:
                               for x, y, t in self.waypoints]}
 
 
+def _time_to_json(x: float) -> float | None:
+    """JSON has no infinity: an unbounded time is written as null."""
+    return None if math.isinf(x) else float(x)
+
+
+def _field(data: Any, key: str, where: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{where}: must be a mapping (got {type(data).__name__})")
+    if key not in data:
+        raise ValueError(f"{where}.{key}: missing")
+    return data[key]
+
+
+def _number(value: Any, where: str, unbounded: bool = False) -> float:
+    """A number of the network file; with ``unbounded``, null is an unbounded time (inf)."""
+    if value is None and unbounded:
+        return math.inf
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+        raise ValueError(f"{where}: must be a number{' or null' if unbounded else ''} (got {value!r})")
+    return float(value)
+
+
+@dataclass
+class Link:
+    """A link (i -> j, k) of the network with its collision box and (M, D) under the final delays:
+    robot i (higher priority) enters the k-th collision region along j's path at T1 = ``ks`` and
+    leaves it at T4 = ``ke`` (inf if i parks in it); j's travelled length in the region is
+    ``ls`` .. ``le``. ``paper_tuple`` is the paper's (lower, higher, k) notation, e.g. (3, 1, 2)."""
+
+    i: str          # higher priority
+    j: str          # lower priority
+    k: int          # 1-based index of the region along j's path
+    M: float
+    D: float
+    ks: float       # T1: i enters the region (absolute time)
+    ke: float       # T4: i leaves it (inf if i parks in it)
+    ls: float       # smallest travelled length of j inside the region
+    le: float       # largest
+
+    @property
+    def paper_tuple(self) -> tuple[str, str, int]:
+        return (self.j, self.i, self.k)
+
+    @property
+    def dangerous(self) -> bool:
+        return self.M > EPS and self.D > EPS
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"i": self.i, "j": self.j, "k": self.k, "M": _time_to_json(self.M), "D": _time_to_json(self.D),
+                "ks": _time_to_json(self.ks), "ke": _time_to_json(self.ke), "ls": self.ls, "le": self.le}
+
+    @classmethod
+    def from_dict(cls, data: Any, where: str = "link") -> Link:
+        """A link as :meth:`to_dict` writes it (null: an unbounded time); ValueError names the field."""
+        ends = []
+        for end in ("i", "j"):
+            rid = _field(data, end, where)
+            if not isinstance(rid, str) or not rid:
+                raise ValueError(f"{where}.{end}: must be a robot id (got {rid!r})")
+            ends.append(rid)
+        k = _field(data, "k", where)
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+            raise ValueError(f"{where}.k: must be an integer >= 1 (got {k!r})")
+        times = [_number(_field(data, key, where), f"{where}.{key}", unbounded=True) for key in ("M", "D", "ks", "ke")]
+        lengths = [_number(_field(data, key, where), f"{where}.{key}") for key in ("ls", "le")]
+        unknown = sorted(set(data) - {"i", "j", "k", "M", "D", "ks", "ke", "ls", "le"})
+        if unknown:
+            raise ValueError(f"{where}.{unknown[0]}: unknown key")
+        return cls(ends[0], ends[1], k, *times, *lengths)
+
+
+@dataclass
+class Network:
+    """The (V, E, C, T, P) of You & Ji as plain data: nodes with (T_delayed, T_traveled) - each
+    robot's departure ``delay`` and its ``travel`` time -, links with (M, D) and collision boxes,
+    the ``priority`` order (highest first) and the collision test (:data:`COLLISION_TESTS`) the
+    delays were computed with (``mode``; None when not known)."""
+
+    priority: list[str]
+    delay: dict[str, float]
+    travel: dict[str, float]
+    links: list[Link] = field(default_factory=list)
+    mode: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``network`` object of the plan file (the ``mode`` is written beside it, as ``mode``)."""
+        return {"priority": list(self.priority),
+                "nodes": {r: {"delay": self.delay[r], "travel": self.travel[r]} for r in self.priority},
+                "links": [link.to_dict() for link in self.links]}
+
+    @classmethod
+    def from_dict(cls, data: Any, mode: str | None = None, where: str = "network") -> Network:
+        """The network of :meth:`to_dict` (and its ``mode``); ValueError names the field
+        (``network.links[3].ke: ...``)."""
+        if mode is not None and mode not in COLLISION_TESTS:
+            raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
+        priority = _field(data, "priority", where)
+        if not isinstance(priority, list) or not all(isinstance(r, str) and r for r in priority):
+            raise ValueError(f"{where}.priority: must be a list of robot ids (got {priority!r})")
+        if len(set(priority)) != len(priority):
+            raise ValueError(f"{where}.priority: lists a robot twice ({priority!r})")
+        nodes = _field(data, "nodes", where)
+        if not isinstance(nodes, Mapping) or set(nodes) != set(priority):
+            raise ValueError(f"{where}.nodes: must map every robot of the priority list, and only those, to "
+                             f"its delay and travel (got {nodes!r})")
+        delay = {r: _number(_field(nodes[r], "delay", f"{where}.nodes[{r!r}]"), f"{where}.nodes[{r!r}].delay")
+                 for r in priority}
+        travel = {r: _number(_field(nodes[r], "travel", f"{where}.nodes[{r!r}]"), f"{where}.nodes[{r!r}].travel")
+                  for r in priority}
+        raw = _field(data, "links", where)
+        if not isinstance(raw, list):
+            raise ValueError(f"{where}.links: must be a list (got {type(raw).__name__})")
+        links = [Link.from_dict(item, f"{where}.links[{n}]") for n, item in enumerate(raw)]
+        for n, link in enumerate(links):
+            for end in ("i", "j"):
+                if getattr(link, end) not in delay:
+                    raise ValueError(f"{where}.links[{n}].{end}: {getattr(link, end)!r} is not a node")
+        unknown = sorted(set(data) - {"priority", "nodes", "links"})
+        if unknown:
+            raise ValueError(f"{where}.{unknown[0]}: unknown key")
+        return cls(list(priority), delay, travel, links, mode)
+
+
 @dataclass
 class Plan:
-    """One timed path per robot, in the plan-file contract of ARCHITECTURE.md."""
+    """One timed path per robot, in the plan-file contract of docs/ARCHITECTURE.md ("Scenario and
+    plan files").
+
+    ``network`` is the (M,D) network the plan was scheduled on, for planners that build one (md),
+    else None. ``info`` holds the planner's own scalars, which differ from planner to planner (md:
+    ``reorders``, ``reroutes``, ``regions``; prior: ``order``, ``reorders``); the plan file writes
+    them in its ``info`` object after the network and its ``mode``."""
 
     planner: str
     paths: list[TimedPath]
     planning_time_s: float = 0.0
-    info: dict[str, Any] = field(default_factory=dict)  # planner-specific extras (e.g. the (M,D) network)
+    info: dict[str, Any] = field(default_factory=dict)
+    network: Network | None = None
+
+    def __post_init__(self) -> None:
+        if "network" in self.info:
+            raise ValueError("plan info: the network is Plan.network (a Network), not an info entry")
 
     def by_id(self) -> dict[str, TimedPath]:
         return {p.robot_id: p for p in self.paths}
@@ -153,7 +299,8 @@ class PlanningError(RuntimeError):
         #: robot id -> id of the robot in its way, where one is known (e.g. parked on its only path)
         self.blockers = dict(blockers or {})
         lines = [f"{rid}: {why}" for rid, why in self.failures.items()]
-        super().__init__("no valid plan for %d robot(s):\n  %s" % (len(lines), "\n  ".join(lines)))
+        listed = "\n  ".join(lines)
+        super().__init__(f"no valid plan for {len(lines)} robot(s):\n  {listed}")
 
 
 #: constant-speed pieces per acceleration or braking ramp (a robot that accelerates at its limit

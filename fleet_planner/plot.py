@@ -1,4 +1,5 @@
-"""Pictures of a plan: the map, the (M,D) view of paper 001 (its Fig. 4) and the schedule.
+"""Pictures of a plan: the map, the (M,D) view of You & Ji, "Design of a Multi-robot Bin Packing
+System in an Automatic Warehouse" (its Fig. 4), and the schedule.
 
 * Map (left): drawn like the ``.map`` file (row 0 on top, y downwards), one colour per robot,
   hollow start discs, filled goal discs, ids at the starts.
@@ -16,14 +17,15 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from .geometry import polyline_point_distances
 from .grid import GridMap
-from .model import Plan, RobotSpec, TimedPath
+from .model import Network, Plan, RobotSpec, TimedPath
 
 #: at most this many robots get their TLVSTC drawn on the right
 MAX_TLVSTC_PANELS = 2
@@ -154,13 +156,12 @@ def waiting_time(path: TimedPath) -> float:
     return float(sum(t1 - t0 for t0, t1, moving in _phases(path) if not moving))
 
 
-def most_constrained(network: dict[str, Any], count: int = MAX_TLVSTC_PANELS) -> list[str]:
+def most_constrained(network: Network, count: int = MAX_TLVSTC_PANELS) -> list[str]:
     """Lower robots with the most inlet links (ties: the longest delay), most constrained first."""
     inlets: dict[str, int] = {}
-    for link in network.get("links", []):
-        inlets[link["j"]] = inlets.get(link["j"], 0) + 1
-    nodes = network.get("nodes", {})
-    ranked = sorted(inlets, key=lambda j: (-inlets[j], -float(nodes.get(j, {}).get("delay", 0.0)), j))
+    for link in network.links:
+        inlets[link.j] = inlets.get(link.j, 0) + 1
+    ranked = sorted(inlets, key=lambda j: (-inlets[j], -float(network.delay.get(j, 0.0)), j))
     return ranked[:count]
 
 
@@ -169,11 +170,11 @@ def _natural(rid: str) -> list:
     return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", rid)]
 
 
-def _higher(rid: str, paths: Mapping[str, TimedPath], network: dict[str, Any] | None) -> list[str]:
+def _higher(rid: str, paths: Mapping[str, TimedPath], network: Network | None) -> list[str]:
     """The robots j must give way to: those before it in the network's priority list, or, without
     a network, every other robot."""
-    if network and rid in network.get("priority", []):
-        before = network["priority"][:network["priority"].index(rid)]
+    if network is not None and rid in network.priority:
+        before = network.priority[:network.priority.index(rid)]
         return [i for i in before if i in paths]
     return [i for i in paths if i != rid]
 
@@ -235,11 +236,6 @@ def _draw_map(ax, grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, colour
     ax.set_ylabel("y [m] (downwards, as in the map file)")
 
 
-def _time(value: Any) -> float:
-    """A time of the network (JSON writes an unbounded one as null)."""
-    return np.inf if value is None else float(value)
-
-
 def _box_slack(times: np.ndarray, length: np.ndarray, box: tuple[float, float, float, float]) -> float:
     """How far in time the curve passes from a box: >= 0 when it passes before (above-left: leaves
     ``le`` before ``ks``) or after it (below-right: reaches ``ls`` after ``ke``), < 0 when it crosses."""
@@ -251,7 +247,7 @@ def _box_slack(times: np.ndarray, length: np.ndarray, box: tuple[float, float, f
     return max(first_at_ls - ke, ks - last_at_le)
 
 
-def _draw_tlvstc(ax, rid: str, paths: Mapping[str, TimedPath], network: dict[str, Any] | None,
+def _draw_tlvstc(ax, rid: str, paths: Mapping[str, TimedPath], network: Network | None,
                  colour: dict) -> tuple[bool, bool]:
     """j's curve over its collision map (shaded per blocking robot) and its collision boxes.
     Returns what the legend has to explain: (a curve without the delay drawn, boxes drawn)."""
@@ -260,10 +256,10 @@ def _draw_tlvstc(ax, rid: str, paths: Mapping[str, TimedPath], network: dict[str
     from matplotlib.patches import Rectangle
 
     path = paths[rid]
-    links = [lk for lk in (network or {}).get("links", []) if lk["j"] == rid]
+    links = [lk for lk in network.links if lk.j == rid] if network is not None else []
     delay = waiting_time(path)
     times, length = travelled_length(path)
-    boxes = [(float(lk["ks"]), _time(lk["ke"]), float(lk["ls"]), float(lk["le"])) for lk in links]
+    boxes = [(float(lk.ks), float(lk.ke), float(lk.ls), float(lk.le)) for lk in links]
     t_end = max([times[-1]] + [b[1] for b in boxes if np.isfinite(b[1])]) * 1.08 + 0.5
     total = float(length[-1])
 
@@ -284,12 +280,12 @@ def _draw_tlvstc(ax, rid: str, paths: Mapping[str, TimedPath], network: dict[str
     # a box whose robot parks in it (ke = inf) reaches beyond the chart
     ax.add_collection(PatchCollection(
         [Rectangle((ks, ls), max(min(ke, 2 * t_end) - ks, 1e-3), max(le - ls, 1e-3)) for ks, ke, ls, le in boxes],
-        facecolors="none", edgecolors=[colour.get(lk["i"], "grey") for lk in links], linewidths=1.1,
+        facecolors="none", edgecolors=[colour.get(lk.i, "grey") for lk in links], linewidths=1.1,
         linestyles=[(0, (4, 2))], zorder=2), autolim=False)
-    for n, (lk, (ks, ke, ls, le)) in enumerate(zip(links, boxes)):
-        c = colour.get(lk["i"], "grey")
+    for n, (lk, (ks, ke, _, le)) in enumerate(zip(links, boxes)):
+        c = colour.get(lk.i, "grey")
         if n in named:
-            ax.annotate(f"({lk['i']},{lk['j']},{lk.get('k', 1)})", ((ks + min(ke, t_end)) / 2, le), xytext=(0, 2),
+            ax.annotate(f"({lk.i},{lk.j},{lk.k})", ((ks + min(ke, t_end)) / 2, le), xytext=(0, 2),
                         textcoords="offset points", ha="center", va="bottom", fontsize=7, color=c,
                         path_effects=halo, zorder=4)
     shifted = delay > 0 and abs(path.start_time - delay) < 1e-9
@@ -304,7 +300,7 @@ def _draw_tlvstc(ax, rid: str, paths: Mapping[str, TimedPath], network: dict[str
     ax.set_ylim(0, total * 1.1 + 0.1)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"travelled length of {rid} [m]")
-    whom = "higher-priority" if network and rid in network.get("priority", []) else "other"
+    whom = "higher-priority" if network is not None and rid in network.priority else "other"
     ax.set_title(f"TLVSTC of {rid}: waits {delay:.1f} s for {len(higher)} {whom} robots"
                  + (f" ({len(links)} collision boxes)" if links else ""), fontsize=10)
     ax.grid(alpha=0.3, zorder=0)
@@ -322,17 +318,17 @@ def _tlvstc_legend(ax, undelayed: bool, boxes: bool) -> None:
     if undelayed:
         handles.insert(1, Line2D([], [], ls=":", color="grey", lw=1.2, label="same, without the delay"))
     if boxes:
-        handles.append(Patch(fill=False, ec="dimgrey", ls=(0, (4, 2)), label="collision box (paper 001)"))
+        handles.append(Patch(fill=False, ec="dimgrey", ls=(0, (4, 2)), label="collision box (You & Ji)"))
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncols=2, fontsize=7,
               frameon=False)
 
 
-def schedule_rows(plan: Plan, network: dict[str, Any] | None = None) -> tuple[list[str], str]:
+def schedule_rows(plan: Plan, network: Network | None = None) -> tuple[list[str], str]:
     """The robots of the Gantt chart, top to bottom, and how they were chosen (for the title): in
     priority order when the network ranks every robot, else by id; of a large fleet only the
     :data:`MAX_GANTT_ROWS` that wait longest."""
     paths = plan.by_id()
-    priority = [rid for rid in (network or {}).get("priority", []) if rid in paths]
+    priority = [rid for rid in (network.priority if network is not None else []) if rid in paths]
     if priority and len(priority) == len(paths):
         ids, how = priority, "priority order, highest on top"
     else:
@@ -345,7 +341,7 @@ def schedule_rows(plan: Plan, network: dict[str, Any] | None = None) -> tuple[li
     return ids, how
 
 
-def _draw_schedule(ax, plan: Plan, network: dict[str, Any] | None, colour: dict) -> None:
+def _draw_schedule(ax, plan: Plan, network: Network | None, colour: dict) -> None:
     """Gantt chart: per robot, hatched bars while it waits, solid ones while it drives."""
     from matplotlib.patches import Patch
 
@@ -375,19 +371,19 @@ def _draw_schedule(ax, plan: Plan, network: dict[str, Any] | None, colour: dict)
               fontsize=7, frameon=False)
 
 
-def _gantt_height(plan: Plan, network: dict[str, Any] | None) -> float:
+def _gantt_height(plan: Plan, network: Network | None) -> float:
     return 1.1 + 0.17 * len(schedule_rows(plan, network)[0])
 
 
-def plot_schedule(plan: Plan, path_png: str | Path, network: dict[str, Any] | None = None) -> None:
-    """Draw the plan's schedule (Gantt chart) to a PNG; ``network`` defaults to
-    ``plan.info['network']`` (its priority order sorts the rows)."""
+def plot_schedule(plan: Plan, path_png: str | Path, network: Network | None = None) -> None:
+    """Draw the plan's schedule (Gantt chart) to a PNG; ``network`` defaults to ``plan.network``
+    (its priority order sorts the rows)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    network = network if network is not None else plan.info.get("network")
+    network = network if network is not None else plan.network
     colour = _colours([p.robot_id for p in plan.paths])
     fig = plt.figure(figsize=(9.0, _gantt_height(plan, network)), layout="constrained")
     _draw_schedule(fig.add_subplot(), plan, network, colour)
@@ -396,23 +392,24 @@ def plot_schedule(plan: Plan, path_png: str | Path, network: dict[str, Any] | No
 
 
 def plot_plan(grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, path_png: str | Path,
-              network: dict[str, Any] | None = None) -> None:
+              network: Network | None = None) -> None:
     """Draw the plan to a PNG: map and TLVSTC charts on top, schedule below. ``network`` defaults
-    to ``plan.info['network']`` when there is one."""
+    to ``plan.network`` when there is one."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    network = network if network is not None else plan.info.get("network")
+    network = network if network is not None else plan.network
     colour = _colours([r.id for r in robots])
     paths = plan.by_id()
     colour.update({rid: (0.5, 0.5, 0.5, 1.0) for rid in paths if rid not in colour})
-    if network and network.get("links"):
+    if network is not None and network.links:
         focus = [rid for rid in most_constrained(network) if rid in paths]
     else:
         wait = {rid: waiting_time(p) for rid, p in paths.items()}
-        focus = [rid for rid in sorted(wait, key=lambda r: (-wait[r], _natural(r))) if wait[rid] > 0][:MAX_TLVSTC_PANELS]
+        by_wait = sorted(wait, key=lambda r: (-wait[r], _natural(r)))
+        focus = [rid for rid in by_wait if wait[rid] > 0][:MAX_TLVSTC_PANELS]
     focus = [rid for rid in focus if paths[rid].length > 0]
     w, h = grid.size_m
     map_w = 7.5
@@ -431,7 +428,7 @@ def plot_plan(grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, path_png: 
     else:
         ax_map = fig.add_subplot(outer[0])
     _draw_map(ax_map, grid, robots, plan, colour, set(focus))
-    mode = f" ({plan.info['mode']} mode)" if plan.info.get("mode") else ""
+    mode = f" ({plan.network.mode} mode)" if plan.network is not None and plan.network.mode else ""
     ax_map.set_title(f"{plan.planner}{mode}: {len(plan.paths)} robots, sum of arrivals {plan.sum_of_arrivals:.1f} s, "
                      f"makespan {plan.makespan:.1f} s", fontsize=10)
     _draw_schedule(fig.add_subplot(outer[1]), plan, network, colour)

@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 
 from .grid import GridMap, MapError, load_scen
-from .model import ROBOT_KINDS, Plan, RobotSpec, TimedPath
+from .model import ROBOT_KINDS, Network, Plan, RobotSpec, TimedPath
 
 MAP_KEYS = ("file", "rows", "resolution")
 ROBOT_KEYS = ("id", "kind", "radius", "max_speed", "start", "goal")
@@ -283,12 +283,29 @@ def _jsonable(value: Any) -> Any:
     raise TypeError(f"plan info: {type(value).__name__} is not JSON serialisable")
 
 
+def _plan_info(plan: Plan) -> dict[str, Any]:
+    """The plan file's ``info``: the network and the collision test it was scheduled with
+    (``mode``) first, when the plan has a network, then the planner's own scalars."""
+    info: dict[str, Any] = {}
+    if plan.network is not None:
+        info["network"] = plan.network.to_dict()
+        if plan.network.mode is not None:
+            info["mode"] = plan.network.mode
+    clash = sorted(set(info) & set(plan.info))
+    if clash:
+        raise ValueError(f"plan info: {', '.join(clash)} belong to the plan's network, not to Plan.info")
+    info.update(plan.info)
+    return info
+
+
 def plan_to_dict(plan: Plan) -> dict[str, Any]:
-    """The plan-file JSON object (``info`` only when the plan has any)."""
+    """The plan-file JSON object (``info`` only when the plan has any; docs/ARCHITECTURE.md,
+    "Scenario and plan files")."""
     out: dict[str, Any] = {"planner": plan.planner, "planning_time_s": float(plan.planning_time_s),
                            "robots": [p.to_dict() for p in plan.paths]}
-    if plan.info:
-        out["info"] = json.loads(json.dumps(plan.info, default=_jsonable))
+    info = _plan_info(plan)
+    if info:
+        out["info"] = json.loads(json.dumps(info, default=_jsonable))
     return out
 
 
@@ -312,6 +329,12 @@ def plan_from_dict(data: Any) -> Plan:
     info = top.get("info", {})
     if not isinstance(info, dict):
         raise ScenarioError(f"info: must be a mapping (got {type(info).__name__})")
+    info, network = dict(info), None
+    if "network" in info:   # a typed network; the collision test it was scheduled with beside it
+        try:
+            network = Network.from_dict(info.pop("network"), info.pop("mode", None))
+        except ValueError as exc:
+            raise ScenarioError(f"info.{exc}") from None
     if not isinstance(top["robots"], list):
         raise ScenarioError(f"robots: must be a list (got {type(top['robots']).__name__})")
     paths = []
@@ -329,7 +352,7 @@ def plan_from_dict(data: Any) -> Plan:
                     or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in wp)):
                 raise ScenarioError(f"{where}.waypoints[{k}]: must be [x, y, t] of finite numbers (got {wp!r})")
         paths.append(TimedPath(r["id"], radius, np.array(wps, dtype=float)))
-    return Plan(top["planner"], paths, float(t_plan), info)
+    return Plan(top["planner"], paths, float(t_plan), info, network)
 
 
 def read_plan(path: str | Path) -> Plan:

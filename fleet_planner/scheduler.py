@@ -1,4 +1,6 @@
-"""The (M,D) network of paper 001 and its priority-ordered delay planner (Section 4, Eq. 3).
+"""The (M,D) network of You & Ji, "Design of a Multi-robot Bin Packing System in an Automatic
+Warehouse", and its priority-ordered delay planner (Section 4, Eq. 3); the network itself
+(:class:`~fleet_planner.model.Network`) is vocabulary: docs/ARCHITECTURE.md, "The (M,D) vocabulary".
 
 Notation (paper Table 1), for a link from a higher-priority robot ``i`` to a lower one ``j`` in
 collision region ``k``: T1 / T4 = when i enters / leaves the region (reaches / leaves the part
@@ -9,13 +11,13 @@ Parked robots are part of the trajectories: a robot sits on its start from t = 0
 departs and on its goal for ever after it arrives. So a region that touches i's goal has T4 = inf,
 one that touches j's start has T2 = 0 whatever j's delay, and one that touches j's goal has T3 = inf.
 A dangerous link of the first two kinds cannot be fixed by delaying j: the scheduler reports it
-(:class:`Blocked`) and the planner re-orders the two robots (FINDINGS 2).
+(:class:`Blocked`) and the planner re-orders the two robots (docs/ARCHITECTURE.md, measured fact 2).
 
 The planner (Eq. 3): take robots in priority order; while any inlet link of robot j is dangerous,
 delay j by the largest D over its dangerous inlet links.
 
-Beyond the paper (``mode="exact"``, FINDINGS 4-5): a collision box makes a whole shared stretch
-exclusive, so a robot can never follow another down an aisle. The exact mode uses the collision
+Beyond the paper (``mode="exact"``, measured facts 4-5): a collision box makes a whole shared
+stretch exclusive, so a robot can never follow another down an aisle. The exact mode uses the collision
 region itself: for each convex piece of a region, the set of delays of j at which j's trajectory
 meets it is an open interval (the range of t_i(a) - t_j(b) over the piece, shifted by i's delay),
 and parked phases add half-lines. j gets the smallest delay outside the union of those intervals:
@@ -24,61 +26,16 @@ never larger than the box answer, and exact for constant-speed robots.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import collision as C
-from .collision import EPS, CollisionModel
+from .collision import CollisionModel
+from .model import COLLISION_TESTS, EPS, Link, Network
 
 INF = math.inf
-MODES = ("box", "exact")
-
-
-@dataclass
-class Link:
-    """A link (i -> j, k) of the network with its collision box and (M, D) under the final delays.
-
-    ``paper_tuple`` is the paper's (lower, higher, k) notation, e.g. (3, 1, 2)."""
-
-    i: str          # higher priority
-    j: str          # lower priority
-    k: int          # 1-based index of the region along j's path
-    M: float
-    D: float
-    ks: float       # T1: i enters the region (absolute time)
-    ke: float       # T4: i leaves it (inf if i parks in it)
-    ls: float       # smallest travelled length of j inside the region
-    le: float       # largest
-
-    @property
-    def paper_tuple(self) -> tuple[str, str, int]:
-        return (self.j, self.i, self.k)
-
-    @property
-    def dangerous(self) -> bool:
-        return self.M > EPS and self.D > EPS
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"i": self.i, "j": self.j, "k": self.k, "M": _num(self.M), "D": _num(self.D),
-                "ks": _num(self.ks), "ke": _num(self.ke), "ls": self.ls, "le": self.le}
-
-
-@dataclass
-class Network:
-    """The paper's (V, E, C, T, P) as plain data: nodes with (T_delayed, T_traveled), links with
-    (M, D) and boxes, and the priority order."""
-
-    priority: list[str]
-    delay: dict[str, float]
-    travel: dict[str, float]
-    links: list[Link] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"priority": list(self.priority),
-                "nodes": {r: {"delay": self.delay[r], "travel": self.travel[r]} for r in self.priority},
-                "links": [link.to_dict() for link in self.links]}
 
 
 @dataclass
@@ -92,11 +49,6 @@ class Blocked:
     kind: str = "goal"   # "goal": blocker parks in j's way; "start": blocker passes j's start too early
 
 
-def _num(x: float) -> float | None:
-    """JSON has no infinity: an unbounded time is written as null."""
-    return None if math.isinf(x) else float(x)
-
-
 class DelayScheduler:
     """Departure delays for robots on fixed paths, in a given priority order (Eq. 3).
 
@@ -106,8 +58,8 @@ class DelayScheduler:
     """
 
     def __init__(self, model: CollisionModel, mode: str = "box"):
-        if mode not in MODES:
-            raise ValueError(f"mode: must be one of {', '.join(MODES)} (got {mode!r})")
+        if mode not in COLLISION_TESTS:
+            raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.model = model
         self.delays = np.zeros(len(model.paths))
         self.mode = mode
@@ -255,7 +207,7 @@ class DelayScheduler:
         """The network under the current delays (links listed by lower robot, then k)."""
         rank = {x: n for n, x in enumerate(order)}
         net = Network([ids[x] for x in order], {ids[x]: float(self.delays[x]) for x in order},
-                      {ids[x]: self.travel(x) for x in order})
+                      {ids[x]: self.travel(x) for x in order}, mode=self.mode)
         for j in order:
             rows = self._inlet(j, rank)
             rows.sort(key=lambda r: (r[3], r[0]))

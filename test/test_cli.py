@@ -54,6 +54,9 @@ class StraightLines(Planner):
         return Plan(self.name, [timed_path_from_polyline(r.id, r.radius, [r.start, r.goal], r.max_speed)
                                 for r in robots], 0.0)
 
+    def plan_incremental(self, grid, robots, fixed, t0):
+        raise NotImplementedError
+
 
 class Refuses(Planner):
     name = "refuses"
@@ -61,11 +64,14 @@ class Refuses(Planner):
     def plan(self, grid, robots, progress=None):
         raise PlanningError({robots[0].id: "no path to the goal", robots[1].id: "blocked by a"})
 
+    def plan_incremental(self, grid, robots, fixed, t0):
+        raise PlanningError({robots[0].id: "no path to the goal"})
+
 
 @pytest.fixture
 def fake_planners(monkeypatch):
-    monkeypatch.setitem(planners._REGISTRY, "straight", f"{__name__}:StraightLines")
-    monkeypatch.setitem(planners._REGISTRY, "refuses", f"{__name__}:Refuses")
+    monkeypatch.setitem(planners._REGISTRY, "straight", planners.Variant(f"{__name__}:StraightLines"))
+    monkeypatch.setitem(planners._REGISTRY, "refuses", planners.Variant(f"{__name__}:Refuses"))
 
 
 @needs_md
@@ -125,3 +131,16 @@ def test_unknown_planner_is_a_usage_error(scenario, tmp_path):
     with pytest.raises(SystemExit) as stop:
         cli.main([str(scenario(CROSSING)), "--out", str(tmp_path / "p.json"), "--planner", "nope"])
     assert stop.value.code == 2
+
+
+@needs_md
+def test_planner_variants_come_from_the_registry(scenario, tmp_path, capsys):
+    path, out = scenario(CROSSING), tmp_path / "plan.json"
+    assert cli.main([str(path), "--out", str(out), "--planner", "md-box", "--quiet"]) == cli.EXIT_OK
+    assert read_plan(out).network.mode == "box"
+    assert cli.main([str(path), "--out", str(out), "--planner", "md", "--mode", "box", "--quiet"]) == cli.EXIT_OK
+    assert read_plan(out).network.mode == "box"
+    out.unlink()
+    assert cli.main([str(path), "--out", str(out), "--planner", "md-box", "--mode", "exact"]) == cli.EXIT_INPUT
+    assert not out.exists()
+    assert "mode is 'box' in this variant" in capsys.readouterr().err

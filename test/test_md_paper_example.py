@@ -28,7 +28,7 @@ So the delay made a safe link dangerous, exactly the case the paper's iteration 
 import numpy as np
 import pytest
 
-from fleet_planner.model import RobotSpec, timed_path_from_polyline
+from fleet_planner.model import timed_path_from_polyline
 from fleet_planner.planners.md import schedule_paths
 
 IDS = ["1", "2", "3"]

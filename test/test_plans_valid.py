@@ -12,9 +12,7 @@ from hypothesis import strategies as st
 from fleet_planner.checker import check_plan
 from fleet_planner.grid import GridMap
 from fleet_planner.model import PlanningError, RobotSpec
-from fleet_planner.planners import get_planner
-
-PLANNERS = [("md", {"mode": "exact"}), ("md", {"mode": "box"}), ("prior", {})]
+from fleet_planner.planners import get_planner, planner_names
 
 
 @st.composite
@@ -36,13 +34,13 @@ def scenarios(draw):
     return grid, robots
 
 
-@pytest.mark.parametrize("name,options", PLANNERS, ids=["md-exact", "md-box", "prior"])
+@pytest.mark.parametrize("name", planner_names())
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=scenarios())
-def test_every_plan_is_valid(name, options, case):
+def test_every_plan_is_valid(name, case):
     grid, robots = case
     try:
-        plan = get_planner(name, **options).plan(grid, robots)
+        plan = get_planner(name).plan(grid, robots)
     except PlanningError as err:
         assert err.failures and set(err.failures) <= {r.id for r in robots}
         return
@@ -56,7 +54,7 @@ def test_exact_mode_never_delays_more_than_boxes_on_a_shared_aisle():
     robots = [RobotSpec("lead", 0.4, 1.0, (2.5, 0.5), (29.5, 0.5)),
               RobotSpec("follow", 0.4, 1.0, (0.5, 0.5), (27.5, 0.5))]
     exact = get_planner("md", mode="exact").plan(grid, robots)
-    box = get_planner("md", mode="box").plan(grid, robots)
+    box = get_planner("md-box").plan(grid, robots)
     for plan in (exact, box):
         assert check_plan(grid, robots, plan) == []
     d_exact = exact.by_id()["follow"].start_time

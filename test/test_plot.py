@@ -10,10 +10,19 @@ import pytest
 matplotlib.use("Agg")
 
 from fleet_planner.grid import GridMap  # noqa: E402
-from fleet_planner.model import Plan, RobotSpec, TimedPath, timed_path_from_polyline  # noqa: E402
+from fleet_planner.model import Network, Plan, RobotSpec, TimedPath, timed_path_from_polyline  # noqa: E402
 from fleet_planner.planners import get_planner  # noqa: E402
-from fleet_planner.plot import (MAX_GANTT_ROWS, blocker_map, collision_map, plot_plan, plot_schedule,  # noqa: E402
-                                positions_at, schedule_rows, travelled_length, waiting_time)
+from fleet_planner.plot import (  # noqa: E402
+    MAX_GANTT_ROWS,
+    blocker_map,
+    collision_map,
+    plot_plan,
+    plot_schedule,
+    positions_at,
+    schedule_rows,
+    travelled_length,
+    waiting_time,
+)
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -113,15 +122,16 @@ def _eroded(mask: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("mode", ["exact", "box"])
 def test_valid_md_plan_curves_never_enter_their_collision_maps(mode):
     plan = get_planner("md", mode=mode).plan(OPEN, CROSS)
-    network = plan.info["network"]
+    network = plan.network
+    assert network is not None
     paths = plan.by_id()
     delayed = 0
-    for rank, rid in enumerate(network["priority"]):
+    for rank, rid in enumerate(network.priority):
         path = paths[rid]
         t = np.linspace(0, plan.makespan + 5, 600)
         s_step = path.length / 300
         s = (np.arange(300) + 0.5) * s_step
-        deep = _eroded(collision_map(paths, rid, network["priority"][:rank], t, s))
+        deep = _eroded(collision_map(paths, rid, network.priority[:rank], t, s))
         rows, cols = _curve_pixels(path, t, s_step, len(s))
         assert not deep[rows, cols].any(), f"{rid}'s curve enters its collision map"
         if path.start_time > 0:
@@ -149,7 +159,8 @@ def test_schedule_rows_of_a_large_fleet_are_the_most_delayed_in_priority_order()
     ids, how = schedule_rows(plan)
     assert ids == [f"r{k}" for k in range(10, n)]           # by id, naturally sorted, r0..r9 waited least
     assert str(MAX_GANTT_ROWS) in how and str(n) in how
-    network = {"priority": [f"r{k}" for k in reversed(range(n))]}
+    ids = [f"r{k}" for k in reversed(range(n))]
+    network = Network(ids, dict.fromkeys(ids, 0.0), dict.fromkeys(ids, 5.0))
     assert schedule_rows(plan, network)[0] == [f"r{k}" for k in reversed(range(10, n))]
     small = Plan("test", paths[:3])
     assert schedule_rows(small)[0] == ["r0", "r1", "r2"]
@@ -158,7 +169,7 @@ def test_schedule_rows_of_a_large_fleet_are_the_most_delayed_in_priority_order()
 @pytest.mark.parametrize("planner", ["md", "prior"])
 def test_plot_plan_writes_a_png(tmp_path, planner):
     plan = get_planner(planner).plan(OPEN, CROSS)
-    assert ("network" in plan.info) == (planner == "md")
+    assert (plan.network is not None) == (planner == "md")
     out = tmp_path / "plan.png"
     plot_plan(OPEN, CROSS, plan, out)
     data = out.read_bytes()
@@ -169,7 +180,7 @@ def test_plot_plan_and_schedule_with_an_empty_network(tmp_path):
     paths = [timed_path_from_polyline(r.id, r.radius, [r.start, r.goal], r.max_speed, departure=2.0 * k)
              for k, r in enumerate(CROSS[:2])]
     plan = Plan("given", paths)
-    plot_plan(OPEN, CROSS[:2], plan, tmp_path / "plan.png", network={"priority": [], "nodes": {}, "links": []})
+    plot_plan(OPEN, CROSS[:2], plan, tmp_path / "plan.png", network=Network([], {}, {}, []))
     plot_schedule(plan, tmp_path / "schedule.png")
     for name in ("plan.png", "schedule.png"):
         assert (tmp_path / name).read_bytes()[:8] == PNG

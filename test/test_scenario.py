@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fleet_planner.checker import check_plan
-from fleet_planner.model import Plan, RobotSpec, timed_path_from_polyline
+from fleet_planner.model import Link, Network, Plan, RobotSpec, timed_path_from_polyline
 from fleet_planner.scenario import (ScenarioError, dump_scenario, load_scenario, parse_scenario,
                                     plan_to_dict, read_plan, scenario_from_movingai, write_plan)
 
@@ -156,8 +156,9 @@ def test_scenario_round_trip(tmp_path, with_file):
 def make_plan() -> Plan:
     a = timed_path_from_polyline("r1", 0.35, [(0.5, 0.5), (4.5, 0.5), (7.5, 3.5)], 1.0, departure=0.3)
     b = timed_path_from_polyline("r2", 0.45, [(7.5, 0.5), (5.0, 2.5), (0.5, 3.5)], 0.8, departure=1 / 3)
-    return Plan("md", [a, b], 0.125, {"network": {"priority": ["r1", "r2"], "nodes": {"r1": {"delay": np.float64(0.3)}}},
-                                      "regions": np.int64(4)})
+    network = Network(["r1", "r2"], {"r1": np.float64(0.3), "r2": 1 / 3}, {"r1": 9.24, "r2": 7.75},
+                      [Link("r1", "r2", 1, 2.5, 0.75, 1.25, np.inf, 4.0, 5.5)], "exact")
+    return Plan("md", [a, b], 0.125, {"regions": np.int64(4)}, network)
 
 
 def test_plan_round_trip_and_still_valid(tmp_path):
@@ -166,7 +167,8 @@ def test_plan_round_trip_and_still_valid(tmp_path):
     write_plan(plan, tmp_path / "plan.json")
     back = read_plan(tmp_path / "plan.json")
     assert back.planner == "md" and back.planning_time_s == 0.125
-    assert back.info == {"network": {"priority": ["r1", "r2"], "nodes": {"r1": {"delay": 0.3}}}, "regions": 4}
+    assert back.info == {"regions": 4}
+    assert back.network == plan.network and back.network.links[0].ke == np.inf
     for p, q in zip(plan.paths, back.paths):
         assert p.robot_id == q.robot_id and p.radius == q.radius
         np.testing.assert_allclose(p.waypoints, q.waypoints, atol=1e-6)
@@ -190,6 +192,10 @@ def test_plan_dict_has_exactly_the_contract_keys():
     (lambda d: d["robots"][0]["waypoints"][1].pop(), "robots[0].waypoints[1]: must be [x, y, t]"),
     (lambda d: d["robots"][0]["waypoints"][1].__setitem__(2, "soon"), "robots[0].waypoints[1]: must be [x, y, t]"),
     (lambda d: d["robots"][1].update(radius=0), "robots[1].radius: must be a finite number > 0"),
+    (lambda d: d["info"]["network"]["links"][0].update(ke="later"),
+     "info.network.links[0].ke: must be a number or null"),
+    (lambda d: d["info"]["network"]["nodes"]["r2"].pop("travel"), "info.network.nodes['r2'].travel: missing"),
+    (lambda d: d["info"].update(mode="boxes"), "info.mode: must be one of box, exact"),
 ])
 def test_bad_plan_files_name_the_field(tmp_path, mutate, message):
     data = plan_to_dict(make_plan())

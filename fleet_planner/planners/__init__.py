@@ -1,28 +1,77 @@
-"""Planner registry: ``get_planner("md")`` etc. Every planner implements :class:`Planner`."""
+"""The planner registry: every named planner variant, registered once.
+
+``get_planner("md")``, ``get_planner("md-box", margin=0.05)``: a variant is a planner class and the
+options that make it that variant (``"md-box"`` is :class:`~fleet_planner.planners.md.MDPlanner`
+with ``mode="box"``, the collision boxes of You & Ji, "Design of a Multi-robot Bin Packing System
+in an Automatic Warehouse"); the caller's options are added to them. The CLI, the fleet manager,
+the delivery simulation, the benchmarks and the tests build their planners here. Every planner
+implements :class:`Planner`.
+"""
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from importlib import import_module
+from types import MappingProxyType
+from typing import Any
 
 from .base import Planner, Progress
 
-#: name -> "module:Class", imported on first use so a planner's dependencies load only when asked for
-_REGISTRY = {
-    "md": "fleet_planner.planners.md:MDPlanner",
-    "prior": "fleet_planner.planners.prior:PriorPlanner",
-}
+
+@dataclass(frozen=True)
+class Variant:
+    """A named planner: its class as ``"module:Class"`` (imported on first use, so that a planner's
+    dependencies load only when it is asked for) and the options that make this variant."""
+
+    target: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+    summary: str = ""
+
+    def planner_class(self) -> type[Planner]:
+        module, cls = self.target.split(":")
+        return getattr(import_module(module), cls)
+
+
+_REGISTRY: dict[str, Variant] = {}
+
+
+def register(name: str, target: str, summary: str = "", **options: Any) -> None:
+    """Register the planner variant ``name``: the class ``target`` ("module:Class") with ``options``."""
+    if name in _REGISTRY:
+        raise ValueError(f"planner: {name!r} is registered already")
+    _REGISTRY[name] = Variant(target, MappingProxyType(dict(options)), summary)
+
+
+register("md", "fleet_planner.planners.md:MDPlanner",
+         "the (M,D) network of You & Ji with exact collision regions (robots may follow each other)")
+register("md-box", "fleet_planner.planners.md:MDPlanner",
+         "the (M,D) network of You & Ji with the paper's collision boxes", mode="box")
+register("prior", "fleet_planner.planners.prior:PriorPlanner",
+         "prioritized planning in space-time (van den Berg & Overmars)")
 
 
 def planner_names() -> list[str]:
+    """The registered variants, in registration order."""
     return list(_REGISTRY)
 
 
-def get_planner(name: str, **options) -> Planner:
+def planner_summary(name: str) -> str:
+    """One line on what the variant ``name`` is (for help texts)."""
+    return _REGISTRY[name].summary
+
+
+def get_planner(name: str, **options: Any) -> Planner:
+    """A new planner of the variant ``name`` with its options and ``options`` (which may add to
+    them, not contradict them: ``get_planner("md-box", mode="exact")`` is a ValueError)."""
     try:
-        target = _REGISTRY[name]
+        variant = _REGISTRY[name]
     except KeyError:
         raise ValueError(f"planner: unknown planner {name!r}; choose one of {', '.join(_REGISTRY)}") from None
-    module, cls = target.split(":")
-    return getattr(import_module(module), cls)(**options)
+    for key, value in options.items():
+        if key in variant.options and variant.options[key] != value:
+            raise ValueError(f"planner {name!r}: {key} is {variant.options[key]!r} in this variant "
+                             f"(got {key}={value!r})")
+    return variant.planner_class()(**{**variant.options, **options})
 
 
-__all__ = ["Planner", "Progress", "get_planner", "planner_names"]
+__all__ = ["Planner", "Progress", "Variant", "get_planner", "planner_names", "planner_summary", "register"]

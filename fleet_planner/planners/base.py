@@ -1,28 +1,49 @@
-"""One interface for every multi-robot planner (md, prior, ...), so tests and benchmarks run the same
-body over all of them."""
+"""One interface for every multi-robot planner (md, prior, ...), so the CLI, the fleet manager, the
+delivery simulation, the benchmarks and the tests run the same body over all of them."""
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Callable, ClassVar, Sequence
+from collections.abc import Callable, Sequence
+from typing import ClassVar
 
 from ..grid import GridMap
-from ..model import Plan, RobotSpec
+from ..model import Plan, RobotSpec, TimedPath
 
 #: progress callback: (done, total, what) - e.g. a progress bar in the CLI or a benchmark
 Progress = Callable[[int, int, str], None]
 
 
 class Planner(ABC):
-    """Turns a map and robots (start, goal, radius, speed) into a :class:`Plan`.
+    """Turns a map and robots (start, goal, radius, speed) into timed paths, in one of two ways:
 
-    ``plan`` returns a valid plan (every disc in free space, no two discs overlapping at any
-    instant, parked robots included, no speed above ``max_speed``) or raises
-    :class:`~fleet_planner.model.PlanningError` naming the robots it could not serve and why.
-    It never returns an invalid plan.
+    * :meth:`plan` - one-shot: every robot from its start at t = 0, a whole :class:`Plan`;
+    * :meth:`plan_incremental` - new legs for some robots around trajectories that other robots
+      are already driving (the fleet manager and the delivery simulation, one leg at a time).
+
+    Both return valid timed paths only (every disc in free space, no two discs overlapping at any
+    instant, parked robots included, no speed above ``max_speed``) or raise
+    :class:`~fleet_planner.model.PlanningError` naming the robots they could not serve and why.
+    They never return an invalid plan. Planners are built by name from the registry
+    (:func:`fleet_planner.planners.get_planner`).
     """
 
     name: ClassVar[str]
 
     @abstractmethod
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
-        ...
+        """A plan for ``robots``: each sits on its start from t = 0 until it departs and on its goal
+        for ever after it arrives. ``progress`` is called now and then with (done, total, what)."""
+
+    @abstractmethod
+    def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
+                         t0: float) -> list[TimedPath]:
+        """New legs for ``robots`` around trajectories being driven.
+
+        Each robot of ``robots`` stands on its ``start`` at ``t0`` and leaves it no earlier than
+        ``t0``. ``fixed`` are the trajectories of the other robots in absolute time; they stay as
+        they are (each robot parked on its last waypoint for ever after it), so only the new legs
+        give way. Returns one timed path per robot, in the order of ``robots``, in absolute time,
+        starting with the waypoint ``(start, t0)``. Raises
+        :class:`~fleet_planner.model.PlanningError` (with ``blockers``, the robot in the way, where
+        one is known) when a robot cannot be served, ``ValueError`` when the input is not a planning
+        problem this planner takes (e.g. a robot both fixed and to be planned)."""

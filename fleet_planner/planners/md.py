@@ -1,4 +1,5 @@
-"""The (M,D) collision-model planner of paper 001, with what we measured it needs (FINDINGS 1-5).
+"""The (M,D) collision-model planner of You & Ji, "Design of a Multi-robot Bin Packing System in an
+Automatic Warehouse", with what we measured it needs (docs/ARCHITECTURE.md, measured facts 1-5).
 
 1. Safe paths: each robot's path avoids the start discs of lower-priority robots and the goal discs
    of higher-priority robots where the map allows (falling back to goals only, then to nothing).
@@ -15,24 +16,37 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..collision import CollisionModel
 from ..geometry import polyline_keeps_off, polyline_passes_near
 from ..grid import GridMap
-from ..model import Plan, PlanningError, RobotSpec, TimedPath, drive_profile, timed_path_from_profile
-from ..scheduler import MODES, Blocked, DelayScheduler, Network
+from ..model import (
+    COLLISION_TESTS,
+    Network,
+    Plan,
+    PlanningError,
+    RobotSpec,
+    TimedPath,
+    drive_profile,
+    timed_path_from_profile,
+)
+from ..scheduler import Blocked, DelayScheduler
 from .base import Planner, Progress
+
+if TYPE_CHECKING:
+    from ..paths import PathFinder
 
 _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
 ORDERS = ("shortest", "longest", "given", "parking")
 
 
 @dataclass
-class Schedule:
+class DepartureSchedule:
     """Result of scheduling fixed paths: delays by robot index, the network, the final order."""
 
     order: list[int]
@@ -43,7 +57,7 @@ class Schedule:
 
 def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Sequence[float],
                    speeds: Sequence[float], order: Sequence[int] | None = None,
-                   margin: float = 0.0, mode: str = "box") -> Schedule:
+                   margin: float = 0.0, mode: str = "box") -> DepartureSchedule:
     """Departure delays for robots on the given paths (no re-planning): the bare method of the paper.
 
     ``order`` lists robot indices from highest to lowest priority (default: as given); ``mode`` is
@@ -52,26 +66,26 @@ def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Seque
     model = CollisionModel(paths, radii, margin, speeds)
     sched = DelayScheduler(model, mode)
     blocked = sched.schedule(order)
-    return Schedule(order, sched.delays.copy(), sched.network(order, ids), blocked)
+    return DepartureSchedule(order, sched.delays.copy(), sched.network(order, ids), blocked)
 
 
 class MDPlanner(Planner):
     """Central planner: safe paths, (M,D) network, departure delays, re-ordering on deadlock.
 
     ``margin`` (m) is added to every pair's sum of radii; ``order`` is the initial priority:
-    "shortest" (default; the best sum of arrival times on every map we measured, FINDINGS 4) and
+    "shortest" (default; the best sum of arrival times on every map we measured, measured fact 4) and
     "longest" sort by straight-line distance to the goal (longest first tends to the shorter
     makespan), "given" keeps the list order, "parking" puts first the robots whose start lies on
     many others' shortest paths and last those whose goal does (fewest re-orderings in crowds);
     ``max_reorders`` bounds the re-ordering attempts (default 4 N); ``mode`` picks the collision
-    test: "exact" (default; robots may follow each other) or "box" (paper 001 as written)."""
+    test: "exact" (default; robots may follow each other) or "box" (You & Ji as written)."""
 
     name = "md"
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
                  mode: str = "exact"):
-        if mode not in MODES:
-            raise ValueError(f"mode: must be one of {', '.join(MODES)} (got {mode!r})")
+        if mode not in COLLISION_TESTS:
+            raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.mode = mode
         if order not in ORDERS:
             raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
@@ -80,6 +94,7 @@ class MDPlanner(Planner):
         self.margin = float(margin)
         self.order = order
         self.max_reorders = max_reorders
+        self._finders = _FinderCache()
 
     # ------------------------------------------------------------------------------------------
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
@@ -87,14 +102,14 @@ class MDPlanner(Planner):
         robots = list(robots)
         _check_endpoints(robots, self.margin)
         shortest: dict[int, np.ndarray] = {}
-        session = _Session(self, grid, robots, self._initial_order(grid, robots, shortest), fixed=0)
-        session.hints = shortest
+        order = self._initial_order(grid, robots, shortest)
+        session = _Session(self, grid, robots, order, fixed=0, hints=shortest)
         session.route(progress)
         session.resolve(progress)
         network = session.sched.network(session.order, [r.id for r in robots])
         return Plan("md", session.timed_paths(), time.perf_counter() - t_start,
-                    {"network": network.to_dict(), "mode": self.mode, "reorders": session.reorders,
-                     "reroutes": session.reroutes, "regions": session.model.region_count})
+                    {"reorders": session.reorders, "reroutes": session.reroutes,
+                     "regions": session.model.region_count}, network)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
                          t0: float) -> list[TimedPath]:
@@ -111,8 +126,8 @@ class MDPlanner(Planner):
         _check_endpoints(specs[nf:], self.margin)
         shortest: dict[int, np.ndarray] = {}
         order = list(range(nf)) + [nf + x for x in self._initial_order(grid, robots, shortest)]
-        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept])
-        session.hints = {nf + x: path for x, path in shortest.items()}
+        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept],
+                           hints={nf + x: path for x, path in shortest.items()})
         session.route()
         session.sched.delays[:nf] = [delay for _, _, delay in kept]
         session.resolve()
@@ -129,30 +144,30 @@ class MDPlanner(Planner):
         if self.order == "given" or len(robots) < 2:
             return idx
         if self.order == "parking":
-            return _parking_order(_Finders.of(grid), robots, self.margin, shortest)
+            return _parking_order(self._finders.of(grid), robots, self.margin, shortest)
         dist = [float(np.hypot(r.goal[0] - r.start[0], r.goal[1] - r.start[1])) for r in robots]
         return sorted(idx, key=lambda x: dist[x], reverse=self.order == "longest")
 
 
-def _parking_order(finders: "_Finders", robots: list[RobotSpec], margin: float,
+def _parking_order(finders: _Finders, robots: list[RobotSpec], margin: float,
                    shortest: dict[int, np.ndarray] | None = None) -> list[int]:
-    """Priority from where robots park (FINDINGS 1 turned into an order): score = how many other
+    """Priority from where robots park (measured fact 1 turned into an order): score = how many other
     robots' shortest paths pass a robot's start disc minus how many pass its goal disc; the
     highest score goes first, ties keep the list order. Robots standing in busy aisles then
     leave before the others come through, and robots parking in them arrive after."""
     import shapely
 
-    lines, owner = [], []
+    lines, owners = [], []
     for x, r in enumerate(robots):
         path = finders.get(r.radius).find(r.start, r.goal)
         if shortest is not None and path is not None:
             shortest[x] = path
         if path is not None and len(path) > 1:
             lines.append(shapely.LineString(path))
-            owner.append(x)
+            owners.append(x)
     if not lines:
         return list(range(len(robots)))
-    owner = np.array(owner)
+    owner = np.array(owners)
     tree = shapely.STRtree(lines)
     reach = 2 * max(r.radius for r in robots) + margin
     radii = np.array([r.radius for r in robots])
@@ -163,7 +178,8 @@ def _parking_order(finders: "_Finders", robots: list[RobotSpec], margin: float,
         other = owner[ti]
         keep = other != qi
         qi, ti, other = qi[keep], ti[keep], other[keep]
-        near = shapely.distance(shapely.points(pts[qi]), np.asarray(lines, dtype=object)[ti]) < radii[qi] + radii[other] + margin
+        near = (shapely.distance(shapely.points(pts[qi]), np.asarray(lines, dtype=object)[ti])
+                < radii[qi] + radii[other] + margin)
         np.add.at(score, qi[near], sign)
     return sorted(range(len(robots)), key=lambda x: -score[x])
 
@@ -173,11 +189,12 @@ class _Session:
     delays), their paths, the priority order, the collision model and the scheduler."""
 
     def __init__(self, planner: MDPlanner, grid: GridMap, robots: list[RobotSpec], order: list[int],
-                 fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = ()):
+                 fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+                 hints: dict[int, np.ndarray] | None = None):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
         self.margin = planner.margin
         self.rank = {x: k for k, x in enumerate(order)}
-        self.finder = _Finders.of(grid)
+        self.finder = planner._finders.of(grid)
         #: per robot its path and the times (from its departure) at which it passes the vertices
         self.paths: list[np.ndarray | None] = [p for p, _ in fixed_paths] + [None] * (len(robots) - fixed)
         self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
@@ -186,7 +203,7 @@ class _Session:
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {}
         self.reorders = self.reroutes = 0
         #: shortest paths already known (robot -> path): kept when they avoid what they must
-        self.hints: dict[int, np.ndarray] = {}
+        self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
     def keep_out(self, x: int, y: int) -> float:
         return self.robots[x].radius + self.robots[y].radius + self.margin
@@ -202,7 +219,9 @@ class _Session:
                    for x in free if self.paths[x] is None}
         if missing:
             raise PlanningError(missing)
-        self.model = CollisionModel(self.paths, [r.radius for r in self.robots], self.margin, times=self.times)
+        routes = [self.route_of(x) for x in range(len(self.robots))]
+        self.model = CollisionModel([p for p, _ in routes], [r.radius for r in self.robots], self.margin,
+                                    times=[t for _, t in routes])
         self.sched = DelayScheduler(self.model, self.planner.mode)
 
     def _set_route(self, x: int, path: np.ndarray | None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
@@ -211,14 +230,21 @@ class _Session:
             self.paths[x] = self.times[x] = None
             return {}
         r = self.robots[x]
-        self.paths[x], self.times[x] = drive_profile(path, r.max_speed, r.max_accel)
-        return {x: (self.paths[x], self.times[x])}
+        points, times = drive_profile(path, r.max_speed, r.max_accel)
+        self.paths[x], self.times[x] = points, times
+        return {x: (points, times)}
+
+    def route_of(self, x: int) -> tuple[np.ndarray, np.ndarray]:
+        """Robot x's path and the times at which it passes the vertices (once it has a path)."""
+        path, times = self.paths[x], self.times[x]
+        assert path is not None and times is not None, f"robot {self.robots[x].id!r} has no path yet"
+        return path, times
 
     def safe_path(self, x: int, partner: int | None = None) -> np.ndarray | None:
-        """FINDINGS 1: avoid lower robots' starts and higher robots' goals; else goals only; else
-        none. Discs that x was found to block (``must``) are kept in those attempts; when they are
-        too many to avoid together, as many as possible are kept, those of ``partner`` (the robot
-        of the conflict being resolved) first."""
+        """Measured fact 1 (docs/ARCHITECTURE.md): avoid lower robots' starts and higher robots'
+        goals; else goals only; else none. Discs that x was found to block (``must``) are kept in
+        those attempts; when they are too many to avoid together, as many as possible are kept,
+        those of ``partner`` (the robot of the conflict being resolved) first."""
         me, rank = self.robots[x], self.rank
         starts = [(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
                   if y != x and rank[y] > rank[x]]
@@ -244,7 +270,8 @@ class _Session:
         # not all of ``must`` at once: keep as much of it as possible, the partner's discs first,
         # then the others, most recently added first
         owners = sorted(by_owner, key=lambda o: (o != partner, -list(by_owner).index(o)))
-        best, kept = find([]), []
+        best = find([])
+        kept: list[tuple[tuple[float, float], float]] = []
         for owner in owners:
             path = find(kept + by_owner[owner])
             if path is not None:
@@ -253,7 +280,7 @@ class _Session:
 
     def resolve(self, progress: Progress | None = None) -> None:
         """Schedule; where a delay cannot help, first re-route around the disc in the way, then
-        move the blocked robot just ahead of its blocker (FINDINGS 2), re-planning only the paths
+        move the blocked robot just ahead of its blocker (measured fact 2), re-planning only the paths
         whose avoidance changed and re-scheduling only what that changes."""
         robots, n = self.robots, len(self.robots)
         limit = 4 * n if self.planner.max_reorders is None else self.planner.max_reorders
@@ -271,8 +298,7 @@ class _Session:
             other = j if mover == i else i
             if tries[(j, i)] == 1 and mover >= self.fixed and self._reroute(mover, other, (disc, self.keep_out(i, j))):
                 blocked = self.sched.schedule(self.order, start_at=self.rank[mover],
-                                              dirty=_apply(self.model, {mover: (self.paths[mover], self.times[mover])},
-                                                           mover))
+                                              dirty=_apply(self.model, {mover: self.route_of(mover)}, mover))
                 continue
             # 2. re-order: j goes just ahead of i (never ahead of a fixed robot)
             if i < self.fixed:
@@ -285,7 +311,7 @@ class _Session:
             self.rank = {x: k for k, x in enumerate(self.order)}
             # robots between the blocker and j now have j above them: those crossing j's goal re-plan
             replan = [j] + [x for x in self.order[pos_i + 1:old_j + 1]
-                            if polyline_passes_near(self.paths[x], robots[j].goal, self.keep_out(x, j))]
+                            if polyline_passes_near(self.route_of(x)[0], robots[j].goal, self.keep_out(x, j))]
             changed = {}
             for x in replan:
                 path = self.safe_path(x)
@@ -307,27 +333,18 @@ class _Session:
         return True
 
     def timed_paths(self) -> list[TimedPath]:
-        return [timed_path_from_profile(r.id, r.radius, self.paths[x], self.times[x], float(self.sched.delays[x]))
+        return [timed_path_from_profile(r.id, r.radius, *self.route_of(x), float(self.sched.delays[x]))
                 for x, r in enumerate(self.robots)]
 
 
 class _Finders:
-    """One path finder per distinct radius (its inflated map is computed once)."""
+    """One path finder per distinct radius of one map (its inflated map is computed once)."""
 
     def __init__(self, grid: GridMap):
         self.grid = grid
-        self._by_radius: dict[float, object] = {}
+        self._by_radius: dict[float, PathFinder] = {}
 
-    @classmethod
-    def of(cls, grid: GridMap) -> "_Finders":
-        """The finders of a map, kept on the map object so every planning call on the same map
-        (the fleet node re-plans many times a minute) reuses the inflated maps and disc caches."""
-        finders = grid.__dict__.get("_md_finders")
-        if finders is None:
-            finders = grid.__dict__["_md_finders"] = cls(grid)
-        return finders
-
-    def get(self, radius: float, exact: bool = False):
+    def get(self, radius: float, exact: bool = False) -> PathFinder:
         """A finder for a disc of ``radius`` or a slightly larger one (radii rounded up to the
         centimetre share one inflated map, which stays valid for the smaller disc); ``exact``
         gives the robot's own radius, for when the rounding closes a passage."""
@@ -337,6 +354,28 @@ class _Finders:
         if key not in self._by_radius:
             self._by_radius[key] = PathFinder(self.grid, key)
         return self._by_radius[key]
+
+
+class _FinderCache:
+    """The path finders of the maps a planner has planned on, owned by the planner: every call on
+    the same map (the fleet manager plans a leg many times a minute) reuses the inflated maps and
+    disc caches. Keyed by map content and resolution, as the prior planner keys its roadmaps (a
+    GridMap is a mutable dataclass, so neither hashable nor a weak key, and the finders refer to
+    their map, which would keep a weak key alive); the few most recent maps are kept."""
+
+    MAX_MAPS = 4
+
+    def __init__(self) -> None:
+        self._by_map: dict[tuple, _Finders] = {}
+
+    def of(self, grid: GridMap) -> _Finders:
+        key = (grid.blocked.shape, grid.resolution, grid.blocked.tobytes())
+        finders = self._by_map.get(key)
+        if finders is None:
+            if len(self._by_map) >= self.MAX_MAPS:
+                self._by_map.clear()
+            finders = self._by_map[key] = _Finders(grid)
+        return finders
 
 
 def _apply(model: CollisionModel, changed: dict[int, tuple[np.ndarray, np.ndarray]], moved: int) -> set[int]:

@@ -37,8 +37,8 @@ from __future__ import annotations
 import heapq
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import shapely
@@ -138,7 +138,7 @@ class PriorPlanner(Planner):
         dist = [math.dist(r.start, r.goal) for r in robots]
         return sorted(idx, key=lambda x: dist[x], reverse=self.order == "longest")
 
-    def _roadmap(self, grid: GridMap, radius: float) -> "_Roadmap":
+    def _roadmap(self, grid: GridMap, radius: float) -> _Roadmap:
         """Roadmaps are cached by map content and radius (the delivery benchmark calls us often)."""
         key = (grid.blocked.shape, grid.resolution, hash(grid.blocked.tobytes()), float(radius))
         rm = self._roadmaps.get(key)
@@ -206,7 +206,7 @@ class _Space:
     that cell's bucket, as the whole move stays within one diagonal of the cell's centre.
     """
 
-    def __init__(self, grid: GridMap, radii: Sequence[float], reach: float):
+    def __init__(self, grid: GridMap, radii: Sequence[float] | np.ndarray, reach: float):
         self.res, self.width, self.height = grid.resolution, grid.width, grid.height
         self.radii = list(radii)
         self.reach = reach
@@ -448,7 +448,8 @@ class _Session:
             cx, cy = grid.centre(col, row)
             if (cx, cy) != (x, y) and shapely.distance(grid.obstacle_geometry,
                                                        shapely.LineString([(x, y), (cx, cy)])) < radius - 1e-9:
-                return f"cannot drive from its {what} ({x:.6g}, {y:.6g}) to its cell's centre without touching an obstacle"
+                return (f"cannot drive from its {what} ({x:.6g}, {y:.6g}) to its cell's centre without "
+                        "touching an obstacle")
             cells.append(row * grid.width + col)
         if rm.component[cells[0]] != rm.component[cells[1]]:
             return f"no way from start to goal on this map for radius {radius:.6g}"
@@ -547,197 +548,7 @@ class _Session:
     # -- one robot -------------------------------------------------------------------------
     def _search(self, i: int) -> np.ndarray:
         """SIPP for robot i; uncompressed waypoints (x, y, t) from (start, t0) or raises _Fail."""
-        grid, spec, t0 = self.grid, self.robots[i], self.t0
-        rm = self.p._roadmap(grid, spec.radius)
-        res, width = grid.resolution, grid.width
-        speed = spec.max_speed
-        keep = self.keep_out(i)
-        buckets = self.space.buckets
-        n_cells = grid.width * grid.height
-
-        (sx, sy), (gx, gy) = (float(v) for v in spec.start), (float(v) for v in spec.goal)
-        sc, sr = grid.cell_of(sx, sy)
-        gc, gr = grid.cell_of(gx, gy)
-        cs, cg = sr * width + sc, gr * width + gc
-        s_off = math.hypot(sx - (sc + 0.5) * res, sy - (sr + 0.5) * res)
-        g_off = math.hypot(gx - (gc + 0.5) * res, gy - (gr + 0.5) * res)
-        start_node = n_cells if s_off > 0 else cs
-        goal_node = start_node if (gx, gy) == (sx, sy) else n_cells + 1 if g_off > 0 else cg
-
-        dist, pred = dijkstra(rm.graph, indices=cg, return_predecessors=True)   # reachable: checked up front
-        free_path = [cs]
-        while free_path[-1] != cg:
-            free_path.append(int(pred[free_path[-1]]))
-        self._check_garages(i, free_path, rm, keep)
-        h_start = (s_off + float(dist[cs]) + g_off) / speed
-        bound = t0 + h_start + self.p.max_wait_s
-
-        def pos(node: int) -> tuple[float, float]:
-            if node == n_cells:
-                return sx, sy
-            if node == n_cells + 1:
-                return gx, gy
-            return (node % width + 0.5) * res, (node // width + 0.5) * res
-
-        def cell(node: int) -> int:
-            return cs if node == n_cells else cg if node == n_cells + 1 else node
-
-        def heur(node: int) -> float:
-            if node == goal_node:
-                return 0.0
-            if node == n_cells:
-                return h_start
-            return (float(dist[node]) + g_off) / speed
-
-        def neighbours(node: int) -> list[tuple[int, float]]:
-            if node >= n_cells:
-                return [(cs, s_off)] if node == n_cells else [(cg, g_off)]
-            out = rm.nbrs[node]
-            if node == cg and goal_node != cg:
-                out = out + [(goal_node, g_off)]
-            return out
-
-        cache: dict[int, list[tuple[float, float]]] = {}
-
-        def intervals(node: int) -> list[tuple[float, float]]:
-            iv = cache.get(node)
-            if iv is None:
-                px, py = pos(node)
-                unsafe = []
-                for piece in buckets[cell(node)]:
-                    reach = keep[piece[6]]
-                    if (reach > 0 and piece[7] - reach < px < piece[9] + reach
-                            and piece[8] - reach < py < piece[10] + reach):
-                        span = _unsafe_times(px, py, piece, reach)
-                        if span is not None:
-                            unsafe.append(span)
-                iv = cache[node] = _complement(unsafe)
-            return iv
-
-        # standing on the start at t0 must be safe
-        iv0 = intervals(start_node)
-        j0 = next((k for k, (s, e) in enumerate(iv0) if s <= t0 <= e), None)
-        if j0 is None:
-            who = self._culprits((sx, sy), cs, keep, t0)
-            raise _Fail(f"standing on its start at t={t0:.6g} it overlaps {_names(self.names, who)}", fatal=True)
-
-        heap = [(t0 + heur(start_node), -t0, 0, start_node, j0, t0)]
-        best = {(start_node, j0): t0}
-        parent: dict[tuple[int, int], tuple[tuple[int, int], float] | None] = {(start_node, j0): None}
-        counter, expansions = 0, 0
-        d_max = max(math.sqrt(2) * res, s_off, g_off) / speed
-        lim = max(keep) + d_max * speed   # pieces farther than this from a node cannot meet a move from it
-        reason = f"no collision-free timing within max_wait_s={self.p.max_wait_s:g} s"
-        while heap:
-            _, _, _, u, ju, g = heapq.heappop(heap)
-            if g > best[(u, ju)]:
-                continue
-            e_u = intervals(u)[ju][1]
-            if u == goal_node and e_u == _INF:
-                return self._waypoints(i, (u, ju), parent, best, pos, cell, intervals, keep, speed)
-            expansions += 1
-            if expansions % 512 == 0:
-                if time.perf_counter() > self.deadline:
-                    raise _Fail(f"time limit of {self.p.time_limit_s:g} s reached", fatal=True)
-                if expansions >= _MAX_EXPANSIONS:
-                    reason = f"search gave up after {expansions} expansions"
-                    break
-            ax, ay = pos(u)
-            horizon = e_u + d_max
-            x0, x1, y0, y1 = ax - lim, ax + lim, ay - lim, ay + lim
-            near = [p for p in buckets[cell(u)] if p[1] > g and p[0] < horizon and keep[p[6]] > 0
-                    and p[7] < x1 and p[9] > x0 and p[8] < y1 and p[10] > y0]
-            for v, length in neighbours(u):
-                d = length / speed
-                hv = heur(v)
-                bx, by = pos(v)
-                wx, wy = (bx - ax) / d, (by - ay) / d
-                for jv, (s_v, e_v) in enumerate(intervals(v)):
-                    if e_v < g + d:
-                        continue
-                    lo = max(g, s_v - d)
-                    if lo > e_u or lo + d + hv > bound:
-                        break
-                    hi = min(e_u, e_v - d)
-                    if lo > hi:
-                        continue
-                    tau = _earliest(near, keep, ax, ay, wx, wy, d, lo, hi)
-                    if tau is None:
-                        continue
-                    arrive = tau + d
-                    key = (v, jv)
-                    if arrive >= best.get(key, _INF):
-                        continue
-                    best[key] = arrive
-                    parent[key] = ((u, ju), tau)
-                    counter += 1
-                    heapq.heappush(heap, (arrive + hv, -arrive, counter, v, jv, arrive))
-        raise self._diagnose(i, reason, rm, free_path, keep, iv0[j0], intervals(goal_node), bound)
-
-    def _waypoints(self, i: int, key: tuple[int, int], parent: dict, best: dict, pos, cell, intervals,
-                   keep: list[float], speed: float) -> np.ndarray:
-        """The found path as waypoints, its waits moved as early along it as they can go."""
-        nodes, taus = [], []
-        at: tuple[int, int] | None = key
-        while at is not None:
-            nodes.append(at[0])
-            link = parent[at]
-            if link is not None:
-                taus.append(link[1])
-            at = None if link is None else link[0]
-        nodes.reverse()
-        taus.reverse()
-        taus = self._postpone(nodes, best[key], pos, cell, intervals, keep, speed) or taus
-        t = self.t0
-        wp = [(*pos(nodes[0]), t)]
-        for prev, node, tau in zip(nodes[:-1], nodes[1:], taus):
-            if tau > t:
-                wp.append((*pos(prev), tau))
-            t = tau + math.dist(pos(prev), pos(node)) / speed
-            wp.append((*pos(node), t))
-        out = np.array(wp, dtype=float)
-        self._verify(i, out)
-        return out
-
-    def _postpone(self, nodes: list[int], arrival: float, pos, cell, intervals, keep: list[float],
-                  speed: float) -> list[float] | None:
-        """Departure times along ``nodes``, each as late as possible for the same arrival, or None.
-
-        SIPP leaves every node as early as it can and so waits just before each conflict, often in
-        an aisle where it blocks the robots planned after it. Going backwards over the same nodes
-        (latest departure from each safe interval that still makes the arrival) moves the waiting
-        to where the robot already stands, its start first of all.
-        """
-        t0 = self.t0
-        latest = {len(intervals(nodes[-1])) - 1: arrival}   # safe interval -> latest time to leave it
-        choices: list[dict[int, tuple[int, float]]] = []
-        for u, v in zip(nodes[-2::-1], nodes[:0:-1]):
-            (ax, ay), (bx, by) = pos(u), pos(v)
-            d = math.hypot(bx - ax, by - ay) / speed
-            wx, wy = (bx - ax) / d, (by - ay) / d
-            near = [p for p in self.space.buckets[cell(u)] if p[1] > t0 and p[0] < arrival and keep[p[6]] > 0]
-            iv_v = intervals(v)
-            new: dict[int, float] = {}
-            pick: dict[int, tuple[int, float]] = {}
-            for iu, (s_u, e_u) in enumerate(intervals(u)):
-                if e_u < t0 or s_u > arrival:
-                    continue
-                for jv, leave in latest.items():
-                    lo, hi = max(s_u, iv_v[jv][0] - d, t0), min(e_u, leave - d)
-                    tau = _latest(near, keep, ax, ay, wx, wy, d, lo, hi) if lo <= hi else None
-                    if tau is not None and tau > new.get(iu, -_INF):
-                        new[iu], pick[iu] = tau, (jv, tau)
-            latest = new
-            choices.append(pick)
-        choices.reverse()
-        iu = next((k for k, (s, e) in enumerate(intervals(nodes[0])) if s <= t0 <= e), None)
-        taus = []
-        for pick in choices:
-            if iu not in pick:
-                return None
-            iu, tau = pick[iu]
-            taus.append(tau)
-        return taus
+        return _RobotSearch(self, i).run()
 
     def _verify(self, i: int, wp: np.ndarray) -> None:
         """Re-check a new path against its neighbours with the plain closest-approach formula (a
@@ -783,7 +594,8 @@ class _Session:
         for o, x, y, reach in discs:
             pad = reach + math.sqrt(2) * res
             c0, c1 = max(0, math.ceil((x - pad) / res - 0.5)), min(width - 1, math.floor((x + pad) / res - 0.5))
-            r0, r1 = max(0, math.ceil((y - pad) / res - 0.5)), min(self.grid.height - 1, math.floor((y + pad) / res - 0.5))
+            r0 = max(0, math.ceil((y - pad) / res - 0.5))
+            r1 = min(self.grid.height - 1, math.floor((y + pad) / res - 0.5))
             for row in range(r0, r1 + 1):
                 for col in range(c0, c1 + 1):
                     ax, ay = (col + 0.5) * res, (row + 0.5) * res
@@ -796,8 +608,8 @@ class _Session:
             return None
         graph = rm.graph.copy()
         for src, dst in blocked:
-            row = slice(graph.indptr[src], graph.indptr[src + 1])
-            graph.data[row][graph.indices[row] == dst] = 0.0
+            out_of_src = slice(graph.indptr[src], graph.indptr[src + 1])
+            graph.data[out_of_src][graph.indices[out_of_src] == dst] = 0.0
         graph.eliminate_zeros()
         if path[-1] in set(breadth_first_order(graph, path[0], return_predecessors=False).tolist()):
             return None
@@ -831,6 +643,244 @@ class _Session:
             return _Fail(f"{reason}; {_names(self.names, who)} drives over its start at t={start_iv[1]:.6g}",
                          [(o, "runover", start_iv[1]) for o in who])
         return _Fail(reason)
+
+
+# ---------------------------------------------------------------------------------------------
+# one robot: safe-interval path planning around what is planned so far
+# ---------------------------------------------------------------------------------------------
+#: a search state: (node, index of one of the node's safe intervals)
+_State = tuple[int, int]
+
+
+class _RobotSearch:
+    """SIPP for robot ``i`` of a session, around the pieces in the session's space.
+
+    The graph: the roadmap's cells (node = cell index ``row * width + col``, at the cell's centre)
+    and, where the robot's start or goal lies off its cell's centre, one extra node for it
+    (``n_cells``: the start, ``n_cells + 1``: the goal) joined to the centre of that cell. A state
+    is a node with one of its safe intervals; ``best`` holds the earliest arrival found at each
+    state and ``parent`` the state it came from with the departure time from there. The heuristic
+    is the time to drive the free shortest path (Dijkstra from the goal cell) at top speed.
+    """
+
+    def __init__(self, session: _Session, i: int):
+        grid, spec = session.grid, session.robots[i]
+        self.session, self.i, self.t0 = session, i, session.t0
+        self.rm = session.p._roadmap(grid, spec.radius)
+        self.res, self.width = res, width = grid.resolution, grid.width
+        self.speed = speed = spec.max_speed
+        self.keep = session.keep_out(i)
+        self.buckets = session.space.buckets
+        self.n_cells = n_cells = grid.width * grid.height
+
+        (sx, sy), (gx, gy) = (float(v) for v in spec.start), (float(v) for v in spec.goal)
+        self.start_xy, self.goal_xy = (sx, sy), (gx, gy)
+        sc, sr = grid.cell_of(sx, sy)
+        gc, gr = grid.cell_of(gx, gy)
+        self.cs, self.cg = cs, cg = sr * width + sc, gr * width + gc
+        self.s_off = s_off = math.hypot(sx - (sc + 0.5) * res, sy - (sr + 0.5) * res)
+        self.g_off = g_off = math.hypot(gx - (gc + 0.5) * res, gy - (gr + 0.5) * res)
+        self.start_node = n_cells if s_off > 0 else cs
+        self.goal_node = self.start_node if (gx, gy) == (sx, sy) else n_cells + 1 if g_off > 0 else cg
+
+        self.dist, pred = dijkstra(self.rm.graph, indices=cg, return_predecessors=True)  # reachable: checked up front
+        self.free_path = [cs]
+        while self.free_path[-1] != cg:
+            self.free_path.append(int(pred[self.free_path[-1]]))
+        self.h_start = (s_off + float(self.dist[cs]) + g_off) / speed
+        self.bound = self.t0 + self.h_start + session.p.max_wait_s
+        self.d_max = max(math.sqrt(2) * res, s_off, g_off) / speed   # the longest move, in seconds
+        # pieces farther than this from a node cannot meet a move from it
+        self.lim = max(self.keep) + self.d_max * speed
+        self._safe: dict[int, list[tuple[float, float]]] = {}   # node -> its safe intervals
+        self.best: dict[_State, float] = {}
+        self.parent: dict[_State, tuple[_State, float] | None] = {}
+        self.heap: list[tuple[float, float, int, int, int, float]] = []
+        self.pushed = 0   # tie-breaker of the heap: first pushed, first popped
+
+    # -- the graph -------------------------------------------------------------------------
+    def pos(self, node: int) -> tuple[float, float]:
+        if node == self.n_cells:
+            return self.start_xy
+        if node == self.n_cells + 1:
+            return self.goal_xy
+        width, res = self.width, self.res
+        return (node % width + 0.5) * res, (node // width + 0.5) * res
+
+    def cell(self, node: int) -> int:
+        return self.cs if node == self.n_cells else self.cg if node == self.n_cells + 1 else node
+
+    def heur(self, node: int) -> float:
+        if node == self.goal_node:
+            return 0.0
+        if node == self.n_cells:
+            return self.h_start
+        return (float(self.dist[node]) + self.g_off) / self.speed
+
+    def neighbours(self, node: int) -> list[tuple[int, float]]:
+        if node >= self.n_cells:
+            return [(self.cs, self.s_off)] if node == self.n_cells else [(self.cg, self.g_off)]
+        out = self.rm.nbrs[node]
+        if node == self.cg and self.goal_node != self.cg:
+            out = out + [(self.goal_node, self.g_off)]
+        return out
+
+    def intervals(self, node: int) -> list[tuple[float, float]]:
+        """The safe intervals of a node (computed once per search)."""
+        iv = self._safe.get(node)
+        if iv is None:
+            px, py = self.pos(node)
+            keep = self.keep
+            unsafe = []
+            for piece in self.buckets[self.cell(node)]:
+                reach = keep[piece[6]]
+                if (reach > 0 and piece[7] - reach < px < piece[9] + reach
+                        and piece[8] - reach < py < piece[10] + reach):
+                    span = _unsafe_times(px, py, piece, reach)
+                    if span is not None:
+                        unsafe.append(span)
+            iv = self._safe[node] = _complement(unsafe)
+        return iv
+
+    # -- the search ------------------------------------------------------------------------
+    def run(self) -> np.ndarray:
+        """The earliest arrival on the goal for good, as waypoints; raises _Fail."""
+        session, t0 = self.session, self.t0
+        session._check_garages(self.i, self.free_path, self.rm, self.keep)
+        start = self._start_state()
+        self.best[start] = t0
+        self.parent[start] = None
+        self.heap.append((t0 + self.heur(self.start_node), -t0, 0, *start, t0))
+        expansions = 0
+        reason = f"no collision-free timing within max_wait_s={session.p.max_wait_s:g} s"
+        while self.heap:
+            _, _, _, u, ju, g = heapq.heappop(self.heap)
+            if g > self.best[(u, ju)]:
+                continue
+            e_u = self.intervals(u)[ju][1]
+            if u == self.goal_node and e_u == _INF:
+                return self._waypoints((u, ju))
+            expansions += 1
+            if expansions % 512 == 0:
+                if time.perf_counter() > session.deadline:
+                    raise _Fail(f"time limit of {session.p.time_limit_s:g} s reached", fatal=True)
+                if expansions >= _MAX_EXPANSIONS:
+                    reason = f"search gave up after {expansions} expansions"
+                    break
+            self._expand(u, ju, g, e_u)
+        raise session._diagnose(self.i, reason, self.rm, self.free_path, self.keep,
+                                self.intervals(self.start_node)[start[1]], self.intervals(self.goal_node), self.bound)
+
+    def _start_state(self) -> _State:
+        """Standing on the start at t0 must be safe: the state of the safe interval holding t0."""
+        t0 = self.t0
+        j0 = next((k for k, (s, e) in enumerate(self.intervals(self.start_node)) if s <= t0 <= e), None)
+        if j0 is None:
+            session = self.session
+            who = session._culprits(self.start_xy, self.cs, self.keep, t0)
+            raise _Fail(f"standing on its start at t={t0:.6g} it overlaps {_names(session.names, who)}", fatal=True)
+        return self.start_node, j0
+
+    def _expand(self, u: int, ju: int, g: float, e_u: float) -> None:
+        """Every state reachable from node u, reached at g and safe until e_u, by one move: leave
+        as early as the move is clear, arrive within a safe interval of the next node."""
+        keep, speed, bound, best, parent = self.keep, self.speed, self.bound, self.best, self.parent
+        ax, ay = self.pos(u)
+        horizon = e_u + self.d_max
+        lim = self.lim
+        x0, x1, y0, y1 = ax - lim, ax + lim, ay - lim, ay + lim
+        near = [p for p in self.buckets[self.cell(u)] if p[1] > g and p[0] < horizon and keep[p[6]] > 0
+                and p[7] < x1 and p[9] > x0 and p[8] < y1 and p[10] > y0]
+        for v, length in self.neighbours(u):
+            d = length / speed
+            hv = self.heur(v)
+            bx, by = self.pos(v)
+            wx, wy = (bx - ax) / d, (by - ay) / d
+            for jv, (s_v, e_v) in enumerate(self.intervals(v)):
+                if e_v < g + d:
+                    continue
+                lo = max(g, s_v - d)
+                if lo > e_u or lo + d + hv > bound:
+                    break
+                hi = min(e_u, e_v - d)
+                if lo > hi:
+                    continue
+                tau = _earliest(near, keep, ax, ay, wx, wy, d, lo, hi)
+                if tau is None:
+                    continue
+                arrive = tau + d
+                key = (v, jv)
+                if arrive >= best.get(key, _INF):
+                    continue
+                best[key] = arrive
+                parent[key] = ((u, ju), tau)
+                self.pushed += 1
+                heapq.heappush(self.heap, (arrive + hv, -arrive, self.pushed, v, jv, arrive))
+
+    # -- the result ------------------------------------------------------------------------
+    def _waypoints(self, key: _State) -> np.ndarray:
+        """The found path as waypoints, its waits moved as early along it as they can go."""
+        nodes, taus = [], []
+        at: _State | None = key
+        while at is not None:
+            nodes.append(at[0])
+            link = self.parent[at]
+            if link is not None:
+                taus.append(link[1])
+            at = None if link is None else link[0]
+        nodes.reverse()
+        taus.reverse()
+        taus = self._postpone(nodes, self.best[key]) or taus
+        pos, speed = self.pos, self.speed
+        t = self.t0
+        wp = [(*pos(nodes[0]), t)]
+        for prev, node, tau in zip(nodes[:-1], nodes[1:], taus):
+            if tau > t:
+                wp.append((*pos(prev), tau))
+            t = tau + math.dist(pos(prev), pos(node)) / speed
+            wp.append((*pos(node), t))
+        out = np.array(wp, dtype=float)
+        self.session._verify(self.i, out)
+        return out
+
+    def _postpone(self, nodes: list[int], arrival: float) -> list[float] | None:
+        """Departure times along ``nodes``, each as late as possible for the same arrival, or None.
+
+        SIPP leaves every node as early as it can and so waits just before each conflict, often in
+        an aisle where it blocks the robots planned after it. Going backwards over the same nodes
+        (latest departure from each safe interval that still makes the arrival) moves the waiting
+        to where the robot already stands, its start first of all.
+        """
+        t0, pos, intervals, keep, speed = self.t0, self.pos, self.intervals, self.keep, self.speed
+        latest = {len(intervals(nodes[-1])) - 1: arrival}   # safe interval -> latest time to leave it
+        choices: list[dict[int, tuple[int, float]]] = []
+        for u, v in zip(nodes[-2::-1], nodes[:0:-1]):
+            (ax, ay), (bx, by) = pos(u), pos(v)
+            d = math.hypot(bx - ax, by - ay) / speed
+            wx, wy = (bx - ax) / d, (by - ay) / d
+            near = [p for p in self.buckets[self.cell(u)] if p[1] > t0 and p[0] < arrival and keep[p[6]] > 0]
+            iv_v = intervals(v)
+            new: dict[int, float] = {}
+            pick: dict[int, tuple[int, float]] = {}
+            for iu, (s_u, e_u) in enumerate(intervals(u)):
+                if e_u < t0 or s_u > arrival:
+                    continue
+                for jv, leave in latest.items():
+                    lo, hi = max(s_u, iv_v[jv][0] - d, t0), min(e_u, leave - d)
+                    tau = _latest(near, keep, ax, ay, wx, wy, d, lo, hi) if lo <= hi else None
+                    if tau is not None and tau > new.get(iu, -_INF):
+                        new[iu], pick[iu] = tau, (jv, tau)
+            latest = new
+            choices.append(pick)
+        choices.reverse()
+        at = next((k for k, (s, e) in enumerate(intervals(nodes[0])) if s <= t0 <= e), None)
+        taus = []
+        for pick in choices:
+            if at not in pick:
+                return None
+            at, tau = pick[at]
+            taus.append(tau)
+        return taus
 
 
 # ---------------------------------------------------------------------------------------------
