@@ -8,8 +8,12 @@ from .base import Planner, Progress
 #: name -> "module:Class", imported on first use so a planner's dependencies load only when asked for
 _REGISTRY = {
     "md": "fleet_planner.planners.md:MDPlanner",
+    "md-box": "fleet_planner.planners.md:MDPlanner",   # MDPlanner(mode="box"), see _PRESETS
     "prior": "fleet_planner.planners.prior:PriorPlanner",
 }
+
+#: registered variants: the options their name fixes
+_PRESETS: dict[str, dict] = {"md-box": {"mode": "box"}}
 
 
 def planner_names() -> list[str]:
@@ -22,7 +26,7 @@ def get_planner(name: str, **options) -> Planner:
     except KeyError:
         raise ValueError(f"planner: unknown planner {name!r}; choose one of {', '.join(_REGISTRY)}") from None
     module, cls = target.split(":")
-    return getattr(import_module(module), cls)(**options)
+    return getattr(import_module(module), cls)(**_PRESETS.get(name, {}), **options)
 
 
 __all__ = ["Planner", "Progress", "get_planner", "planner_names"]

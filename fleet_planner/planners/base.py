@@ -6,7 +6,7 @@ from abc import ABC, abstractmethod
 from typing import Callable, ClassVar, Sequence
 
 from ..grid import GridMap
-from ..model import Plan, RobotSpec
+from ..model import Plan, RobotSpec, TimedPath
 
 #: progress callback: (done, total, what) - e.g. a progress bar in the CLI or a benchmark
 Progress = Callable[[int, int, str], None]
@@ -26,3 +26,10 @@ class Planner(ABC):
     @abstractmethod
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         ...
+
+    def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
+                         t0: float) -> list[TimedPath]:
+        """Timed paths (absolute times) for ``robots`` leaving their starts no earlier than ``t0``,
+        around the ``fixed`` trajectories being driven (unchanged; each robot stays on its last
+        waypoint for ever); raises :class:`~fleet_planner.model.PlanningError` like :meth:`plan`."""
+        raise NotImplementedError(f"{type(self).__name__} does not plan incrementally")
