@@ -2,7 +2,6 @@
 (:class:`DeliveryResult`); the measures every method shares."""
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -23,13 +22,13 @@ STOPS = ("done", "cap", "stall", "wall")
 
 @dataclass(frozen=True)
 class RunLimits:
-    """When a run stops and how it waits (see :func:`~fleet_planner.delivery.simulate`)."""
+    """When a run stops and how it waits (the meanings and defaults: :func:`~fleet_planner.delivery.simulate`)."""
 
-    cap_s: float = 4 * 3600.0
-    stall_s: float = 600.0
-    no_progress_s: float = 120.0
-    retry_s: float = 2.0
-    wall_cap_s: float = math.inf
+    cap_s: float
+    stall_s: float
+    no_progress_s: float
+    retry_s: float
+    wall_cap_s: float
 
 
 @dataclass

@@ -152,7 +152,7 @@ class _DeliveryRules:
         self.solo_time = _SoloTimes(problem)
         self.robots = [_SimRobot(i, rid, problem.spots[i], spot=i, solo_at=problem.spots[i])
                        for i, rid in enumerate(problem.robot_ids())]
-        self.spots = _ParkingSpots(problem.spots, problem.n_robots)
+        self.parking = _ParkingSpots(problem.spots, problem.n_robots)
         #: central: driving distance from each station to each parking spot, to queue close by
         self.spot_dist: dict[str, np.ndarray] = {}
         if claims:
@@ -160,10 +160,10 @@ class _DeliveryRules:
             cells = [problem.grid.cell_of(*p) for p in problem.spots]
             at = [row * problem.grid.width + col for col, row in cells]
             self.spot_dist = {s: drive[k, at] for k, s in enumerate(problem.stations)}
-        self.stations = _StationQueues(list(problem.stations))
+        self.queues = _StationQueues(list(problem.stations))
         self.next_delivery = 0
         self.completed = 0
-        self.ctime: float | None = None
+        self.ctime: float | None = None     # when the last delivery was done
         self.phase_s: dict[str, float] = {}  # robot-seconds spent in each phase
         self.hold_legs = 0
 
@@ -196,13 +196,13 @@ class _DeliveryRules:
             self._to_station(r, r.delivery.pick, "pick", t)
         else:
             # home, else the closest free spot (near a station, it would stand in others' way)
-            spot = r.idx if self.spots.owner[r.idx] is None else \
-                self.spots.nearest_free(np.hypot(*(self.spots.xy - np.asarray(r.pos)).T))
+            spot = r.idx if self.parking.owner[r.idx] is None else \
+                self.parking.nearest_free(np.hypot(*(self.parking.xy - np.asarray(r.pos)).T))
             if spot is None:                  # every spot taken or promised: stay (nothing left to do)
                 self.enter(r, "done", t)
                 r.wake = math.inf
                 return
-            self.spots.owner[spot], r.booked_spot = r.idx, spot
+            self.parking.owner[spot], r.booked_spot = r.idx, spot
             self._need(r, self.problem.spots[spot], "park", None, t)
 
     def _drive_solo(self, r: _SimRobot, station: Point) -> None:
@@ -218,9 +218,9 @@ class _DeliveryRules:
         if not self.claims:
             self._need(r, goal, kind, station, t)
             return
-        free = self.stations.free_for(station, r.idx)
+        free = self.queues.free_for(station, r.idx)
         drive = self.spot_dist[station]
-        spot = self.spots.nearest_free(drive)
+        spot = self.parking.nearest_free(drive)
         on_spot = r.spot is not None and r.on_station is None and r.pos == self.problem.spots[r.spot]
         if on_spot:
             close = drive[r.spot] <= CLAIM_RADIUS or (spot is not None and drive[r.spot] <= drive[spot])
@@ -228,12 +228,12 @@ class _DeliveryRules:
             close = math.dist(r.pos, goal) <= CLAIM_RADIUS
         if free and (close or (spot is None and not on_spot)):
             # close, or standing on a station with nowhere to wait: better go than block it
-            self.stations.claim(station, r.idx)
+            self.queues.claim(station, r.idx)
             self._need(r, goal, kind, station, t)
         elif close and on_spot:
             self._queue(r, station, kind, t)  # wait right here
         elif spot is not None:
-            self.spots.owner[spot] = r.idx
+            self.parking.owner[spot] = r.idx
             r.booked_spot, r.station_kind = spot, kind
             self._need(r, self.problem.spots[spot], "hold", station, t)
             self.hold_legs += 1
@@ -244,7 +244,7 @@ class _DeliveryRules:
     def _queue(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         self.enter(r, "queued", t)
         r.station, r.wake, r.station_kind = station, math.inf, kind
-        self.stations.join(station, r.idx)
+        self.queues.join(station, r.idx)
 
     def _need(self, r: _SimRobot, target: Point, kind: str, station: str | None, t: float) -> None:
         self.enter(r, "need", t)
@@ -257,33 +257,33 @@ class _DeliveryRules:
 
     def others_queue_here(self, r: _SimRobot) -> bool:
         """r stands on a station others queue for."""
-        return r.on_station is not None and self.stations.has_queue(r.on_station)
+        return r.on_station is not None and self.queues.has_queue(r.on_station)
 
     def spot_near_here(self, r: _SimRobot) -> int | None:
         """The free parking spot closest to the station r stands on."""
         assert r.on_station is not None
-        return self.spots.nearest_free(self.spot_dist[r.on_station])
+        return self.parking.nearest_free(self.spot_dist[r.on_station])
 
     def evacuate(self, r: _SimRobot, spot: int) -> None:
         """r clears its station for the parking spot instead of going where it decided (that
         decision is undone; it decides again on the spot)."""
         if r.booked_spot is not None:
-            self.spots.owner[r.booked_spot] = None
+            self.parking.owner[r.booked_spot] = None
         if (r.target_kind in ("pick", "drop") and r.station is not None and r.station != r.on_station
-                and self.stations.holder.get(r.station) == r.idx):
-            self.stations.release(r.station)
-        self.spots.owner[spot], r.booked_spot = r.idx, spot
+                and self.queues.holder.get(r.station) == r.idx):
+            self.queues.release(r.station)
+        self.parking.owner[spot], r.booked_spot = r.idx, spot
         r.target, r.target_kind, r.station = self.problem.spots[spot], "evac", None
 
     # -- events ---------------------------------------------------------------------------------
     def left(self, r: _SimRobot, t: float) -> None:
         """r drove off from where it stood: free its spot and the station it stood on."""
-        if r.spot is not None and self.spots.owner[r.spot] == r.idx:
-            self.spots.owner[r.spot] = None
+        if r.spot is not None and self.parking.owner[r.spot] == r.idx:
+            self.parking.owner[r.spot] = None
         r.spot = r.booked_spot if r.target_kind in ("hold", "park", "evac") else None
         r.booked_spot = None
         if r.on_station is not None:
-            self.stations.release(r.on_station)
+            self.queues.release(r.on_station)
             r.on_station = None
         r.progress_t = t
 
@@ -298,8 +298,8 @@ class _DeliveryRules:
         elif r.target_kind == "hold":
             station = r.station
             assert station is not None
-            if self.stations.holder.get(station) is None:
-                self.stations.claim(station, r.idx)
+            if self.queues.holder.get(station) is None:
+                self.queues.claim(station, r.idx)
                 self._need(r, self.problem.stations[station], r.station_kind, station, t)
             else:
                 self._queue(r, station, r.station_kind, t)
@@ -324,7 +324,7 @@ class _DeliveryRules:
     def take_handed_over(self, t: float) -> list[_SimRobot]:
         """Robots that were queued and now hold their station: they need their leg to it."""
         out = []
-        for i in self.stations.take_handed_over():
+        for i in self.queues.take_handed_over():
             r = self.robots[i]
             assert r.station is not None
             self._need(r, self.problem.stations[r.station], r.station_kind, r.station, t)
