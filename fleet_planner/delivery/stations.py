@@ -33,8 +33,8 @@ from .problem import Delivery, DeliveryProblem
 CLAIM_RADIUS = 8.0
 #: central methods: a robot with no parking spot free to queue on decides again this much later (s)
 RETARGET_S = 5.0
-#: central methods: a robot on a station others queue for whose next leg would leave only this much
-#: later (s), or could not be planned, drives to a parking spot near it instead if that is sooner
+#: central methods: a robot on a station others queue for whose next leg would leave more than this
+#: much later (s), or could not be planned, drives to a parking spot near it instead if that is sooner
 EVACUATE_S = 10.0
 
 #: what a robot is doing: idle (before the start), need (a leg to its target, to be planned or
