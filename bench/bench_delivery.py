@@ -1,17 +1,18 @@
 #!/usr/bin/env python3
-"""Delivery benchmark in the style of paper 002 (issue 4): md, prior and behavior on the same tasks.
+"""Delivery benchmark: md, prior and behavior on the same deliveries.
 
+In the style of section V of Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance":
 N robots (0.5 m x 0.5 m, a disc of radius 0.354 m, top speed 0.8 m/s) serve one seeded sequence of
-#Del = N x --deliveries-per-robot tasks: drive to station k, dock (--dock s), drive to station l,
-dock; each robot takes the next task when it has finished one. Simulated faster than real time by
-:func:`fleet_planner.sim.simulate`; see its module for the methods and the station discipline.
+#Del = N x --deliveries-per-robot deliveries: drive to station k, dock (--dock s), drive to station
+l, dock; each robot takes the next delivery when it has finished one. Simulated faster than real time by
+:func:`fleet_planner.delivery.simulate`; see that package for the methods and the station discipline.
 
 Maps: ``warehouse`` (the default warehouse of config/: load at chutes, unload at storing sites),
 ``large`` (a generated 74 m x 31.5 m warehouse whose rack aisles fit one robot only), and MovingAI
 maps from --maps-dir by name (--stations stations spread over the free space, seeded).
 
 Columns: CTime (s, completion of the last delivery; with a ``!`` when the run stopped unfinished,
-then it is the stop time), the lower bound (each robot's own task sequence driven alone, maximum
+then it is the stop time), the lower bound (each robot's own deliveries driven alone, maximum
 over robots) and CTime / bound, average velocity over robots (m/s), planning time per planned leg
 (md, prior) or decision time per fleet step of --dt (behavior) in ms, overlapping disc pairs
 (exact, must be 0), robots left deadlocked (no progress for 120 s at the end), why the run stopped
@@ -34,9 +35,16 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from fleet_planner.delivery import (  # noqa: E402
+    METHODS,
+    DeliveryProblem,
+    DeliveryResult,
+    delivery_problem,
+    simulate,
+    spread_stations,
+    warehouse_problem,
+)
 from fleet_planner.grid import GridMap  # noqa: E402
-from fleet_planner.sim import METHODS, DeliveryProblem, DeliveryResult, delivery_problem, simulate, \
-    spread_stations, warehouse_problem  # noqa: E402
 from fleet_planner.warehouse import generate_warehouse, load_warehouse  # noqa: E402
 
 BUILTIN_MAPS = ("warehouse", "large")
@@ -77,13 +85,13 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--sizes", default="20,40,50,100", help="numbers of robots (default: %(default)s)")
     p.add_argument("--methods", default="md,prior,behavior", help=f"of {', '.join(METHODS)} (default: %(default)s)")
     p.add_argument("--deliveries-per-robot", dest="per_robot", type=int, default=3,
-                   help="#Del = N x this (default: %(default)s; paper 002: 2.5-10)")
+                   help="#Del = N x this (default: %(default)s; Sun, Kleiner & Nebel: 2.5-10)")
     p.add_argument("--stations", type=int, default=8, help="stations on a MovingAI map (default: %(default)s)")
     p.add_argument("--dock", type=float, default=5.0, help="docking time at a station, s (default: %(default)s)")
     p.add_argument("--dt", type=float, default=0.1, help="behavior time step, s (default: %(default)s)")
     p.add_argument("--cap", type=float, default=4 * 3600.0, help="simulated-time cap per run, s (default: 4 h)")
     p.add_argument("--wall-cap", type=float, default=900.0, help="wall-clock cap per run, s (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="tasks, homes, stations (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="deliveries, homes, stations (default: %(default)s)")
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     p.add_argument("--plot", type=Path, help="also draw CTime per method and N to this PNG")
     args = p.parse_args(argv)

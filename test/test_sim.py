@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
+from fleet_planner.delivery import METHODS, choose_spots, simulate, warehouse_problem
 from fleet_planner.grid import GridMap
-from fleet_planner.sim import METHODS, choose_spots, simulate, warehouse_problem
 from fleet_planner.warehouse import generate_warehouse
 
 
@@ -42,7 +42,7 @@ def _min_gap(positions: np.ndarray, radius: float) -> float:
 
 def _dwells(wp: np.ndarray, point, at_least: float) -> int:
     """How often a trajectory stands still on ``point`` for ``at_least`` seconds."""
-    count, since = 0, None
+    count, since, prev_t = 0, None, 0.0
     for x, y, t in wp:
         on = math.dist((x, y), point) < 1e-6
         if on and since is None:
@@ -60,7 +60,7 @@ def _dwells(wp: np.ndarray, point, at_least: float) -> int:
 def test_tiny_delivery_run(problem, method):
     result = simulate(problem, method, record=True)
 
-    assert result.finished and result.completed == len(problem.tasks) == 8
+    assert result.finished and result.completed == len(problem.deliveries) == 8
     assert result.ctime >= result.lower_bound > 0
     assert result.deadlocks == 0
     r = problem.radius
@@ -74,16 +74,16 @@ def test_tiny_delivery_run(problem, method):
         end = max(float(p.waypoints[-1, 2]) for p in paths)
         assert _min_gap(_sample(paths, np.arange(0.0, end + 0.02, 0.02)), r) >= -1e-6
         # every load and unload happened: a robot stood docked on the station for dock_s
-        for name in {s for task in problem.tasks for s in (task.pick, task.drop)}:
+        for name in {s for d in problem.deliveries for s in (d.pick, d.drop)}:
             visits = sum(_dwells(p.waypoints, problem.stations[name], problem.dock_s) for p in paths)
-            needed = sum((task.pick == name) + (task.drop == name) for task in problem.tasks)
+            needed = sum((d.pick == name) + (d.drop == name) for d in problem.deliveries)
             assert visits >= needed, name
     else:
         pos = result.positions
         assert pos.shape == (len(result.times), problem.n_robots, 2)
         assert _min_gap(pos, r) >= -1e-9
-        # every station of a task was reached (the behaviour fleet drives to it exactly)
-        for name in {s for task in problem.tasks for s in (task.pick, task.drop)}:
+        # every station of a delivery was reached (the behaviour fleet drives to it exactly)
+        for name in {s for d in problem.deliveries for s in (d.pick, d.drop)}:
             point = np.asarray(problem.stations[name])
             assert np.min(np.hypot(*(pos - point).reshape(-1, 2).T)) < 1e-6, name
 

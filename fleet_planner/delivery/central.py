@@ -1,0 +1,171 @@
+"""The central methods (md, md-box, prior): event-driven, the robots follow their timed paths exactly.
+
+Each time a robot needs a new leg, the planner's
+:meth:`~fleet_planner.planners.base.Planner.plan_incremental` plans it around the trajectories
+every other robot is driving (a robot standing still is a one-waypoint trajectory). A leg that
+cannot be planned is tried again a little later, once some other robot got a new leg. Where the
+robots go is decided by the station discipline of :mod:`fleet_planner.delivery.stations`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model import PlanningError, Point, RobotSpec, TimedPath
+from ..planners import get_planner
+from .problem import DeliveryProblem
+from .result import DeliveryResult, RunLimits, RunTally, SimProgress, check_driven, distance_driven, mean_velocity
+from .stations import EVACUATE_S, _DeliveryRules, _SimRobot
+
+#: a robot whose leg could not be planned tries again at the latest this many ``retry_s`` later
+#: (sooner once another robot got a new leg)
+RETRY_LATEST = 15
+
+
+class _CentralRun:
+    """One run of a central method: the trajectories being driven, the legs driven, the retries."""
+
+    def __init__(self, problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None,
+                 progress: SimProgress | None):
+        self.tally = RunTally()
+        self.problem = problem
+        self.method = method
+        self.limits = limits
+        self.progress = progress
+        self.planner = get_planner(method, **(planner_options or {}))
+        self.rules = _DeliveryRules(problem, claims=True)
+        self.robots = self.rules.robots
+        n = problem.n_robots
+        #: per robot: the legs it drove, waypoints (x, y, t); the first one is where it starts
+        self.legs: list[list[np.ndarray]] = [[np.array([[*r.pos, 0.0]])] for r in self.robots]
+        #: per robot: the trajectory it is driving, which the others' legs are planned around
+        self.driving: list[TimedPath] = [TimedPath(r.id, problem.radius, self.legs[r.idx][0]) for r in self.robots]
+        #: per robot: legs started (by all robots) at its last failed attempt, and when that was
+        self.legs_at_failure = [-1] * n
+        self.failed_at = [0.0] * n
+        self.leg_delay_s = 0.0      # over all legs: arrival later than driving straight off at top speed
+        self.last_activity = 0.0    # when some robot last arrived, docked or set off
+
+    def run(self) -> DeliveryResult:
+        for r in self.robots:
+            self.rules.next_target(r, 0.0)
+        t, stop = self._run_events()
+        return self._result(t, stop)
+
+    def _run_events(self) -> tuple[float, str]:
+        """Handle the robots' events in time order until a stop; returns (time, why it stopped)."""
+        rules, limits = self.rules, self.limits
+        t = 0.0
+        while True:
+            if rules.ctime is not None:
+                return rules.ctime, "done"
+            wake = np.array([r.wake for r in self.robots])
+            t_next = float(wake.min())
+            if t_next > limits.cap_s:
+                return limits.cap_s, "cap"
+            if t_next - self.last_activity > limits.stall_s:
+                return self.last_activity + limits.stall_s, "stall"
+            if self.tally.wall_s() > limits.wall_cap_s:
+                return t, "wall"
+            t = t_next
+            for i in np.nonzero(wake <= t)[0]:
+                self._wake(self.robots[int(i)], t)
+            # robots that failed before may succeed now that others have new legs
+            for r in self.robots:
+                if r.phase == "need" and self.legs_at_failure[r.idx] != self.tally.legs:
+                    r.wake = min(r.wake, max(t, self.failed_at[r.idx] + limits.retry_s))
+                    self.legs_at_failure[r.idx] = self.tally.legs
+
+    def _wake(self, r: _SimRobot, t: float) -> None:
+        """r is due at t: its event (arrival, end of docking, deciding again), then the legs it and
+        the robots a station was just handed to need."""
+        rules = self.rules
+        if r.wake > t:
+            return
+        if r.phase == "drive":
+            rules.arrived(r, t)
+            self.last_activity = t
+        elif r.phase == "dock":
+            rules.docked(r, t)
+            self.last_activity = t
+            if self.progress:
+                self.progress(rules.completed, len(self.problem.deliveries), t)
+        elif r.phase == "wait":
+            rules.retarget(r, t)
+        if r.phase == "need" and r.wake <= t:
+            if self._start_leg(r, t):
+                self.last_activity = t
+        for q in rules.take_handed_over(t):
+            if self._start_leg(q, t):
+                self.last_activity = t
+
+    def _as_fixed(self, q: _SimRobot, now: float) -> TimedPath:
+        """q's trajectory as the planner must keep clear of it: once q has arrived, standing there
+        from ``now`` on."""
+        tp = self.driving[q.idx]
+        if len(tp.waypoints) > 1 and tp.waypoints[-1, 2] <= now:
+            tp = self.driving[q.idx] = TimedPath(q.id, self.problem.radius, np.array([[*tp.waypoints[-1, :2], now]]))
+        return tp
+
+    def _plan_leg(self, r: _SimRobot, goal: Point, others: list[TimedPath], now: float) -> TimedPath | None:
+        spec = RobotSpec(r.id, self.problem.radius, self.problem.max_speed, r.pos, goal)
+        with self.tally.deciding():
+            try:
+                return self.planner.plan_incremental(self.problem.grid, [spec], others, now)[0]
+            except PlanningError:
+                self.tally.failed_plans += 1
+                return None
+
+    def _start_leg(self, r: _SimRobot, now: float) -> bool:
+        """Plan r's leg to its target (or to a parking spot, to clear a station others queue for)
+        and set off; on its target already, it arrives at once. False: no leg yet, try again."""
+        rules = self.rules
+        assert r.target is not None
+        if math.dist(r.pos, r.target) < 1e-9:
+            rules.arrived(r, now)
+            return True
+        others = [self._as_fixed(q, now) for q in self.robots if q is not r]
+        leg = self._plan_leg(r, r.target, others, now)
+        if rules.others_queue_here(r) and (leg is None or leg.start_time > now + EVACUATE_S):
+            spot = rules.spot_near_here(r)
+            if spot is not None:
+                evac = self._plan_leg(r, self.problem.spots[spot], others, now)
+                if evac is not None and (leg is None or evac.start_time < leg.start_time):
+                    rules.evacuate(r, spot)
+                    leg = evac
+        if leg is None:
+            self.legs_at_failure[r.idx], self.failed_at[r.idx] = self.tally.legs, now
+            r.wake = now + RETRY_LATEST * self.limits.retry_s
+            return False
+        self.tally.legs += 1
+        self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
+        self.driving[r.idx] = leg
+        self.legs[r.idx].append(leg.waypoints)
+        rules.left(r, now)
+        rules.enter(r, "drive", now)
+        r.wake = max(now, leg.arrival_time)
+        return True
+
+    def _result(self, t: float, stop: str) -> DeliveryResult:
+        p, rules, tally = self.problem, self.rules, self.tally
+        paths = [TimedPath(r.id, p.radius, np.vstack(self.legs[r.idx])) for r in self.robots]
+        collisions, gap, violations = check_driven(p, paths)
+        driven = [distance_driven(tp.waypoints, t) for tp in paths]
+        per_leg = max(tally.legs, 1)
+        return DeliveryResult(
+            problem=p.name, method=self.method, n_robots=p.n_robots, n_deliveries=len(p.deliveries),
+            completed=rules.completed, stop=stop, ctime=t, lower_bound=rules.lower_bound(),
+            avg_velocity=mean_velocity(driven, t), decision_s=tally.decide_wall_s / per_leg, decision_unit="leg",
+            planner_wall_s=tally.decide_wall_s, legs=tally.legs, failed_plans=tally.failed_plans,
+            collisions=collisions, min_gap=gap,
+            deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock", "drive")),
+            wall_s=tally.wall_s(), violations=violations, trajectories=paths,
+            extra={"mean_leg_delay_s": round(self.leg_delay_s / per_leg, 2), "hold_legs": rules.hold_legs,
+                   "mean_phase_s": rules.mean_phase_s(t)})
+
+
+def simulate_central(problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None = None,
+                     progress: SimProgress | None = None) -> DeliveryResult:
+    """Run the deliveries with a central method (a planner name of the registry: md, md-box, prior)."""
+    return _CentralRun(problem, method, limits, planner_options, progress).run()

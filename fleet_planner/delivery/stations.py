@@ -1,0 +1,345 @@
+"""Which robot goes where: the delivery sequence, station claims and queues, parking spots.
+
+:class:`_DeliveryRules` is the part every method shares: it hands out the deliveries in sequence,
+decides each robot's next target and keeps the measures (the lower bound, time per phase,
+progress). A robot's ``phase`` is one of :data:`PHASES`; its target is one of :data:`TARGET_KINDS`.
+
+Station discipline of the central methods (``claims=True``; the behaviour layer has its own, the
+docking arbiter): a planner needs a robot's goal to be free for ever after it arrives, so a station
+is *claimed* by one robot from the moment it sets off for it until its next leg is planned. So that
+a station is not held idle while its claimant drives from afar, a robot claims it only from within
+:data:`CLAIM_RADIUS`; from farther away, or when the station is claimed, it first drives to the free
+parking spot closest to the station (some spots are placed near the busy stations for this) and
+queues there, first come first served (:class:`_StationQueues`). A robot that would block a station
+others queue for (its next leg leaves more than :data:`EVACUATE_S` later, or cannot be planned)
+clears it for a parking spot when that is sooner (:meth:`_DeliveryRules.evacuate`, decided by the
+central run). These rules are the simulation's, the same for md and prior.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import polyline_length
+from ..model import Point
+from ..paths import PathFinder
+from .layout import driving_distances
+from .problem import Delivery, DeliveryProblem
+
+#: central methods: a robot claims a station only from this close (m, straight line; from a parking
+#: spot: driving distance); from farther away it first drives to a parking spot near the station
+CLAIM_RADIUS = 8.0
+#: central methods: a robot with no parking spot free to queue on decides again this much later (s)
+RETARGET_S = 5.0
+#: central methods: a robot on a station others queue for whose next leg would leave more than this
+#: much later (s), or could not be planned, drives to a parking spot near it instead if that is sooner
+EVACUATE_S = 10.0
+
+#: what a robot is doing: idle (before the start), need (a leg to its target, to be planned or
+#: assigned), drive, dock, queued (on a parking spot, for a station), wait (no spot free to queue
+#: on yet: decides again later), done
+PHASES = ("idle", "need", "drive", "dock", "queued", "wait", "done")
+#: what a robot's target is: a station to load at (pick) or unload at (drop); a parking spot near a
+#: station to queue on (hold), to clear a station for the robots queued for it (evac), or to park
+#: on when the deliveries are used up (park)
+TARGET_KINDS = ("pick", "drop", "hold", "evac", "park")
+
+
+@dataclass
+class _SimRobot:
+    """One simulated robot, as the rules see it."""
+
+    idx: int
+    id: str
+    pos: Point
+    phase: str = "idle"              # one of PHASES
+    delivery: Delivery | None = None
+    loaded: bool = False             # it has loaded at its delivery's pick station
+    target: Point | None = None
+    target_kind: str = ""            # one of TARGET_KINDS
+    station: str | None = None       # the station the target is or queues for
+    spot: int | None = None          # its parking spot (home, queue or final): stands on it or drives to it
+    on_station: str | None = None    # central: the station it stands on (claimed) after docking
+    wake: float = 0.0                # when it is due next
+    progress_t: float = 0.0          # the last time it made progress
+    best_left: float = math.inf      # behavior: the least path length left to the target on this leg
+    solo_s: float = 0.0              # its deliveries so far, driven alone (for the lower bound)
+    solo_at: Point = (0.0, 0.0)      # where that solo drive ends
+    station_kind: str = ""           # pick or drop: what it will do at the station it queues for
+    booked_spot: int | None = None   # the parking spot its next leg goes to (reserved for it)
+    phase_since: float = 0.0         # when it entered its phase
+
+
+class _SoloTimes:
+    """Shortest-path driving times between points at top speed, for the lower bound (cached)."""
+
+    def __init__(self, problem: DeliveryProblem):
+        self.finder = PathFinder(problem.grid, problem.radius)
+        self.speed = problem.max_speed
+        self._cache: dict[tuple[tuple[float, ...], tuple[float, ...]], float] = {}
+
+    def __call__(self, a: Point, b: Point) -> float:
+        key = (tuple(a), tuple(b))
+        if key not in self._cache:
+            path = self.finder.find(a, b)
+            if path is None:
+                raise ValueError(f"no path from {a} to {b} for radius {self.finder.radius:g}")
+            self._cache[key] = polyline_length(path) / self.speed
+        return self._cache[key]
+
+
+class _ParkingSpots:
+    """The parking spots and which robot owns each one (stands on it, drives to it or booked it)."""
+
+    def __init__(self, points: list[Point], n_robots: int):
+        self.xy = np.asarray(points, dtype=float)
+        self.owner: list[int | None] = [None] * len(points)
+        for i in range(n_robots):   # robot i starts on its home, spot i
+            self.owner[i] = i
+
+    def nearest_free(self, dist: np.ndarray) -> int | None:
+        """The free spot of least ``dist`` (one entry per spot), if any is free."""
+        return next((int(i) for i in np.argsort(dist, kind="stable") if self.owner[i] is None), None)
+
+
+class _StationQueues:
+    """Central methods: which robot holds each station (its claim) and who queues for it, first come
+    first served. A released station goes to the first robot in its queue at once."""
+
+    def __init__(self, stations: list[str]):
+        self.holder: dict[str, int] = {}
+        self.waiting: dict[str, list[int]] = {s: [] for s in stations}
+        self.handed_over: list[int] = []   # robots a released station was just handed to
+
+    def free_for(self, station: str, idx: int) -> bool:
+        """Nobody but robot ``idx`` holds ``station``."""
+        return self.holder.get(station, idx) == idx
+
+    def claim(self, station: str, idx: int) -> None:
+        self.holder[station] = idx
+
+    def join(self, station: str, idx: int) -> None:
+        self.waiting[station].append(idx)
+
+    def has_queue(self, station: str) -> bool:
+        return bool(self.waiting[station])
+
+    def release(self, station: str) -> None:
+        if self.holder.get(station) is None:
+            return
+        del self.holder[station]
+        if self.waiting[station]:
+            idx = self.waiting[station].pop(0)
+            self.holder[station] = idx
+            self.handed_over.append(idx)
+
+    def take_handed_over(self) -> list[int]:
+        out, self.handed_over = self.handed_over, []
+        return out
+
+
+class _DeliveryRules:
+    """The delivery sequence, station claims and queues, parking spots, the lower bound, progress.
+
+    Every method calls the events (:meth:`left`, :meth:`arrived`, :meth:`docked`) as they happen;
+    the rules set the robot's next ``phase``, ``target`` and ``wake``."""
+
+    def __init__(self, problem: DeliveryProblem, claims: bool):
+        self.problem = problem
+        self.claims = claims
+        self.solo_time = _SoloTimes(problem)
+        self.robots = [_SimRobot(i, rid, problem.spots[i], spot=i, solo_at=problem.spots[i])
+                       for i, rid in enumerate(problem.robot_ids())]
+        self.parking = _ParkingSpots(problem.spots, problem.n_robots)
+        #: central: driving distance from each station to each parking spot, to queue close by
+        self.spot_dist: dict[str, np.ndarray] = {}
+        if claims:
+            drive = driving_distances(problem.grid, self.solo_time.finder.free, list(problem.stations.values()))
+            cells = [problem.grid.cell_of(*p) for p in problem.spots]
+            at = [row * problem.grid.width + col for col, row in cells]
+            self.spot_dist = {s: drive[k, at] for k, s in enumerate(problem.stations)}
+        self.queues = _StationQueues(list(problem.stations))
+        self.next_delivery = 0
+        self.completed = 0
+        self.ctime: float | None = None     # when the last delivery was done
+        self.phase_s: dict[str, float] = {}  # robot-seconds spent in each phase
+        self.hold_legs = 0
+
+    def enter(self, r: _SimRobot, phase: str, t: float) -> None:
+        """r goes into ``phase`` at t (the time spent in the old one is counted)."""
+        self.phase_s[r.phase] = self.phase_s.get(r.phase, 0.0) + t - r.phase_since
+        r.phase, r.phase_since = phase, t
+
+    def mean_phase_s(self, t: float) -> dict[str, float]:
+        """Mean seconds per robot in each phase until t (need: waiting for a leg to be planned or
+        assigned; queued: on a parking spot waiting for a station; drive includes the wait at the
+        start of a planned leg)."""
+        total = dict(self.phase_s)
+        for r in self.robots:
+            total[r.phase] = total.get(r.phase, 0.0) + max(t - r.phase_since, 0.0)
+        return {k: round(v / len(self.robots), 1) for k, v in total.items() if k not in ("idle", "done")}
+
+    # -- decisions ------------------------------------------------------------------------------
+    def next_target(self, r: _SimRobot, t: float) -> None:
+        """After a dock (or at the start): where to go next; sets ``phase`` to need or queued."""
+        if r.delivery is not None and not r.loaded:
+            self._to_station(r, r.delivery.pick, "pick", t)
+        elif r.delivery is not None:
+            self._to_station(r, r.delivery.drop, "drop", t)
+        elif self.next_delivery < len(self.problem.deliveries):
+            r.delivery, r.loaded = self.problem.deliveries[self.next_delivery], False
+            self.next_delivery += 1
+            self._drive_solo(r, self.problem.stations[r.delivery.pick])
+            self._drive_solo(r, self.problem.stations[r.delivery.drop])
+            self._to_station(r, r.delivery.pick, "pick", t)
+        else:
+            # home, else the closest free spot (near a station, it would stand in others' way)
+            spot = r.idx if self.parking.owner[r.idx] is None else \
+                self.parking.nearest_free(np.hypot(*(self.parking.xy - np.asarray(r.pos)).T))
+            if spot is None:                  # every spot taken or promised: stay (nothing left to do)
+                self.enter(r, "done", t)
+                r.wake = math.inf
+                return
+            self.parking.owner[spot], r.booked_spot = r.idx, spot
+            self._need(r, self.problem.spots[spot], "park", None, t)
+
+    def _drive_solo(self, r: _SimRobot, station: Point) -> None:
+        """The lower bound: r drives on to ``station`` alone and docks there."""
+        r.solo_s += self.solo_time(r.solo_at, station) + self.problem.dock_s
+        r.solo_at = station
+
+    def _to_station(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
+        """Central methods: claim the station only when close to it (it stays claimed until the
+        robot leaves it again, so a claim made from afar would idle it for the whole drive);
+        from afar, or when it is taken, wait on a parking spot near it first."""
+        goal = self.problem.stations[station]
+        if not self.claims:
+            self._need(r, goal, kind, station, t)
+            return
+        free = self.queues.free_for(station, r.idx)
+        drive = self.spot_dist[station]
+        spot = self.parking.nearest_free(drive)
+        on_spot = r.spot is not None and r.on_station is None and r.pos == self.problem.spots[r.spot]
+        if on_spot:
+            close = drive[r.spot] <= CLAIM_RADIUS or (spot is not None and drive[r.spot] <= drive[spot])
+        else:
+            close = math.dist(r.pos, goal) <= CLAIM_RADIUS
+        if free and (close or (spot is None and not on_spot)):
+            # close, or standing on a station with nowhere to wait: better go than block it
+            self.queues.claim(station, r.idx)
+            self._need(r, goal, kind, station, t)
+        elif close and on_spot:
+            self._queue(r, station, kind, t)  # wait right here
+        elif spot is not None:
+            self.parking.owner[spot] = r.idx
+            r.booked_spot, r.station_kind = spot, kind
+            self._need(r, self.problem.spots[spot], "hold", station, t)
+            self.hold_legs += 1
+        else:                                 # nowhere to queue yet: decide again a little later
+            self.enter(r, "wait", t)
+            r.station, r.station_kind, r.wake = station, kind, t + RETARGET_S
+
+    def _queue(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
+        self.enter(r, "queued", t)
+        r.station, r.wake, r.station_kind = station, math.inf, kind
+        self.queues.join(station, r.idx)
+
+    def _need(self, r: _SimRobot, target: Point, kind: str, station: str | None, t: float) -> None:
+        self.enter(r, "need", t)
+        r.target, r.target_kind, r.station, r.wake = target, kind, station, t
+
+    def retarget(self, r: _SimRobot, t: float) -> None:
+        """A waiting robot decides again how to get to its station."""
+        assert r.station is not None
+        self._to_station(r, r.station, r.station_kind, t)
+
+    def others_queue_here(self, r: _SimRobot) -> bool:
+        """r stands on a station others queue for."""
+        return r.on_station is not None and self.queues.has_queue(r.on_station)
+
+    def spot_near_here(self, r: _SimRobot) -> int | None:
+        """The free parking spot closest to the station r stands on."""
+        assert r.on_station is not None
+        return self.parking.nearest_free(self.spot_dist[r.on_station])
+
+    def evacuate(self, r: _SimRobot, spot: int) -> None:
+        """r clears its station for the parking spot instead of going where it decided (that
+        decision is undone; it decides again on the spot)."""
+        if r.booked_spot is not None:
+            self.parking.owner[r.booked_spot] = None
+        if (r.target_kind in ("pick", "drop") and r.station is not None and r.station != r.on_station
+                and self.queues.holder.get(r.station) == r.idx):
+            self.queues.release(r.station)
+        self.parking.owner[spot], r.booked_spot = r.idx, spot
+        r.target, r.target_kind, r.station = self.problem.spots[spot], "evac", None
+
+    # -- events ---------------------------------------------------------------------------------
+    def left(self, r: _SimRobot, t: float) -> None:
+        """r drove off from where it stood: free its spot and the station it stood on."""
+        if r.spot is not None and self.parking.owner[r.spot] == r.idx:
+            self.parking.owner[r.spot] = None
+        r.spot = r.booked_spot if r.target_kind in ("hold", "park", "evac") else None
+        r.booked_spot = None
+        if r.on_station is not None:
+            self.queues.release(r.on_station)
+            r.on_station = None
+        r.progress_t = t
+
+    def arrived(self, r: _SimRobot, t: float) -> None:
+        """r reached its target."""
+        assert r.target is not None
+        r.progress_t = t
+        r.pos = r.target
+        if r.target_kind in ("pick", "drop"):
+            self.enter(r, "dock", t)
+            r.wake, r.on_station = t + self.problem.dock_s, r.station if self.claims else None
+        elif r.target_kind == "hold":
+            station = r.station
+            assert station is not None
+            if self.queues.holder.get(station) is None:
+                self.queues.claim(station, r.idx)
+                self._need(r, self.problem.stations[station], r.station_kind, station, t)
+            else:
+                self._queue(r, station, r.station_kind, t)
+        elif r.target_kind == "evac":
+            self.next_target(r, t)
+        else:
+            self.enter(r, "done", t)
+            r.wake = math.inf
+
+    def docked(self, r: _SimRobot, t: float) -> None:
+        """r's docking time is over."""
+        r.progress_t = t
+        if r.target_kind == "pick":
+            r.loaded = True
+        else:
+            r.delivery = None
+            self.completed += 1
+            if self.completed == len(self.problem.deliveries):
+                self.ctime = t
+        self.next_target(r, t)
+
+    def take_handed_over(self, t: float) -> list[_SimRobot]:
+        """Robots that were queued and now hold their station: they need their leg to it."""
+        out = []
+        for i in self.queues.take_handed_over():
+            r = self.robots[i]
+            assert r.station is not None
+            self._need(r, self.problem.stations[r.station], r.station_kind, r.station, t)
+            out.append(r)
+        return out
+
+    # -- measures -------------------------------------------------------------------------------
+    def busy(self, r: _SimRobot) -> bool:
+        """r still has a delivery to make."""
+        return r.delivery is not None
+
+    def lower_bound(self) -> float:
+        return max((r.solo_s for r in self.robots), default=0.0)
+
+    def deadlocked(self, t: float, no_progress_s: float, moving: tuple[str, ...]) -> int:
+        """Robots with a delivery left, in none of the ``moving`` phases, without progress for long."""
+        return sum(1 for r in self.robots
+                   if self.busy(r) and r.phase not in moving and t - r.progress_t > no_progress_s)
