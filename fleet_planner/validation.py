@@ -163,13 +163,14 @@ class Vocabulary:
         raise self.error.at(path, reason)
 
     def worded(self, check: Check[T], reason: str) -> Check[T]:
-        """``check`` with one message for every way it fails (``{got}`` in ``reason``: the value)."""
+        """``check`` with one message for every way it fails, ``reason`` at the path it was given
+        (``{got}`` in it: the value shown, ``{type}``: its type name)."""
         def reworded(value: Any, path: str) -> T:
             try:
                 return check(value, path)
             except ValidationError:
                 pass
-            self.fail(path, reason.format(got=self.show(value)))
+            self.fail(path, reason.format(got=self.show(value), type=type(value).__name__))
         return reworded
 
     # -- scalars -----------------------------------------------------------------------------------
