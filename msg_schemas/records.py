@@ -10,7 +10,13 @@ with the path of the offending field, e.g. ``task.deadline: unknown field`` or
 fields, NaN and infinities, and wrong types (``true`` is not a number) are all rejected. Optional
 fields may be absent or ``null`` and are left out of the JSON when unset.
 
-Only the schema is checked here; whether a station or robot exists is the planner's business.
+Only the schema is checked here; whether a station or robot exists is the planner's business. The
+fields are declared with the vocabulary of :mod:`fleet_planner.validation` (values shown as JSON
+spells them); the contract is in docs/ARCHITECTURE.md, "Wire records".
+
+BBMRCA is the behaviour-based coordination of Sun, Kleiner and Nebel, "Behavior-based Multi-Robot
+Collision Avoidance" (ICRA 2014); the (M,D) model is that of You and Ji, "Design of a Multi-robot
+Bin Packing System in an Automatic Warehouse".
 """
 from __future__ import annotations
 
@@ -200,13 +206,13 @@ class RobotStatus(Record):
     task_id: str | None = spec(optional(nonempty), default=None)
     path_id: int | None = spec(optional(integer(lo=0)), default=None)  # which timed path it follows
     lateness_s: float = spec(number(lo=0.0), default=0.0)  # how far behind its due position
-    # robots coordinating by behaviours (paper 002) broadcast their BBMRCA state: see BEHAVIOR_STATE
+    # robots coordinating by behaviours (BBMRCA) broadcast their behaviour state: see BEHAVIOR_STATE
     behavior: dict[str, Any] | None = spec(optional(obj(BEHAVIOR_STATE)), default=None)
 
 
 @dataclass(frozen=True)
 class Schedule(Record):
-    """The (M,D) collision model of a plan (paper 001 Table 2) for tools and monitors.
+    """The (M,D) collision model of a plan (You and Ji, Table 2) for tools and monitors.
 
     ``nodes`` maps robot ids to their delayed departure and pure travel time, ``priority`` lists
     every node id from highest to lowest priority, and each link is a collision region
@@ -246,9 +252,9 @@ class Schedule(Record):
 
 @dataclass(frozen=True)
 class WaitMessageRecord(Record):
-    """A BBMRCA wait message (paper 002, IV.C) on its way from a waiting robot to the robot it waits
-    for: ``waiting`` lists the waiting robots it went through, the first sender first and this
-    sender last. A robot that finds its own id in it has found a wait cycle."""
+    """A BBMRCA wait message (Sun, Kleiner and Nebel, section IV.C) on its way from a waiting robot
+    to the robot it waits for: ``waiting`` lists the waiting robots it went through, the first
+    sender first and this sender last. A robot that finds its own id in it has found a wait cycle."""
 
     SCHEMA: ClassVar[str] = "fleet/wait_message@1"
     NAME: ClassVar[str] = "wait_message"
