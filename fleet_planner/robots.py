@@ -1,8 +1,10 @@
-"""The robots themselves: the four kinds of paper 001 (sec 2.2) and a simulated robot (no rclpy).
+"""The robots themselves: the four kinds of You and Ji, "Design of a Multi-robot Bin Packing System in
+an Automatic Warehouse" (section 2.2), and a simulated robot (no rclpy).
 
 * :class:`RobotKind` - what a kind of robot can do: size, speed, acceleration, capabilities
   (``manipulator``, ``forklift``), payload, pick/place/lift durations and its battery.
-  :func:`load_kinds` reads them from ``config/robot_kinds.yaml``.
+  :func:`load_kinds` reads them from ``config/robot_kinds.yaml``; the fields are declared with the
+  checks of :mod:`fleet_planner.validation`, so a kind built in code is checked as one read from a file.
 * :class:`RobotModel` - one simulated robot driving a timed path on a clock: it waits on its start
   until departure, tracks the path's due position under its speed and acceleration limits (never
   ahead of schedule; ``lateness_s`` says how far behind), picks and places for set durations,
@@ -16,14 +18,15 @@ departure; with infinite acceleration it is exactly on schedule at every step.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
-import yaml
 
 from .model import CAPABILITIES, ROBOT_KINDS, Point, TimedPath
+from .validation import ValidationError, Vocabulary, anything, check_fields, in_file, read_yaml, spec
 from .warehouse import config_path
 
 ACTIONS = ("pick", "place")
@@ -33,8 +36,19 @@ KINDS_FILE = "robot_kinds.yaml"  # the shipped kinds, found by warehouse.config_
 _EPS = 1e-9
 
 
-class KindsError(ValueError):
+class KindsError(ValidationError):
     """A robot kind that cannot be used; the message names the kind and the field."""
+
+
+# the kinds file's words: "kind 'cargo': radius must be ...", unknown and missing fields named in the kind
+_V = Vocabulary(KindsError, not_mapping="expected a mapping of fields (got {got})",
+                unknown="unknown field(s) {keys} (known: {known})", unknown_in="mapping", unknown_sorted=True,
+                missing="{key} is missing", missing_in="mapping")
+_POSITIVE = _V.worded(_V.number(above=0), "must be a finite number > 0 (got {got})")
+_AT_LEAST_0 = _V.worded(_V.number(lo=0), "must be a finite number >= 0 (got {got})")
+_ACCELERATION = _V.worded(_V.number(above=0, infinite=True), "must be a finite number > 0 (got {got})")  # inf: instant
+_CAPABILITIES = _V.worded(_V.list_of(_V.choice(CAPABILITIES), types=(list, tuple, set, frozenset)),
+                          f"must be a list drawn from {', '.join(CAPABILITIES)} (got {{got}})")
 
 
 @dataclass(frozen=True)
@@ -47,41 +61,28 @@ class RobotKind:
     """
 
     name: str
-    radius: float
-    max_speed: float
-    max_accel: float
-    capabilities: frozenset[str]
-    payload_kg: float
-    pick_s: float
-    place_s: float
-    battery_wh: float
-    drain_w_moving: float
-    drain_w_idle: float
-    charge_w: float
-    lift_s: float = 0.0
-
-    _POSITIVE = ("radius", "max_speed", "max_accel", "battery_wh", "charge_w")
+    radius: float = spec(_POSITIVE)
+    max_speed: float = spec(_POSITIVE)
+    max_accel: float = spec(_ACCELERATION)
+    capabilities: frozenset[str] = spec(anything)  # checked after the numbers, in __post_init__
+    payload_kg: float = spec(_AT_LEAST_0)
+    pick_s: float = spec(_AT_LEAST_0)
+    place_s: float = spec(_AT_LEAST_0)
+    battery_wh: float = spec(_POSITIVE)
+    drain_w_moving: float = spec(_AT_LEAST_0)
+    drain_w_idle: float = spec(_AT_LEAST_0)
+    charge_w: float = spec(_POSITIVE)
+    lift_s: float = spec(_AT_LEAST_0, default=0.0)
 
     def __post_init__(self) -> None:
         where = f"kind {self.name!r}"
         if self.name not in ROBOT_KINDS:
             raise KindsError(f"{where}: unknown kind (known: {', '.join(ROBOT_KINDS)})")
-        for f in fields(self):
-            if f.name in ("name", "capabilities"):
-                continue
-            value = getattr(self, f.name)
-            positive = f.name in self._POSITIVE
-            ok = (isinstance(value, (int, float)) and not isinstance(value, bool) and not math.isnan(value)
-                  and (math.isfinite(value) or f.name == "max_accel")
-                  and (value > 0 if positive else value >= 0))
-            if not ok:
-                want = "> 0" if positive else ">= 0"
-                raise KindsError(f"{where}: {f.name} must be a finite number {want} (got {value!r})")
-            object.__setattr__(self, f.name, float(value))
-        caps = self.capabilities
-        if not isinstance(caps, (list, tuple, set, frozenset)) or not all(c in CAPABILITIES for c in caps):
-            raise KindsError(f"{where}: capabilities must be a list drawn from "
-                             f"{', '.join(CAPABILITIES)} (got {caps!r})")
+        try:
+            check_fields(self)
+            caps = _CAPABILITIES(self.capabilities, "capabilities")
+        except KindsError as exc:  # kinds word it "kind 'cargo': radius must be ..."
+            raise KindsError(f"{where}: {exc.path} {exc.reason}") from None
         object.__setattr__(self, "capabilities", frozenset(caps))
         if self.lift_s and "forklift" not in self.capabilities:
             raise KindsError(f"{where}: lift_s is only for kinds with the forklift capability")
@@ -104,31 +105,22 @@ def load_kinds(path: str | Path | None = None) -> dict[str, RobotKind]:
         path = Path(path) if path is not None else config_path(KINDS_FILE)
     except FileNotFoundError as exc:
         raise KindsError(str(exc)) from exc
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise KindsError(f"{path}: cannot read robot kinds ({exc})") from exc
+    data = read_yaml(path, KindsError, what="robot kinds", invalid=None)
     if not isinstance(data, dict) or not data:
         raise KindsError(f"{path}: expected a mapping of kind names to their fields")
     known = [f.name for f in fields(RobotKind) if f.name != "name"]
     kinds = {}
-    for name, spec in data.items():
-        where = f"{path}: kind {name!r}"
-        if not isinstance(spec, dict):
-            raise KindsError(f"{where}: expected a mapping of fields (got {spec!r})")
-        unknown = sorted(set(spec) - set(known))
-        if unknown:
-            raise KindsError(f"{where}: unknown field(s) {', '.join(unknown)} (known: {', '.join(known)})")
-        caps = spec.get("capabilities")
-        forklift = isinstance(caps, list) and "forklift" in caps
-        for field_name in known:
-            if field_name not in spec and (field_name != "lift_s" or forklift):
-                raise KindsError(f"{where}: {field_name} is missing")
-        try:
-            kinds[name] = RobotKind(name=name, **spec)
-        except KindsError as exc:
-            raise KindsError(f"{path}: {exc}") from None
+    with in_file(path, KindsError):
+        for name, given in data.items():
+            _V.keys(given, f"kind {name!r}", known, [k for k in known if k != "lift_s" or _forklift(given)])
+            kinds[name] = RobotKind(name=name, **given)
     return kinds
+
+
+def _forklift(given: Any) -> bool:
+    """Whether a kind's fields in a file give it the forklift capability (then ``lift_s`` is required)."""
+    caps = given.get("capabilities") if isinstance(given, dict) else None
+    return isinstance(caps, list) and "forklift" in caps
 
 
 class RobotModel:
@@ -335,6 +327,7 @@ class RobotModel:
         return d
 
     def _point_at(self, s: float) -> Point:
+        assert self.path is not None  # only called while following a timed path (from _track)
         S, wp = self._S, self.path.waypoints
         if s >= S[-1]:
             return float(wp[-1, 0]), float(wp[-1, 1])

@@ -1,8 +1,10 @@
-"""The scenario file (YAML) and the plan file (JSON) of ARCHITECTURE.md, read strictly.
+"""The scenario file (YAML) and the plan file (JSON) of docs/ARCHITECTURE.md ("Scenario and plan
+files"), read strictly.
 
 Everything a user can get wrong in a scenario is reported as a :class:`ScenarioError` whose message
 starts with the path of the offending field (``robots[3].radius: ...``), says why and shows the
-value it got. Unknown keys are errors, not silently ignored, so a typo cannot go unnoticed.
+value it got. Unknown keys are errors, not silently ignored, so a typo cannot go unnoticed. The
+checks are those of the field vocabulary, :mod:`fleet_planner.validation`.
 Benchmarks build scenarios from MovingAI ``.map``/``.scen`` pairs with
 :func:`scenario_from_movingai` and save them with :func:`dump_scenario`.
 """
@@ -11,15 +13,16 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
-import yaml
 
 from .grid import GridMap, MapError, load_scen
 from .model import ROBOT_KINDS, Network, Plan, RobotSpec, TimedPath
+from .validation import ValidationError, Vocabulary, anything, read_yaml
 
 MAP_KEYS = ("file", "rows", "resolution")
 ROBOT_KEYS = ("id", "kind", "radius", "max_speed", "start", "goal")
@@ -28,8 +31,20 @@ PLAN_KEYS = ("planner", "planning_time_s", "robots", "info")
 PLAN_ROBOT_KEYS = ("id", "radius", "waypoints")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ValidationError):
     """A scenario or plan file that cannot be used; the message starts with the field path."""
+
+
+# the scenario file's words: values shown as Python writes them, the top level called "scenario"
+_V = Vocabulary(ScenarioError, root="scenario", missing="missing (required: {required})")
+_POSITIVE = _V.worded(_V.number(above=0), "must be a finite number > 0 (got {got})")
+_POINT = _V.worded(_V.point, "must be a list of 2 finite numbers [x, y] (got {got})")
+_ROBOT_ID = _V.worded(_V.string(min_len=1, strip=True), "must be a non-empty string (got {got}; quote numbers)")
+_KIND = _V.choice(ROBOT_KINDS)
+_MAP_FILE = _V.worded(_V.string(min_len=1), "must be a non-empty path string (got {got})")
+_ROW_LIST = _V.worded(_V.list_of(anything, min_len=1), "must be a non-empty list of strings (got {got})")
+_ROW = _V.string(min_len=1)
+_ROBOT_LIST = _V.worded(_V.list_of(anything, min_len=1), "must be a non-empty list of robots (got {got})")
 
 
 @dataclass
@@ -45,105 +60,57 @@ class Scenario:
 # ---------------------------------------------------------------------------------------------
 # scenario: reading and validating
 # ---------------------------------------------------------------------------------------------
-class _StrictLoader(yaml.SafeLoader):
-    """A safe YAML loader that refuses duplicate keys instead of keeping the last one."""
-
-
-def _no_duplicates(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
-    seen = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=deep)
-        if key in seen:
-            raise ScenarioError(f"line {key_node.start_mark.line + 1}: duplicate key {key!r}")
-        seen.add(key)
-    return loader.construct_mapping(node, deep=deep)
-
-
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _no_duplicates)
-
-
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML file (a relative ``map.file`` is relative to it)."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{path}: cannot read scenario file ({exc})") from exc
-    try:
-        data = yaml.load(text, Loader=_StrictLoader)
-    except ScenarioError as exc:
-        raise ScenarioError(f"{path}: {exc}") from None
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f"{path}: not valid YAML ({exc})") from exc
+    data = read_yaml(path, ScenarioError, what="scenario file", unique_keys=True)
     scenario = parse_scenario(data, path.parent)
     scenario.source = path
     return scenario
 
 
 def _keys(data: Any, where: str, allowed: Sequence[str], required: Sequence[str]) -> dict:
-    if not isinstance(data, dict):
-        raise ScenarioError(f"{where or 'scenario'}: must be a mapping (got {type(data).__name__})")
-    prefix = f"{where}." if where else ""
-    for key in data:
-        if key not in allowed:
-            raise ScenarioError(f"{prefix}{key}: unknown key (allowed: {', '.join(allowed)})")
-    for key in required:
-        if key not in data:
-            raise ScenarioError(f"{prefix}{key}: missing (required: {', '.join(required)})")
-    return data
+    return dict(_V.keys(data, where, allowed, required))
 
 
 def _positive(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ScenarioError(f"{where}: must be a finite number > 0 (got {value!r})")
-    return float(value)
+    return _POSITIVE(value, where)
 
 
-def _point(value: Any, where: str) -> tuple[float, float]:
-    if (not isinstance(value, (list, tuple)) or len(value) != 2
-            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in value)):
-        raise ScenarioError(f"{where}: must be a list of 2 finite numbers [x, y] (got {value!r})")
-    return float(value[0]), float(value[1])
+def _rows(value: Any, where: str) -> tuple[str, ...]:
+    """Inline map rows: a non-empty list of non-empty strings, all as long as the first."""
+    rows = _ROW_LIST(value, where)
+    for i, row in enumerate(rows):
+        _ROW(row, f"{where}[{i}]")
+        if len(row) != len(rows[0]):
+            _V.fail(f"{where}[{i}]", f"has {len(row)} cells, {where}[0] has {len(rows[0])}")
+    return rows
 
 
 def _parse_map(data: Any, base_dir: Path) -> tuple[GridMap, Path | None]:
-    m = _keys(data, "map", MAP_KEYS, ())
-    resolution = _positive(m.get("resolution", 1.0), "map.resolution")
+    m = _V.keys(data, "map", MAP_KEYS)
+    resolution = _POSITIVE(m.get("resolution", 1.0), "map.resolution")
     if ("file" in m) == ("rows" in m):
         raise ScenarioError("map: needs exactly one of 'file' (a MovingAI .map) or 'rows' (inline rows)")
     if "file" in m:
-        if not isinstance(m["file"], str) or not m["file"]:
-            raise ScenarioError(f"map.file: must be a non-empty path string (got {m['file']!r})")
-        map_file = (base_dir / m["file"]).resolve()
+        map_file = (base_dir / _MAP_FILE(m["file"], "map.file")).resolve()
         try:
             return GridMap.from_movingai(map_file, resolution), map_file
         except MapError as exc:
             raise ScenarioError(f"map.file: {exc}") from None
-    rows = m["rows"]
-    if not isinstance(rows, list) or not rows:
-        raise ScenarioError(f"map.rows: must be a non-empty list of strings (got {rows!r})")
-    for i, row in enumerate(rows):
-        if not isinstance(row, str) or not row:
-            raise ScenarioError(f"map.rows[{i}]: must be a non-empty string (got {row!r})")
-        if len(row) != len(rows[0]):
-            raise ScenarioError(f"map.rows[{i}]: has {len(row)} cells, map.rows[0] has {len(rows[0])}")
-    return GridMap.from_rows(rows, resolution, "inline"), None
+    return GridMap.from_rows(_rows(m["rows"], "map.rows"), resolution, "inline"), None
 
 
 def _parse_robot(data: Any, where: str, grid: GridMap) -> RobotSpec:
-    r = _keys(data, where, ROBOT_KEYS, ROBOT_REQUIRED)
-    rid = r["id"]
-    if not isinstance(rid, str) or not rid.strip():
-        raise ScenarioError(f"{where}.id: must be a non-empty string (got {rid!r}; quote numbers)")
-    kind = r.get("kind", "cargo")
-    if kind not in ROBOT_KINDS:
-        raise ScenarioError(f"{where}.kind: must be one of {', '.join(ROBOT_KINDS)} (got {kind!r})")
-    radius = _positive(r["radius"], f"{where}.radius")
-    max_speed = _positive(r["max_speed"], f"{where}.max_speed")
+    r = _V.keys(data, where, ROBOT_KEYS, ROBOT_REQUIRED)
+    rid = _ROBOT_ID(r["id"], f"{where}.id")
+    kind = _KIND(r.get("kind", "cargo"), f"{where}.kind")
+    radius = _POSITIVE(r["radius"], f"{where}.radius")
+    max_speed = _POSITIVE(r["max_speed"], f"{where}.max_speed")
     ends = {}
     w, h = grid.size_m
-    for name in ("start", "goal"):
-        x, y = _point(r[name], f"{where}.{name}")
+    for name in ("start", "goal"):  # start whole (shape, map, free space), then goal
+        x, y = _POINT(r[name], f"{where}.{name}")
         if not (0 <= x <= w and 0 <= y <= h):
             raise ScenarioError(f"{where}.{name}: ({x:g}, {y:g}) is outside the {w:g} m x {h:g} m map")
         clearance = grid.clearance(x, y)
@@ -175,13 +142,11 @@ def _check_disjoint(robots: list[RobotSpec], name: str) -> None:
 
 def parse_scenario(data: Any, base_dir: Path) -> Scenario:
     """Validate a scenario already parsed from YAML (``base_dir`` resolves a relative map file)."""
-    top = _keys(data, "", ("map", "robots"), ("map", "robots"))
+    top = _V.keys(data, "", ("map", "robots"), ("map", "robots"))
     grid, map_file = _parse_map(top["map"], Path(base_dir))
-    if not isinstance(top["robots"], list) or not top["robots"]:
-        raise ScenarioError(f"robots: must be a non-empty list of robots (got {top['robots']!r})")
     robots: list[RobotSpec] = []
     first_index: dict[str, int] = {}
-    for i, item in enumerate(top["robots"]):
+    for i, item in enumerate(_ROBOT_LIST(top["robots"], "robots")):
         spec = _parse_robot(item, f"robots[{i}]", grid)
         if spec.id in first_index:
             raise ScenarioError(f"robots[{i}].id: duplicate id {spec.id!r} (also robots[{first_index[spec.id]}])")
@@ -248,7 +213,7 @@ def scenario_from_movingai(map_path: str | Path, scen_path: str | Path, n: int, 
         raise ScenarioError(str(exc)) from None
     rng = np.random.default_rng(seed)
     robots: list[RobotSpec] = []
-    taken = {"start": [], "goal": []}  # (x, y, r) of accepted discs
+    taken: dict[str, list[tuple[float, float, float]]] = {"start": [], "goal": []}  # (x, y, r) of accepted discs
     for (s_cell, g_cell) in entries:
         r = float(rng.uniform(*radius))
         v = float(rng.uniform(*speed))

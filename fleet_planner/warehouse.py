@@ -1,4 +1,5 @@
-"""The warehouse of paper 001, section 2.1: a grid map plus the stations robots drive between.
+"""The warehouse of You and Ji, "Design of a Multi-robot Bin Packing System in an Automatic Warehouse"
+(section 2.1): a grid map plus the stations robots drive between.
 
 * ``chute``   - where a robot picks items up;
 * ``storage`` - a storing site: boxes with address tags (``"B07-02"``) where a robot places items;
@@ -8,24 +9,28 @@ A station's ``(x, y)`` is the pose (metres, map frame) where a robot stops to be
 chute, rack or charger itself (those are blocked cells of the map). Warehouses are read from a YAML
 file (:func:`load_warehouse`, default ``config/warehouse.yaml``) or generated for benchmarks
 (:func:`generate_warehouse`). :func:`config_path` finds the shipped config files both in a source
-checkout and in an installed package.
+checkout and in an installed package. The file is checked with the field vocabulary of
+:mod:`fleet_planner.validation`; errors name the file and the field.
 """
 from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 import yaml
 
 from .grid import GridMap, MapError
+from .validation import ValidationError, Vocabulary, all_of, anything, in_file, read_yaml
 
 PACKAGE = "fleet_planner"
 STATION_TYPES = ("chute", "storage", "charger")
 STATION_KEYS = ("name", "type", "x", "y", "tags", "capacity")
+MAP_KEYS = ("file", "rows", "resolution")
 #: clearance every generated stop pose leaves around it: the largest robot of the default fleet
 STOP_RADIUS = 0.45
 
@@ -33,8 +38,27 @@ STOP_RADIUS = 0.45
 _SOURCE_ROOT = Path(__file__).resolve().parent.parent
 
 
-class WarehouseError(ValueError):
+class WarehouseError(ValidationError):
     """A warehouse that cannot be used; the message names the file or field and the reason."""
+
+
+# the warehouse file's words: values shown as Python writes them, unknown keys listed as allowed
+_V = Vocabulary(WarehouseError)
+_NUMBER = _V.number()
+_POSITIVE_INT = _V.worded(_V.integer(lo=1), "must be an integer >= 1 (got {got})")
+_STATION_TYPE = _V.worded(_V.choice(STATION_TYPES), "{got} is not one of " + ", ".join(STATION_TYPES))
+_MAP_FILE = _V.worded(_V.string(min_len=1), "must be a non-empty path string (got {got})")
+_MAP_ROWS = _V.worded(_V.list_of(_V.string()), "must be a list of strings (got {got})")
+_RESOLUTION = all_of(_NUMBER, _V.number(above=0))  # "> 0" shows the value as a float
+_STATIONS = _V.worded(_V.list_of(anything), "must be a list (got {type})")
+_STATION = _V.mapping(
+    {"name": _V.worded(_V.string(min_len=1, strip=True), "must be a non-empty string (got {got}; quote numbers)"),
+     "type": anything,  # checked by Warehouse, as for a generated one
+     "tags": _V.worded(_V.list_of(_V.string(min_len=1)), "must be a list of non-empty strings (got {got})"),
+     "capacity": _POSITIVE_INT,
+     "x": _NUMBER, "y": _NUMBER},
+    defaults={"tags": [], "capacity": 1}, known=STATION_KEYS,
+    not_mapping=f"must be a mapping with {', '.join(STATION_KEYS[:4])} (got {{got}})")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -105,8 +129,7 @@ class Warehouse:
             where = f"stations[{i}] ({s.name!r})"
             if key != s.name:
                 raise WarehouseError(f"{where}: stored under the name {key!r}")
-            if s.type not in STATION_TYPES:
-                raise WarehouseError(f"{where}.type: {s.type!r} is not one of {', '.join(STATION_TYPES)}")
+            _STATION_TYPE(s.type, f"{where}.type")
             col, row = self.grid.cell_of(s.x, s.y)
             if not self.grid.in_bounds(col, row):
                 w, h = self.grid.size_m
@@ -147,75 +170,31 @@ def _index(stations: Iterable[Station]) -> dict[str, Station]:
 # ---------------------------------------------------------------------------------------------
 # reading and writing
 # ---------------------------------------------------------------------------------------------
-def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise WarehouseError(f"{where}: must be a finite number (got {value!r})")
-    return float(value)
-
-
 def _parse_map(m: Any, base_dir: Path) -> GridMap:
-    if not isinstance(m, dict):
-        raise WarehouseError(f"map: must be a mapping with 'file' and 'resolution' (got {m!r})")
-    for key in m:
-        if key not in ("file", "rows", "resolution"):
-            raise WarehouseError(f"map.{key}: unknown key (allowed: file, rows, resolution)")
-    resolution = _number(m.get("resolution", 1.0), "map.resolution")
-    if resolution <= 0:
-        raise WarehouseError(f"map.resolution: must be > 0 (got {resolution!r})")
+    m = _V.keys(m, "map", MAP_KEYS, not_mapping="must be a mapping with 'file' and 'resolution' (got {got})")
+    resolution = _RESOLUTION(m.get("resolution", 1.0), "map.resolution")
     if ("file" in m) == ("rows" in m):
         raise WarehouseError("map: needs exactly one of 'file' (a MovingAI .map) or 'rows' (inline rows)")
     try:
         if "file" in m:
-            if not isinstance(m["file"], str) or not m["file"]:
-                raise WarehouseError(f"map.file: must be a non-empty path string (got {m['file']!r})")
-            return GridMap.from_movingai(base_dir / m["file"], resolution)
-        rows = m["rows"]
-        if not isinstance(rows, list) or not all(isinstance(r, str) for r in rows):
-            raise WarehouseError(f"map.rows: must be a list of strings (got {rows!r})")
-        return GridMap.from_rows(rows, resolution)
+            return GridMap.from_movingai(base_dir / _MAP_FILE(m["file"], "map.file"), resolution)
+        return GridMap.from_rows(_MAP_ROWS(m["rows"], "map.rows"), resolution)
     except MapError as exc:
         raise WarehouseError(f"map: {exc}") from None
 
 
 def _parse_station(data: Any, where: str) -> Station:
-    if not isinstance(data, dict):
-        raise WarehouseError(f"{where}: must be a mapping with {', '.join(STATION_KEYS[:4])} (got {data!r})")
-    for key in data:
-        if key not in STATION_KEYS:
-            raise WarehouseError(f"{where}.{key}: unknown key (allowed: {', '.join(STATION_KEYS)})")
-    for key in ("name", "type", "x", "y"):
-        if key not in data:
-            raise WarehouseError(f"{where}.{key}: missing")
-    name = data["name"]
-    if not isinstance(name, str) or not name.strip():
-        raise WarehouseError(f"{where}.name: must be a non-empty string (got {name!r}; quote numbers)")
-    tags = data.get("tags", [])
-    if not isinstance(tags, list) or not all(isinstance(t, str) and t for t in tags):
-        raise WarehouseError(f"{where}.tags: must be a list of non-empty strings (got {tags!r})")
-    capacity = data.get("capacity", 1)
-    if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
-        raise WarehouseError(f"{where}.capacity: must be an integer >= 1 (got {capacity!r})")
-    return Station(name, data["type"], _number(data["x"], f"{where}.x"), _number(data["y"], f"{where}.y"),
-                   tuple(tags), capacity)
+    f = _STATION(data, where)
+    return Station(f["name"], f["type"], f["x"], f["y"], f["tags"], f["capacity"])
 
 
 def parse_warehouse(data: Any, base_dir: Path, name: str = "warehouse") -> Warehouse:
     """Validate a warehouse already parsed from YAML (``base_dir`` resolves a relative map file)."""
-    if not isinstance(data, dict):
-        raise WarehouseError(f"must be a mapping with 'map' and 'stations' (got {type(data).__name__})")
-    for key in data:
-        if key not in ("name", "map", "stations"):
-            raise WarehouseError(f"{key}: unknown key (allowed: name, map, stations)")
-    for key in ("map", "stations"):
-        if key not in data:
-            raise WarehouseError(f"{key}: missing")
+    data = _V.keys(data, "", ("name", "map", "stations"), ("map", "stations"),
+                   not_mapping="must be a mapping with 'map' and 'stations' (got {type})")
     grid = _parse_map(data["map"], base_dir)
-    if not isinstance(data["stations"], list):
-        raise WarehouseError(f"stations: must be a list (got {type(data['stations']).__name__})")
-    stations = [_parse_station(s, f"stations[{i}]") for i, s in enumerate(data["stations"])]
-    wh_name = data.get("name", name)
-    if not isinstance(wh_name, str):
-        raise WarehouseError(f"name: must be a string (got {wh_name!r})")
+    stations = [_parse_station(s, f"stations[{i}]") for i, s in enumerate(_STATIONS(data["stations"], "stations"))]
+    wh_name = _V.string()(data.get("name", name), "name")
     return Warehouse(grid, _index(stations), wh_name)
 
 
@@ -226,16 +205,9 @@ def load_warehouse(path: str | Path | None = None) -> Warehouse:
     ``warehouse.yaml: stations[3].type: 'shelf' is not one of chute, storage, charger``.
     """
     path = Path(path) if path is not None else config_path("warehouse.yaml")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError) as exc:
-        raise WarehouseError(f"{path}: cannot read warehouse file ({exc})") from exc
-    except yaml.YAMLError as exc:
-        raise WarehouseError(f"{path}: not valid YAML ({exc})") from exc
-    try:
+    data = read_yaml(path, WarehouseError, what="warehouse file")
+    with in_file(path, WarehouseError):
         return parse_warehouse(data, path.parent, path.stem)
-    except WarehouseError as exc:
-        raise WarehouseError(f"{path}: {exc}") from None
 
 
 def save_warehouse(warehouse: Warehouse, path: str | Path, comment: str = "") -> Path:
@@ -279,8 +251,7 @@ def generate_warehouse(blocks_x: int, blocks_y: int, block_w: int, block_h: int,
     """
     for pname, value in (("blocks_x", blocks_x), ("blocks_y", blocks_y), ("block_w", block_w),
                          ("block_h", block_h), ("aisle", aisle)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise WarehouseError(f"{pname}: must be an integer >= 1 (got {value!r})")
+        _POSITIVE_INT(value, pname)
     if not (isinstance(resolution, (int, float)) and math.isfinite(resolution) and resolution > 0):
         raise WarehouseError(f"resolution: must be a number > 0 (got {resolution!r})")
     # stops sit k cells away from the block they face: the first cell centre with STOP_RADIUS clearance

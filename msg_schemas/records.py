@@ -10,168 +10,66 @@ with the path of the offending field, e.g. ``task.deadline: unknown field`` or
 fields, NaN and infinities, and wrong types (``true`` is not a number) are all rejected. Optional
 fields may be absent or ``null`` and are left out of the JSON when unset.
 
-Only the schema is checked here; whether a station or robot exists is the planner's business.
+Only the schema is checked here; whether a station or robot exists is the planner's business. The
+fields are declared with the vocabulary of :mod:`fleet_planner.validation` (values shown as JSON
+spells them); the contract is in docs/ARCHITECTURE.md, "Wire records".
+
+BBMRCA is the behaviour-based coordination of Sun, Kleiner and Nebel, "Behavior-based Multi-Robot
+Collision Avoidance" (ICRA 2014); the (M,D) model is that of You and Ji, "Design of a Multi-robot
+Bin Packing System in an Automatic Warehouse".
 """
 from __future__ import annotations
 
 import json
-import math
-import re
-from dataclasses import MISSING, dataclass, field, fields
-from typing import Any, Callable, ClassVar, Mapping
+from collections.abc import Mapping
+from dataclasses import MISSING, dataclass, fields
+from typing import Any, ClassVar
 
 from fleet_planner.model import CAPABILITIES, ROBOT_KINDS, STATUS_MODES, Behavior
+from fleet_planner.validation import (
+    Check,
+    ValidationError,
+    Vocabulary,
+    check_fields,
+    optional,
+    robot_id_problem,
+    show_json,
+    spec,
+)
 
 BEHAVIORS = tuple(b.value for b in Behavior)
 TASK_EVENTS = ("accepted", "rejected", "assigned", "picked", "placed", "done", "failed", "cancelled")
 EVENTS_NEEDING_REASON = ("rejected", "failed")
 
-_ROS_TOKEN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
-
-class RecordError(ValueError):
+class RecordError(ValidationError):
     """A record that does not fit its schema; the message starts with the field's path."""
 
 
-def robot_id_problem(robot_id: object) -> str | None:
-    """Why ``robot_id`` cannot name a robot (it must fit in a ROS topic name), or None if it can."""
-    if not isinstance(robot_id, str):
-        return f"must be a string (got {_show(robot_id)})"
-    if not _ROS_TOKEN.fullmatch(robot_id):
-        return ("must be letters, digits and '_' only, not starting with a digit, so that it can be "
-                f"part of a ROS topic name (got {robot_id!r})")
-    return None
+# -- the records' words for the field vocabulary (fleet_planner.validation) ---------------------
+# A check takes (value, path) and returns the normalised value or raises RecordError(path: why);
+# values are shown as JSON spells them (NaN, true, null).
+_V = Vocabulary(RecordError, show=show_json, mappings=(Mapping,), lists=(list, tuple),
+                not_mapping="must be a JSON object (got {got})", unknown="unknown field (known: {known})",
+                missing="required field missing")
+
+number = _V.number            # number(lo, hi): a finite float in [lo, hi]
+integer = _V.integer          # integer(lo)
+nonempty = _V.string(min_len=1, strip=True)
+ros_id = _V.ros_id            # fits in a ROS topic name
+choice = _V.choice            # choice(options)
+boolean = _V.boolean
+point = _V.point              # [x, y]
+list_of = _V.list_of          # list_of(item, unique=False)
+dict_of = _V.dict_of          # dict_of(item): non-empty string keys
 
 
-# -- a tiny declarative field-spec vocabulary ----------------------------------------------------
-# A check takes (value, path) and returns the normalised value or raises RecordError(path: why).
-Check = Callable[[Any, str], Any]
+def obj(members: dict[str, Check[Any]]) -> Check[dict[str, Any]]:
+    """A JSON object with exactly the keys of ``members``; returns a plain dict of checked values."""
+    return _V.mapping(members)
 
 
-def _show(value: object) -> str:
-    """A value as the sender wrote it in JSON, short enough for an error message."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
-    if value is None or isinstance(value, bool):
-        return json.dumps(value)
-    text = repr(value) if isinstance(value, (str, int, float)) else type(value).__name__
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def number(lo: float = -math.inf, hi: float = math.inf) -> Check:
-    """A finite float in [lo, hi] (ints are accepted and converted; bools are not numbers)."""
-    def check(value: Any, path: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise RecordError(f"{path}: must be a finite number (got {_show(value)})")
-        if not lo <= value <= hi:
-            bounds = f">= {lo:g}" if hi == math.inf else f"in [{lo:g}, {hi:g}]"
-            raise RecordError(f"{path}: must be {bounds} (got {_show(value)})")
-        return float(value)
-    return check
-
-
-def integer(lo: int | None = None) -> Check:
-    def check(value: Any, path: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise RecordError(f"{path}: must be an integer (got {_show(value)})")
-        if lo is not None and value < lo:
-            raise RecordError(f"{path}: must be >= {lo} (got {value})")
-        return value
-    return check
-
-
-def nonempty(value: Any, path: str) -> str:
-    """A non-empty string."""
-    if not isinstance(value, str) or not value.strip():
-        raise RecordError(f"{path}: must be a non-empty string (got {_show(value)})")
-    return value
-
-
-def ros_id(value: Any, path: str) -> str:
-    problem = robot_id_problem(value)
-    if problem:
-        raise RecordError(f"{path}: {problem}")
-    return value
-
-
-def choice(options: tuple[str, ...]) -> Check:
-    def check(value: Any, path: str) -> str:
-        if not isinstance(value, str) or value not in options:
-            raise RecordError(f"{path}: must be one of {', '.join(options)} (got {_show(value)})")
-        return value
-    return check
-
-
-def boolean(value: Any, path: str) -> bool:
-    if not isinstance(value, bool):
-        raise RecordError(f"{path}: must be true or false (got {_show(value)})")
-    return value
-
-
-def point(value: Any, path: str) -> tuple[float, float]:
-    """A list ``[x, y]`` of two finite numbers."""
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise RecordError(f"{path}: must be a list [x, y] (got {_show(value)})")
-    return tuple(number()(v, f"{path}[{i}]") for i, v in enumerate(value))
-
-
-def optional(inner: Check) -> Check:
-    """``None`` (absent or JSON null) or whatever ``inner`` accepts."""
-    return lambda value, path: None if value is None else inner(value, path)
-
-
-def list_of(item: Check, unique: bool = False) -> Check:
-    def check(value: Any, path: str) -> tuple:
-        if not isinstance(value, (list, tuple)):
-            raise RecordError(f"{path}: must be a list (got {_show(value)})")
-        out = tuple(item(v, f"{path}[{i}]") for i, v in enumerate(value))
-        if unique and len(set(out)) != len(out):
-            dup = next(v for i, v in enumerate(out) if v in out[:i])
-            raise RecordError(f"{path}: {dup!r} appears more than once")
-        return out
-    return check
-
-
-def _mapping(value: Any, path: str) -> Mapping:
-    if not isinstance(value, Mapping):
-        raise RecordError(f"{path}: must be a JSON object (got {_show(value)})")
-    return value
-
-
-def obj(spec: dict[str, Check]) -> Check:
-    """A JSON object with exactly the keys of ``spec``; returns a plain dict of checked values."""
-    def check(value: Any, path: str) -> dict:
-        _exact_keys(_mapping(value, path), spec, set(spec), path)
-        return {k: c(value[k], f"{path}.{k}") for k, c in spec.items()}
-    return check
-
-
-def dict_of(item: Check) -> Check:
-    """A JSON object with non-empty string keys and values checked by ``item``."""
-    def check(value: Any, path: str) -> dict:
-        out = {}
-        for k, v in _mapping(value, path).items():
-            nonempty(k, f"{path} key")
-            out[k] = item(v, f"{path}[{k!r}]")
-        return out
-    return check
-
-
-def _exact_keys(data: Mapping, known: Mapping, required: set[str], path: str) -> None:
-    unknown = [k for k in data if k not in known]
-    if unknown:
-        raise RecordError(f"{path}.{unknown[0]}: unknown field (known: {', '.join(known)})")
-    for name in known:
-        if name in required and name not in data:
-            raise RecordError(f"{path}.{name}: required field missing")
-
-
-def spec(check: Check, default: Any = MISSING) -> Any:
-    """Declare a record field: its check, and its default if it is optional."""
-    return field(default=default, metadata={"check": check})
-
-
-def _reject_duplicates(pairs: list[tuple[str, Any]]) -> dict:
+def _reject_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out = {}
     for k, v in pairs:
         if k in out:
@@ -189,9 +87,7 @@ class Record:
     NAME: ClassVar[str]  # the prefix of every error path
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = f.metadata["check"](getattr(self, f.name), f"{self.NAME}.{f.name}")
-            object.__setattr__(self, f.name, value)
+        check_fields(self, self.NAME)
         self._check_together()
 
     def _check_together(self) -> None:
@@ -209,20 +105,20 @@ class Record:
         return json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
 
     @classmethod
-    def from_dict(cls, data: Any) -> "Record":
-        data = _mapping(data, cls.NAME)
+    def from_dict(cls, data: Any) -> Record:
+        data = _V.as_mapping(data, cls.NAME)
         schema = data.get("schema", MISSING)
         if schema is MISSING:
             raise RecordError(f"{cls.NAME}.schema: required field missing (expected {cls.SCHEMA!r})")
         if schema != cls.SCHEMA:
-            raise RecordError(f"{cls.NAME}.schema: expected {cls.SCHEMA!r} (got {_show(schema)})")
-        own = {f.name: f for f in fields(cls)}
-        required = {n for n, f in own.items() if f.default is MISSING}
-        _exact_keys(data, {"schema": None, **own}, required, cls.NAME)
+            raise RecordError(f"{cls.NAME}.schema: expected {cls.SCHEMA!r} (got {show_json(schema)})")
+        own = fields(cls)
+        required = [f.name for f in own if f.default is MISSING]
+        _V.keys(data, cls.NAME, ["schema", *(f.name for f in own)], required)
         return cls(**{k: v for k, v in data.items() if k != "schema"})
 
     @classmethod
-    def from_json(cls, text: str | bytes) -> "Record":
+    def from_json(cls, text: str | bytes) -> Record:
         try:
             data = json.loads(text, object_pairs_hook=_reject_duplicates)
         except RecordError as exc:
@@ -310,13 +206,13 @@ class RobotStatus(Record):
     task_id: str | None = spec(optional(nonempty), default=None)
     path_id: int | None = spec(optional(integer(lo=0)), default=None)  # which timed path it follows
     lateness_s: float = spec(number(lo=0.0), default=0.0)  # how far behind its due position
-    # robots coordinating by behaviours (paper 002) broadcast their BBMRCA state: see BEHAVIOR_STATE
+    # robots coordinating by behaviours (BBMRCA) broadcast their behaviour state: see BEHAVIOR_STATE
     behavior: dict[str, Any] | None = spec(optional(obj(BEHAVIOR_STATE)), default=None)
 
 
 @dataclass(frozen=True)
 class Schedule(Record):
-    """The (M,D) collision model of a plan (paper 001 Table 2) for tools and monitors.
+    """The (M,D) collision model of a plan (You and Ji, Table 2) for tools and monitors.
 
     ``nodes`` maps robot ids to their delayed departure and pure travel time, ``priority`` lists
     every node id from highest to lowest priority, and each link is a collision region
@@ -356,9 +252,9 @@ class Schedule(Record):
 
 @dataclass(frozen=True)
 class WaitMessageRecord(Record):
-    """A BBMRCA wait message (paper 002, IV.C) on its way from a waiting robot to the robot it waits
-    for: ``waiting`` lists the waiting robots it went through, the first sender first and this
-    sender last. A robot that finds its own id in it has found a wait cycle."""
+    """A BBMRCA wait message (Sun, Kleiner and Nebel, section IV.C) on its way from a waiting robot
+    to the robot it waits for: ``waiting`` lists the waiting robots it went through, the first
+    sender first and this sender last. A robot that finds its own id in it has found a wait cycle."""
 
     SCHEMA: ClassVar[str] = "fleet/wait_message@1"
     NAME: ClassVar[str] = "wait_message"
@@ -377,3 +273,8 @@ class WaitMessageRecord(Record):
 
 
 RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord)
+
+__all__ = ["BEHAVIORS", "BEHAVIOR_STATE", "EVENTS_NEEDING_REASON", "RECORDS", "TASK_EVENTS", "Check", "Record",
+           "RecordError", "RobotStatus", "Schedule", "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice",
+           "dict_of", "integer", "list_of", "nonempty", "number", "obj", "optional", "point", "robot_id_problem",
+           "ros_id", "spec"]

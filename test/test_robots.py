@@ -127,7 +127,7 @@ def test_with_finite_accel_the_robot_brakes_for_a_hold_and_waits_out_its_time():
     path = TimedPath("r1", 0.35, [(0, 0, 0), (4, 0, 4), (4, 0, 8), (8, 0, 12)])
     robot = RobotModel("r1", kind(max_speed=1.0, max_accel=0.5), 0.0, 0.0)
     robot.follow(path, 0.0)
-    for t in run(robot, 0.0, 8.0, dt=0.01):
+    for _t in run(robot, 0.0, 8.0, dt=0.01):
         assert robot.x <= 4.0
     assert (robot.x, robot.mode, robot.lateness_s) == (4.0, "waiting", 0.0)
     list(run(robot, 8.0, 8.5, dt=0.01))
@@ -139,7 +139,7 @@ def test_a_late_robot_catches_up_when_it_can_drive_faster_than_planned():
     robot = RobotModel("r1", kind(max_speed=1.0, max_accel=0.5), 0.0, 0.0)
     robot.follow(path, 0.0)
     worst = 0.0
-    for t in run(robot, 0.0, 10.0):
+    for _t in run(robot, 0.0, 10.0):
         worst = max(worst, robot.lateness_s)
     assert worst > 0.2 and robot.lateness_s == 0.0
 

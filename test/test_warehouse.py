@@ -15,8 +15,16 @@ from fleet_planner import warehouse as wh
 from fleet_planner.grid import GridMap
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.scenario import load_scenario
-from fleet_planner.warehouse import (STOP_RADIUS, Station, Warehouse, WarehouseError, config_path,
-                                     generate_warehouse, load_warehouse, save_warehouse)
+from fleet_planner.warehouse import (
+    STOP_RADIUS,
+    Station,
+    Warehouse,
+    WarehouseError,
+    config_path,
+    generate_warehouse,
+    load_warehouse,
+    save_warehouse,
+)
 
 
 def _reachable_region(grid: GridMap, radius: float) -> np.ndarray:
