@@ -24,7 +24,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from fleet_planner.dispatch import COORDINATION, RobotAgent
+from fleet_planner.fleet import COORDINATION, RobotAgent
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.warehouse import Warehouse, load_warehouse
