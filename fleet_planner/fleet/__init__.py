@@ -9,6 +9,9 @@ Where each concept lives:
   events out;
 * :mod:`.agent` - the robot's end, :class:`RobotAgent`: a robot model following its legs and
   picking, placing and charging where they end;
+* :mod:`.coordination` - the coordination mode, a strategy used on both ends: :class:`Coordination`
+  (:class:`CentralCoordination`, :class:`BehaviorCoordination`), looked up by name with
+  :func:`get_coordination`; how a robot drives under it, a :class:`Driver`;
 * :mod:`.wire` - status <-> behaviour views (:func:`view_of_status`, :func:`behavior_state`) and
   status samples as a timed path (:func:`samples_to_path`);
 * :mod:`.fleet_file` - the robots of a bring-up (:func:`load_fleet`, :class:`FleetMember`,
@@ -26,13 +29,26 @@ robots avoid each other on their own by the behaviours of Sun, Kleiner & Nebel, 
 Multi-Robot Collision Avoidance", and the manager only allocates jobs and chargers and gives goals.
 The topics both ends talk over are described in docs/ARCHITECTURE.md.
 """
-from .agent import AGENT_BEHAVIOR, RobotAgent
+from .agent import RobotAgent
+from .coordination import (
+    AGENT_BEHAVIOR,
+    COORDINATION,
+    BehaviorCoordination,
+    CentralCoordination,
+    Coordination,
+    Driver,
+    LegNotPlanned,
+    LegPlanner,
+    coordination_names,
+    get_coordination,
+)
 from .fleet_file import FleetError, FleetMember, load_fleet
 from .legs import ACTING, PURPOSES, Decisions, DispatchParams, Leg, lag_allowance
-from .manager import COORDINATION, FleetManager
+from .manager import FleetManager
 from .state import can_do
 from .wire import behavior_state, samples_to_path, view_of_status
 
-__all__ = ["ACTING", "AGENT_BEHAVIOR", "COORDINATION", "PURPOSES", "Decisions", "DispatchParams", "FleetError",
-           "FleetManager", "FleetMember", "Leg", "RobotAgent", "behavior_state", "can_do", "lag_allowance",
-           "load_fleet", "samples_to_path", "view_of_status"]
+__all__ = ["ACTING", "AGENT_BEHAVIOR", "COORDINATION", "PURPOSES", "BehaviorCoordination", "CentralCoordination",
+           "Coordination", "Decisions", "DispatchParams", "Driver", "FleetError", "FleetManager", "FleetMember", "Leg",
+           "LegNotPlanned", "LegPlanner", "RobotAgent", "behavior_state", "can_do", "coordination_names",
+           "get_coordination", "lag_allowance", "load_fleet", "samples_to_path", "view_of_status"]

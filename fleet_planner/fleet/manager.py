@@ -36,16 +36,14 @@ import numpy as np
 
 from msg_schemas.records import RecordError, RobotStatus, Schedule, Task, TaskEvent
 
-from ..geometry import point_at_arc, polyline_passes_near
-from ..model import PlanningError, Point, RobotSpec, TimedPath, timed_path_from_polyline
-from ..paths import PathFinder
+from ..model import Point, TimedPath
 from ..planners.md import MDPlanner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
+from .coordination import Coordination, LegNotPlanned, get_coordination
 from .legs import ACTING, AT_STATION_M, Decisions, DispatchParams, Leg, lag_allowance
 from .state import FleetRobot, Job, Target, can_do
 
-COORDINATION = ("central", "behavior")
 #: an action not seen in any status counts as finished this long after its nominal end
 ACTION_SLACK_S = 2.0
 
@@ -55,18 +53,16 @@ class FleetManager:
 
     ``kinds`` are the robot kinds robots may report (their sizes, speeds and abilities);
     ``parking`` are extra places where idle robots may wait out of the way, besides the chargers;
-    ``coordination`` is how the robots avoid each other (see the module doc).
+    ``coordination`` is how the robots avoid each other: a name of
+    :data:`~.coordination.COORDINATION` or a :class:`~.coordination.Coordination`.
     """
 
     def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
                  params: DispatchParams | None = None, parking: Sequence[Point] = (),
-                 coordination: str = "central"):
+                 coordination: str | Coordination = "central"):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
-        if coordination not in COORDINATION:
-            raise ValueError(f"coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
-        self.coordination = coordination
-        self._finders: dict[float, PathFinder] = {}
+        self.strategy = get_coordination(coordination)
         self.warehouse = warehouse
         self.kinds = dict(kinds)
         self.params = params or DispatchParams()
@@ -86,6 +82,11 @@ class FleetManager:
         self.jobs: dict[str, Job] = {}
         self._notes: list[str] = []
         self._plan_id = 0
+
+    @property
+    def coordination(self) -> str:
+        """The name of the coordination mode."""
+        return self.strategy.name
 
     def set_params(self, params: DispatchParams) -> None:
         """Change thresholds at run time (not the speed factor or margin: the margin depends on them)."""
@@ -214,14 +215,8 @@ class FleetManager:
             else:
                 job.state, job.robot, job.picked = "queued", None, False
                 d.notes.append(f"job {job.task.id} is queued again for another robot")
-        if self.coordination != "central":
-            return  # the robots see it and drive round it themselves
-        for o in self.robots.values():
-            if o is r or o.leg is None or o.immobile or o.target is None:
-                continue
-            if _passes_near(o.leg.path, now, r.pos, o.radius + r.radius + self.margin):
-                o.replan = o.conflict = True
-                d.notes.append(f"robot {o.id} re-plans around {r.id}")
+        for o in self._replan_around(r, r.pos, now):
+            d.notes.append(f"robot {o.id} re-plans around {r.id}")
 
     def _arrivals(self, now: float, d: Decisions) -> None:
         for r in self.robots.values():
@@ -250,11 +245,9 @@ class FleetManager:
             r.arrived_at, r.saw_action = None, False
 
     def _find_late(self, d: Decisions) -> None:
-        if self.coordination != "central":
-            return  # the times of a behaviour leg bind nothing
         for r in self.robots.values():
             if (r.target is not None and not r.replan and r.on_leg and r.status.mode != "error"
-                    and r.status.lateness_s > self.params.lateness_tolerance_s):
+                    and self.strategy.is_late(r, self.params.lateness_tolerance_s)):
                 r.replan = True
                 d.notes.append(f"robot {r.id} is {r.status.lateness_s:.1f} s late: re-planning its leg")
 
@@ -275,15 +268,24 @@ class FleetManager:
         that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
         more must stop at once, not drive on for another ``lead_s``."""
         path_id = max(round(now * 1e9), r.last_path_id + 1)
-        x, y = self._start_of(r, path_id / 1e9)
-        leg = Leg(r.id, TimedPath(r.id, r.radius, [[x, y, path_id / 1e9]]), path_id, "hold", "")
+        x, y = self.strategy.start_of(r, path_id / 1e9)
+        leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
         self._give(r, leg, d)
         r.conflict = False
         d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
-        for o in self.robots.values() if self.coordination == "central" else ():
-            if o is not r and o.leg is not None and not o.immobile and o.target is not None and \
-                    _passes_near(o.leg.path, now, (x, y), o.radius + r.radius + self.margin):
+        self._replan_around(r, (x, y), now)
+
+    def _replan_around(self, r: FleetRobot, point: Point, now: float) -> list[FleetRobot]:
+        """Mark the robots whose legs must now keep clear of ``r`` standing at ``point`` to re-plan
+        (as the coordination mode says); they are returned."""
+        marked = []
+        for o in self.robots.values():
+            if o is r or o.leg is None or o.immobile or o.target is None:
+                continue
+            if self.strategy.must_replan_around(o.leg.path, now, point, o.radius + r.radius + self.margin):
                 o.replan = o.conflict = True
+                marked.append(o)
+        return marked
 
     def _allocate(self, now: float, d: Decisions) -> None:
         queued = sorted((j for j in self.jobs.values() if j.state == "queued"),
@@ -338,35 +340,25 @@ class FleetManager:
 
     def _plan_leg(self, r: FleetRobot, target: Target, now: float, d: Decisions,
                   clear_way: bool = True) -> Leg | None:
-        """Plan ``r`` from where it is (or will be, if it is driving) to ``target``, around everyone
-        else; on success ``r`` gets the leg and the target. On failure None is returned (the caller
-        tries again later) and, with ``clear_way``, a free robot named as the blocker is sent off."""
+        """Plan ``r`` from where it is (or will be, if it is driving) to ``target``, as the
+        coordination mode plans legs; on success ``r`` gets the leg and the target. On failure None
+        is returned (the caller tries again later; why is noted once) and, with ``clear_way``, a free
+        robot named as the blocker is sent off."""
         path_id = self._next_path_id(r, now)
         t0 = path_id / 1e9
-        start = self._start_of(r, t0)
+        start = self.strategy.start_of(r, t0)
         if math.dist(start, target.pose) < 1e-6:
-            path = TimedPath(r.id, r.radius, [[*target.pose, t0]])
-        elif self.coordination == "behavior":
-            path = self._plain_leg(r, start, target.pose, t0)
-            if path is None:
-                why = f"no way to {target.name} on the map"
-                if why != r.trouble:
-                    d.notes.append(f"robot {r.id}: {why}")
-                r.trouble = why
-                return None
+            path = TimedPath(r.id, r.radius, np.array([[*target.pose, t0]]))
         else:
-            spec = RobotSpec(r.id, r.radius, r.kind.max_speed * self.params.speed_factor, start,
-                             target.pose, r.kind.name,
-                             r.kind.max_accel if math.isfinite(r.kind.max_accel) else None)
-            others = [o.trajectory() for o in self.robots.values() if o is not r]
             try:
-                path = self.planner.plan_incremental(self.warehouse.grid, [spec], others, t0)[0]
-            except PlanningError as exc:
-                why = f"no leg to {target.name} yet ({'; '.join(exc.failures.values())})"
-                if why != r.trouble:
-                    d.notes.append(f"robot {r.id}: {why}")
-                r.trouble = why
-                blocker = self.robots.get(exc.blockers.get(r.id, ""))
+                path = self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
+                                              speed=r.kind.max_speed * self.params.speed_factor,
+                                              fleet=self.robots.values())
+            except LegNotPlanned as exc:
+                if exc.why != r.trouble:
+                    d.notes.append(f"robot {r.id}: {exc.why}")
+                r.trouble = exc.why
+                blocker = self.robots.get(exc.blocker) if exc.blocker is not None else None
                 if clear_way and blocker is not None and blocker.free:
                     self._send_away(blocker, now, d)
                 return None
@@ -375,16 +367,6 @@ class FleetManager:
         r.target, r.trouble = target, ""
         return leg
 
-    def _plain_leg(self, r: FleetRobot, start: Point, goal: Point, t0: float) -> TimedPath | None:
-        """A behaviour leg: the robot's shortest path on the map, around nobody, timed at the
-        planned speed from ``t0``. Only its goal binds the robot, which plans its own way there."""
-        if r.radius not in self._finders:
-            self._finders[r.radius] = PathFinder(self.warehouse.grid, r.radius)
-        points = self._finders[r.radius].find(start, goal)
-        if points is None:
-            return None
-        return timed_path_from_polyline(r.id, r.radius, points, r.kind.max_speed * self.params.speed_factor, t0)
-
     def _give(self, r: FleetRobot, leg: Leg, d: Decisions) -> None:
         r.leg, r.last_path_id = leg, leg.path_id
         r.arrived_at, r.saw_action = None, False
@@ -392,22 +374,6 @@ class FleetManager:
 
     def _next_path_id(self, r: FleetRobot, now: float) -> int:
         return max(round((now + self.params.lead_s) * 1e9), r.last_path_id + 1)
-
-    def _start_of(self, r: FleetRobot, t0: float) -> Point:
-        """Where ``r`` will be at ``t0``: where it stands, or, driving its leg, a little further along
-        it at the speed its status shows (never beyond where its schedule is due); driving a path
-        the manager does not know (back from offline), straight on at its velocity."""
-        st = r.status
-        if self.coordination != "central":
-            return st.x, st.y  # it drives its own path: where it is now is all that is known
-        if not r.on_leg:
-            ahead = max(0.0, t0 - st.stamp) if st.mode == "driving" else 0.0
-            return st.x + st.vx * ahead, st.y + st.vy * ahead
-        wp = r.leg.path.waypoints
-        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
-        due = float(np.interp(t0, wp[:, 2], arc))
-        s = min(st.progress * arc[-1] + math.hypot(st.vx, st.vy) * max(0.0, t0 - st.stamp), due, arc[-1])
-        return point_at_arc(wp[:, :2], arc, s)
 
     def _occupant(self, pose: Point, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:
         """A robot standing on, or bound for, a disc of ``radius`` at ``pose``."""
@@ -477,13 +443,3 @@ def _guess_id(raw: Any) -> str:
             m = re.search(r'"id"\s*:\s*"([^"\\]+)"', raw)
             return m.group(1) if m and m.group(1).strip() else "?"
     return "?"
-
-
-def _passes_near(path: TimedPath, now: float, point: Point, dist: float) -> bool:
-    """True if the part of ``path`` from ``now`` on comes closer than ``dist`` to ``point``."""
-    wp = path.waypoints
-    ahead = wp[wp[:, 2] > now, :2]
-    pts = np.vstack([path.position(now), ahead]) if len(ahead) else np.array([path.position(now)])
-    return polyline_passes_near(pts, point, dist)
-
-
