@@ -6,11 +6,12 @@ The planner node feeds it what comes off the wire (:meth:`~FleetManager.submit` 
 timer, which returns :class:`~.legs.Decisions`: new timed paths (:class:`~.legs.Leg`) and task
 events to publish. The job's life and the coordination modes are described in :mod:`fleet_planner.fleet`.
 
-Every leg is planned with :meth:`MDPlanner.plan_incremental` around the trajectories of all other
-robots (a standing robot is a one-waypoint path), so planned discs never come closer than the sum
-of radii plus the planner's margin. Legs are planned with each kind's acceleration (speed ramps
-written as short constant-speed pieces, :func:`~fleet_planner.model.drive_profile`) at
-``speed_factor`` f of its top speed v; a robot tracking such a leg (never ahead, see
+Under central coordination every leg is planned with the planner's ``plan_incremental`` (by
+default the (M,D) planner, :class:`~fleet_planner.planners.md.MDPlanner`) around the trajectories
+of all other robots (a standing robot is a one-waypoint path), so planned discs never come closer
+than the sum of radii plus the planner's margin. Legs are planned with each kind's acceleration
+(speed ramps written as short constant-speed pieces, :func:`~fleet_planner.model.drive_profile`)
+at ``speed_factor`` f of its top speed v; a robot tracking such a leg (never ahead, see
 :class:`~fleet_planner.robots.RobotModel`) lags it by at most the ramp approximation,
 (f v)^2 / (8 a n^2) for n pieces per ramp, plus what it drives in one control step. The margin is
 twice the largest such lag plus ``safety_margin``, so the discs as driven stay apart as well.
@@ -18,9 +19,10 @@ twice the largest such lag plus ``safety_margin``, so the discs as driven stay a
 When things go wrong: a leg that cannot be planned now (someone is parked in the way) is tried
 again at the next step, and an idle robot in the way is sent off first; a robot silent for
 ``offline_timeout_s`` (or out of battery) is immobile: its last position becomes a fixed obstacle,
-its job goes back to the queue (or fails, if it was carrying it with an empty battery) and robots
-whose legs pass near it re-plan; a robot more than ``lateness_tolerance_s`` behind its schedule
-re-plans the rest of its leg from where it is, around everyone else.
+its job goes back to the queue (or fails, if it was carrying it with an empty battery) and, under
+central coordination, robots whose legs pass near it re-plan; a central robot more than
+``lateness_tolerance_s`` behind its schedule re-plans the rest of its leg from where it is, around
+everyone else.
 
 Times are seconds on one clock (the planner's ROS time): ``now`` is always passed in.
 """
@@ -30,17 +32,17 @@ import json
 import math
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from msg_schemas.records import RecordError, RobotStatus, Schedule, Task, TaskEvent
 
 from ..model import Point, TimedPath
-from ..planners.md import MDPlanner
+from ..planners import get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
-from .coordination import Coordination, LegNotPlanned, get_coordination
+from .coordination import Coordination, LegNotPlanned, LegPlanner, get_coordination
 from .legs import ACTING, AT_STATION_M, Decisions, DispatchParams, Leg, lag_allowance
 from .state import FleetRobot, Job, Target, can_do
 
@@ -54,12 +56,15 @@ class FleetManager:
     ``kinds`` are the robot kinds robots may report (their sizes, speeds and abilities);
     ``parking`` are extra places where idle robots may wait out of the way, besides the chargers;
     ``coordination`` is how the robots avoid each other: a name of
-    :data:`~.coordination.COORDINATION` or a :class:`~.coordination.Coordination`.
+    :data:`~.coordination.COORDINATION` or a :class:`~.coordination.Coordination`;
+    ``planner`` plans the legs of central coordination (anything with ``plan_incremental``, see
+    :class:`~.coordination.LegPlanner`), by default the registry's ``md`` planner keeping
+    :attr:`margin` (one handed in should keep at least that much between discs).
     """
 
     def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
                  params: DispatchParams | None = None, parking: Sequence[Point] = (),
-                 coordination: str | Coordination = "central"):
+                 coordination: str | Coordination = "central", planner: LegPlanner | None = None):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
         self.strategy = get_coordination(coordination)
@@ -77,7 +82,7 @@ class FleetManager:
         self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
-        self.planner = MDPlanner(margin=self.margin)
+        self.planner = planner if planner is not None else cast(LegPlanner, get_planner("md", margin=self.margin))
         self.robots: dict[str, FleetRobot] = {}
         self.jobs: dict[str, Job] = {}
         self._notes: list[str] = []
