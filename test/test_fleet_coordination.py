@@ -2,8 +2,16 @@
 or a strategy object) and the planner handed to the fleet manager instead of built in."""
 import pytest
 
-from fleet_planner.fleet import (COORDINATION, BehaviorCoordination, CentralCoordination, DispatchParams,
-                                 FleetManager, RobotAgent, coordination_names, get_coordination)
+from fleet_planner.fleet import (
+    COORDINATION,
+    BehaviorCoordination,
+    CentralCoordination,
+    DispatchParams,
+    FleetManager,
+    RobotAgent,
+    coordination_names,
+    get_coordination,
+)
 from fleet_planner.planners.md import MDPlanner
 from fleet_planner.robots import RobotModel, load_kinds
 from fleet_planner.warehouse import generate_warehouse

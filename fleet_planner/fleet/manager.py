@@ -7,9 +7,10 @@ timer, which returns :class:`~.legs.Decisions`: new timed paths (:class:`~.legs.
 events to publish. The job's life and the coordination modes are described in :mod:`fleet_planner.fleet`.
 
 Under central coordination every leg is planned with the planner's ``plan_incremental`` (by
-default the (M,D) planner, :class:`~fleet_planner.planners.md.MDPlanner`) around the trajectories
-of all other robots (a standing robot is a one-waypoint path), so planned discs never come closer
-than the sum of radii plus the planner's margin. Legs are planned with each kind's acceleration
+default the (M,D) planner of You & Ji, "Design of a Multi-robot Bin Packing System in an Automatic
+Warehouse", :class:`~fleet_planner.planners.md.MDPlanner`) around the trajectories of all other
+robots (a standing robot is a one-waypoint path), so planned discs never come closer than the sum
+of radii plus the planner's margin. Legs are planned with each kind's acceleration
 (speed ramps written as short constant-speed pieces, :func:`~fleet_planner.model.drive_profile`)
 at ``speed_factor`` f of its top speed v; a robot tracking such a leg (never ahead, see
 :class:`~fleet_planner.robots.RobotModel`) lags it by at most the ramp approximation,
@@ -107,9 +108,9 @@ class FleetManager:
             if isinstance(raw, Task):
                 task = raw
             elif isinstance(raw, (str, bytes)):
-                task = Task.from_json(raw)
+                task = cast(Task, Task.from_json(raw))
             else:
-                task = Task.from_dict(raw)
+                task = cast(Task, Task.from_dict(raw))
         except RecordError as exc:
             return [_event(_guess_id(raw), "rejected", now, reason=str(exc))]
         problem = self._problem(task)
@@ -117,6 +118,7 @@ class FleetManager:
             return [_event(task.id, "rejected", now, reason=problem)]
         pick = self.warehouse.stations[task.pick]
         place = self._storing_site(task.place)
+        assert place is not None  # _problem found it
         self.jobs[task.id] = Job(task, pick, place, len(self.jobs))
         return [_event(task.id, "accepted", now)]
 
@@ -169,7 +171,12 @@ class FleetManager:
             r.stop = not r.immobile  # it may still drive a leg the others no longer keep clear of
             self._notes.append(f"robot {r.id} is back online at ({status.x:.2f}, {status.y:.2f})")
             return
-        leg, target = r.leg, r.target
+        self._note_arrival(r, now)
+
+    def _note_arrival(self, r: FleetRobot, now: float) -> None:
+        """Note when ``r``'s status first shows it at the end of the leg to its target, and whether
+        it shows it doing what it went there for."""
+        status, leg, target = r.status, r.leg, r.target
         if (leg is not None and target is not None and leg.goal == target.name and not r.replan
                 and status.path_id == leg.path_id and status.progress >= 1.0):
             if r.arrived_at is None:
@@ -224,6 +231,8 @@ class FleetManager:
             d.notes.append(f"robot {o.id} re-plans around {r.id}")
 
     def _arrivals(self, now: float, d: Decisions) -> None:
+        """Robots at the end of their legs: a pick or place done (seen done, or its nominal time
+        gone by) moves the job on; any other target is simply reached."""
         for r in self.robots.values():
             if r.arrived_at is None or r.target is None or not r.online:
                 continue
@@ -234,20 +243,25 @@ class FleetManager:
                 nominal = r.kind.action_s(target.purpose) + ACTION_SLACK_S
                 if not (r.saw_action or now - r.arrived_at >= nominal):
                     continue
-                job = self.jobs[r.job]
-                if target.purpose == "pick":
-                    job.picked = True
-                    d.events.append(_event(job.task.id, "picked", now, r.id))
-                    r.target = Target("place", job.place.name, job.place.pose)
-                    r.replan = True
-                else:
-                    job.state = "done"
-                    d.events.append(_event(job.task.id, "placed", now, r.id))
-                    d.events.append(_event(job.task.id, "done", now, r.id))
-                    r.job, r.target, r.idle_since = None, None, now
+                self._action_done(r, target, now, d)
             else:
                 r.target, r.idle_since = None, now
             r.arrived_at, r.saw_action = None, False
+
+    def _action_done(self, r: FleetRobot, target: Target, now: float, d: Decisions) -> None:
+        """``r`` picked (it heads for the storing site next) or placed (its job is done)."""
+        assert r.job is not None  # a robot picks and places only for its job
+        job = self.jobs[r.job]
+        if target.purpose == "pick":
+            job.picked = True
+            d.events.append(_event(job.task.id, "picked", now, r.id))
+            r.target = Target("place", job.place.name, job.place.pose)
+            r.replan = True
+        else:
+            job.state = "done"
+            d.events.append(_event(job.task.id, "placed", now, r.id))
+            d.events.append(_event(job.task.id, "done", now, r.id))
+            r.job, r.target, r.idle_since = None, None, now
 
     def _find_late(self, d: Decisions) -> None:
         for r in self.robots.values():
@@ -259,11 +273,11 @@ class FleetManager:
     def _replan(self, now: float, d: Decisions) -> None:
         """Plan the legs of robots that have somewhere to go: those that just picked first (they
         hold a chute), then those re-planning. A robot whose new leg is not yet acknowledged waits."""
-        waiting = [r for r in self.robots.values() if r.replan and r.target is not None and not r.immobile
-                   and r.online and (r.leg is None or r.status.path_id == r.leg.path_id)]
-        waiting.sort(key=lambda r: (r.target.purpose != "place", r.id))
-        for r in waiting:
-            if self._plan_leg(r, r.target, now, d) is not None:
+        waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
+                   and not r.immobile and r.online and (r.leg is None or r.status.path_id == r.leg.path_id)]
+        waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
+        for r, target in waiting:
+            if self._plan_leg(r, target, now, d) is not None:
                 r.replan = r.conflict = False
             elif r.conflict and r.on_leg:
                 self._hold(r, now, d)
