@@ -24,7 +24,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from fleet_planner.dispatch import COORDINATION, RobotAgent
+from fleet_planner.fleet import COORDINATION, RobotAgent
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.warehouse import Warehouse, load_warehouse
@@ -87,7 +87,7 @@ class AgentNode(Node):
         self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._waits = None
-        if mode == "behavior":
+        if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
             self.create_subscription(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
         self._timer = self.create_timer(1.0 / rate, self._on_timer)

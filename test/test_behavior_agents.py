@@ -12,7 +12,7 @@ import pytest
 from fleet_planner.behavior import (Behavior, BehaviorController, HeardDocking, RobotView, WaitMessage,
                                     safety_stop)
 from fleet_planner.checker import min_separation
-from fleet_planner.dispatch import DispatchParams, FleetManager, RobotAgent, samples_to_path
+from fleet_planner.fleet import DispatchParams, FleetManager, RobotAgent, samples_to_path
 from fleet_planner.grid import GridMap
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import RobotModel, load_kinds

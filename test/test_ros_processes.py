@@ -5,7 +5,7 @@ import subprocess
 
 import yaml
 
-from fleet_planner.dispatch import FleetMember
+from fleet_planner.fleet import FleetMember
 from fleet_planner.ros.demo import node_command, start_processes, stop_processes
 from fleet_planner.warehouse import config_path, generate_warehouse, save_warehouse
 

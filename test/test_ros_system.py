@@ -7,7 +7,7 @@ import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from fleet_planner.dispatch import FleetMember
+from fleet_planner.fleet import FleetMember
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.demo import bring_up, spin_until
 from fleet_planner.warehouse import generate_warehouse

@@ -41,7 +41,7 @@ from std_msgs.msg import String
 from tqdm import tqdm
 
 from fleet_planner.checker import min_separation
-from fleet_planner.dispatch import COORDINATION, FleetMember, load_fleet, samples_to_path
+from fleet_planner.fleet import COORDINATION, FleetMember, load_fleet, samples_to_path
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.planner_node import DrainingExecutor, PlannerNode

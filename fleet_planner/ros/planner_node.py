@@ -26,7 +26,7 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from fleet_planner.dispatch import COORDINATION, Decisions, DispatchParams, FleetManager
+from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics

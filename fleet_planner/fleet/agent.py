@@ -1,0 +1,139 @@
+"""The robot's end of the fleet: :class:`RobotAgent`, a :class:`~fleet_planner.robots.RobotModel`
+that follows the legs it is sent and, where a leg ends, picks at the chute of its job, places at the
+storing site holding the job's address tag, or charges at a charger. How it drives its legs and keeps
+clear of the others depends on the coordination mode (:mod:`.coordination`).
+
+Times are seconds on one clock (the robot's ROS time): ``now`` is always passed in.
+"""
+from __future__ import annotations
+
+from msg_schemas.records import RobotStatus, Task, TaskEvent, WaitMessageRecord
+
+from ..behavior import BehaviorController, BehaviorParams
+from ..model import TimedPath
+from ..robots import RobotModel
+from ..warehouse import Warehouse
+from .coordination import AGENT_BEHAVIOR, Coordination, get_coordination
+from .legs import station_at
+
+
+class RobotAgent:
+    """A robot doing its jobs: it follows the legs it is sent with its :class:`RobotModel` and, where
+    a leg ends, picks (at the chute of its job), places (at the storing site that holds the job's
+    address tag, once it carries the goods) or charges (at a charger, with nothing to do).
+
+    It learns its job from the ``assigned`` task event naming it and the job's stations from the
+    task itself (:meth:`on_task`); if it never saw the task, any chute or storing site will do.
+    It hears the other robots' statuses (:meth:`on_status`).
+
+    ``coordination`` (a name of :data:`~.coordination.COORDINATION` or a
+    :class:`~.coordination.Coordination`) says how it drives (its :attr:`driver`): ``"central"``,
+    each leg's timed path, with a safety net: it waits rather than drive into a robot in its
+    critical area (:meth:`CentralDriver.must_wait <.coordination.CentralDriver.must_wait>` says
+    how); ``"behavior"``, only to the goal of each leg (and the station there, which it docks at one
+    robot at a time), on its own path at its own speed with a :class:`BehaviorController`, from the
+    other robots' statuses and the wait messages addressed to it (:meth:`on_wait_message`; the ones
+    it sends come from :meth:`take_wait_messages`); its statuses then carry its behaviour state.
+    """
+
+    KEEP_TASKS = 10_000  # task details remembered
+
+    def __init__(self, model: RobotModel, warehouse: Warehouse, coordination: str | Coordination = "central",
+                 params: BehaviorParams = AGENT_BEHAVIOR):
+        self.strategy = get_coordination(coordination)
+        self.model = model
+        self.warehouse = warehouse
+        self.tasks: dict[str, Task] = {}
+        self.loaded = False
+        self.heard: dict[str, RobotStatus] = {}   # the other robots' last statuses
+        self.driver = self.strategy.driver(model, warehouse, params)
+        self._acting: str | None = None
+        self._last: float | None = None
+
+    @property
+    def coordination(self) -> str:
+        """The name of its coordination mode."""
+        return self.strategy.name
+
+    @property
+    def controller(self) -> BehaviorController | None:
+        """Its behaviour controller (behaviour coordination), else None."""
+        return self.driver.controller
+
+    @property
+    def waits_for(self) -> str | None:
+        """The robot its safety net stops for (central coordination), if any."""
+        return self.driver.waits_for
+
+    @property
+    def job(self) -> str | None:
+        return self.model.task_id
+
+    def on_task(self, task: Task) -> None:
+        if len(self.tasks) >= self.KEEP_TASKS:
+            self.tasks.pop(next(iter(self.tasks)))
+        self.tasks[task.id] = task
+
+    def on_event(self, event: TaskEvent) -> None:
+        """Take a job assigned to this robot; drop one given to another robot, failed or cancelled."""
+        me = self.model.id
+        if event.event == "assigned" and event.robot_id == me:
+            self.model.task_id, self.loaded = event.task_id, False
+        elif event.task_id == self.job and (event.event in ("failed", "cancelled")
+                                            or event.event == "assigned" and event.robot_id != me):
+            self.model.task_id, self.loaded = None, False
+
+    def on_status(self, status: RobotStatus) -> None:
+        """Another robot's status (its own and older ones than the last heard are ignored)."""
+        last = self.heard.get(status.id)
+        if status.id != self.model.id and (last is None or status.stamp >= last.stamp):
+            self.heard[status.id] = status
+
+    def on_wait_message(self, msg: WaitMessageRecord) -> None:
+        """A wait message on the topic: taken at the next tick if it is addressed to this robot."""
+        if msg.receiver == self.model.id:
+            self.driver.on_wait_message(msg)
+
+    def take_wait_messages(self) -> list[WaitMessageRecord]:
+        """The wait messages this robot sent since the last call, to publish."""
+        return self.driver.take_wait_messages()
+
+    def on_path(self, path: TimedPath, t0: float, path_id: int) -> None:
+        """Follow a leg whose times count from ``t0``; ValueError if it cannot (see RobotModel.follow).
+        Under behaviour coordination only its goal counts: ValueError if there is no way there."""
+        self.driver.follow(path, t0, path_id, self._last)
+
+    def tick(self, now: float) -> RobotStatus:
+        """Advance to ``now``, start what is due where the robot stands, and report."""
+        m = self.model
+        if self._last is not None and now > self._last:
+            self.driver.drive(self._last, now - self._last, self.heard)
+        if self._last is None or now > self._last:
+            self._last = now
+        if self._acting is not None and m.busy_until is None:
+            if self._acting == "pick":
+                self.loaded = True
+            else:
+                self.loaded, m.task_id = False, None
+            self._acting = None
+        if m.mode == "idle" and m.speed == 0.0 and m.progress >= 1.0:
+            self._act(now)
+        state = self.driver.behavior_state()
+        return RobotStatus(**m.status(now), behavior=state)
+
+    # -- where a leg ends ---------------------------------------------------------------------------
+    def _act(self, now: float) -> None:
+        m = self.model
+        here = station_at(self.warehouse, (m.x, m.y))
+        task = self.tasks.get(self.job) if self.job else None
+        if self.job is not None and here is not None:
+            if not self.loaded and here.type == "chute" and (task is None or task.pick == here.name):
+                m.start_action("pick", now)
+                self._acting = "pick"
+            elif self.loaded and here.type == "storage" and (task is None or task.place == here.name
+                                                              or task.place in here.tags):
+                m.start_action("place", now)
+                self._acting = "place"
+        elif self.job is None and here is not None and here.type == "charger" and m.battery < 1.0:
+            m.start_charging()
+

@@ -1,0 +1,374 @@
+"""How the robots of a fleet avoid each other: the coordination mode, a strategy used on both ends.
+
+The mode is named in the nodes' parameter ``coordination`` and is the same for the manager and every
+agent. What differs between the modes is here, behind one interface, :class:`Coordination`:
+
+* on the planner's end (:class:`~.manager.FleetManager`): how a leg is planned
+  (:meth:`~Coordination.plan_leg`) from where (:meth:`~Coordination.start_of`), and whether the
+  times and ways of the legs bind: a late robot re-plans (:meth:`~Coordination.is_late`), a leg
+  passing near a robot that stopped re-plans (:meth:`~Coordination.must_replan_around`);
+* on the robot's end (:class:`~.agent.RobotAgent`): how it drives, a :class:`Driver` per robot
+  (:meth:`~Coordination.driver`): its safety net or its behaviour controller, its wait messages and
+  the behaviour state its statuses carry.
+
+``central`` (:class:`CentralCoordination`): every leg is planned around the trajectories of all
+other robots and the robots drive them as timed. A central robot keeps a safety net of its own:
+before it drives on, it checks the other robots' reported discs against its critical area
+(:func:`~fleet_planner.behavior.safety_stop`), each grown by :data:`NET_MARGIN_M` and swept along
+where it may drive until the end of the step, the area reaching as far as the robot may drive
+itself; it waits (reporting ``waiting``) rather than drive into one, and if that lasts, it is late
+and the planner re-plans it.
+
+``behavior`` (:class:`BehaviorCoordination`): the robots avoid each other on their own, by the
+behaviours of Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance": the planner
+still allocates jobs and chargers, but a leg is only a goal (a plain A* path whose times bind
+nothing; no delays, no re-planning of late robots), and the robot plans its own path there and
+resolves conflicts by the behaviour rules, from the others' statuses (which then carry their
+behaviour state) and wait messages (:class:`~fleet_planner.behavior.BehaviorController`).
+
+:func:`get_coordination` looks a mode up by name; :data:`COORDINATION` are the names.
+"""
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+
+from msg_schemas.records import RobotStatus, WaitMessageRecord
+
+from ..behavior import BehaviorController, BehaviorParams, RobotView, WaitMessage, safety_stop
+from ..geometry import point_at_arc, polyline_passes_near
+from ..grid import GridMap
+from ..model import PlanningError, Point, RobotSpec, TimedPath, timed_path_from_polyline
+from ..paths import PathFinder
+from ..robots import RobotModel
+from ..warehouse import Warehouse
+from .legs import CONTROL_PERIOD_S, station_at
+from .state import FleetRobot, Target
+from .wire import behavior_state, view_of_status
+
+#: a robot's status older than this (s) says it stopped reporting: it counts as standing where it was
+STALE_S = 1.0
+#: the safety net of a central robot keeps this much (m) beyond the sum of radii (and beyond where
+#: the two may drive before the next status)
+NET_MARGIN_M = 0.05
+#: a behaviour-coordinated robot drives at most this long (s) per control step, however late the
+#: step comes: it never jumps further than its safety layer looked
+MAX_STEER_S = 2 * CONTROL_PERIOD_S
+#: the behaviour layer of a robot on its own: it hears the others a status period late, so its
+#: safety layer grows their discs (see BehaviorController.keeps_clear), and passes leave room for that
+AGENT_BEHAVIOR = BehaviorParams(safety_margin=0.05, avoid_margin=0.3)
+
+
+class LegPlanner(Protocol):
+    """What the fleet manager needs of a planner (:mod:`fleet_planner.planners`): legs for
+    ``robots`` from ``t0`` around trajectories being driven (``fixed``, absolute times), or a
+    :class:`~fleet_planner.model.PlanningError` naming who is in the way."""
+
+    def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
+                         t0: float) -> list[TimedPath]: ...
+
+
+class LegNotPlanned(Exception):
+    """No leg to a target now: ``why`` in words, and the robot in the way if one is known."""
+
+    def __init__(self, why: str, blocker: str | None = None):
+        super().__init__(why)
+        self.why = why
+        self.blocker = blocker
+
+
+# -------------------------------------------------------------------------------------------------
+# the interface
+# -------------------------------------------------------------------------------------------------
+class Driver(ABC):
+    """How one robot drives under a coordination mode; its :class:`~.agent.RobotAgent` hands it
+    the legs it is sent, the other robots' statuses and the wait messages addressed to it."""
+
+    #: the robot it holds for this step (the safety net of a central robot), if any
+    waits_for: str | None = None
+    #: its behaviour controller (behaviour coordination), else None
+    controller: BehaviorController | None = None
+
+    @abstractmethod
+    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
+        """Take a leg whose times count from ``t0`` (``now``: the robot's last tick, None before
+        the first); ValueError if it cannot."""
+
+    @abstractmethod
+    def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
+        """Step the robot's model from ``t`` by ``dt``, given the others' last statuses."""
+
+    @abstractmethod
+    def behavior_state(self) -> dict[str, Any] | None:
+        """The ``behavior`` field of the robot's status (None: it does not coordinate by behaviours)."""
+
+    @abstractmethod
+    def on_wait_message(self, msg: WaitMessageRecord) -> None:
+        """A wait message addressed to this robot."""
+
+    @abstractmethod
+    def take_wait_messages(self) -> list[WaitMessageRecord]:
+        """The wait messages the robot sent since the last call, to publish."""
+
+
+class Coordination(ABC):
+    """A coordination mode: what differs between the modes on the planner's end and the robot's."""
+
+    #: the name in the nodes' parameter ``coordination`` and in :data:`COORDINATION`
+    name: ClassVar[str]
+    #: the robots talk over the wait-message topic
+    exchanges_wait_messages: ClassVar[bool] = False
+
+    # -- the planner's end ------------------------------------------------------------------------
+    @abstractmethod
+    def start_of(self, robot: FleetRobot, t0: float) -> Point:
+        """Where ``robot`` will be at ``t0``, the start of a new leg."""
+
+    @abstractmethod
+    def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
+                 planner: LegPlanner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+        """A leg for ``robot`` from ``start`` at ``t0`` to ``target`` at ``speed`` (``fleet``: every
+        robot, ``robot`` included); :class:`LegNotPlanned` if there is none now."""
+
+    @abstractmethod
+    def is_late(self, robot: FleetRobot, tolerance_s: float) -> bool:
+        """Whether ``robot``, driving its leg, is so far behind the leg's times that it re-plans."""
+
+    @abstractmethod
+    def must_replan_around(self, path: TimedPath, now: float, point: Point, clearance: float) -> bool:
+        """Whether a robot driving ``path`` re-plans to keep ``clearance`` from a robot that stopped
+        at ``point`` (out of order, or held)."""
+
+    # -- the robot's end --------------------------------------------------------------------------
+    @abstractmethod
+    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams) -> Driver:
+        """How the robot of ``model`` drives (``params``: its behaviour layer, where it has one)."""
+
+
+# -------------------------------------------------------------------------------------------------
+# central: timed paths planned around each other, a safety net on the robots
+# -------------------------------------------------------------------------------------------------
+class CentralCoordination(Coordination):
+    """The manager plans every leg around the trajectories of all other robots; robots drive them
+    as timed, with a safety net (:class:`CentralDriver`)."""
+
+    name = "central"
+
+    def start_of(self, robot: FleetRobot, t0: float) -> Point:
+        """Where it stands, or, driving its leg, a little further along it at the speed its status
+        shows (never beyond where its schedule is due); driving a path the manager does not know
+        (back from offline), straight on at its velocity."""
+        st = robot.status
+        if robot.leg is None or not robot.on_leg:
+            ahead = max(0.0, t0 - st.stamp) if st.mode == "driving" else 0.0
+            return st.x + st.vx * ahead, st.y + st.vy * ahead
+        wp = robot.leg.path.waypoints
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+        due = float(np.interp(t0, wp[:, 2], arc))
+        s = min(st.progress * arc[-1] + math.hypot(st.vx, st.vy) * max(0.0, t0 - st.stamp), due, arc[-1])
+        return point_at_arc(wp[:, :2], arc, s)
+
+    def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
+                 planner: LegPlanner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+        """Planned with ``planner`` around the trajectories of all other robots."""
+        kind = robot.kind
+        spec = RobotSpec(robot.id, robot.radius, speed, start, target.pose, kind.name,
+                         kind.max_accel if math.isfinite(kind.max_accel) else None)
+        others = [o.trajectory() for o in fleet if o is not robot]
+        try:
+            return planner.plan_incremental(grid, [spec], others, t0)[0]
+        except PlanningError as exc:
+            raise LegNotPlanned(f"no leg to {target.name} yet ({'; '.join(exc.failures.values())})",
+                                exc.blockers.get(robot.id)) from exc
+
+    def is_late(self, robot: FleetRobot, tolerance_s: float) -> bool:
+        return robot.status.lateness_s > tolerance_s
+
+    def must_replan_around(self, path: TimedPath, now: float, point: Point, clearance: float) -> bool:
+        """The part of ``path`` from ``now`` on comes closer than ``clearance`` to ``point``."""
+        wp = path.waypoints
+        ahead = wp[wp[:, 2] > now, :2]
+        pts = np.vstack([path.position(now), ahead]) if len(ahead) else np.array([path.position(now)])
+        return polyline_passes_near(pts, point, clearance)
+
+    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams) -> Driver:
+        return CentralDriver(model)
+
+
+class CentralDriver(Driver):
+    """A robot driving each leg's timed path, with a safety net: it waits rather than drive into a
+    robot in its critical area (:meth:`must_wait` says how)."""
+
+    def __init__(self, model: RobotModel):
+        self.model = model
+        self.waits_for = None
+
+    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
+        self.model.follow(path, t0, path_id)
+
+    def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
+        self.model.step(t, dt, hold=self.must_wait(t, dt, heard))
+
+    def behavior_state(self) -> dict[str, Any] | None:
+        return None
+
+    def on_wait_message(self, msg: WaitMessageRecord) -> None:
+        pass  # a central robot waits for nobody's messages
+
+    def take_wait_messages(self) -> list[WaitMessageRecord]:
+        return []
+
+    def must_wait(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> bool:
+        """Whether the robot must hold this step rather than drive into another robot: one whose
+        reported disc, grown by :data:`NET_MARGIN_M` and swept along the way it drives from its
+        report to the end of the step (at its reported velocity), lies in the robot's critical
+        area reaching as far as it may drive in the step (:func:`~fleet_planner.behavior.safety_stop`).
+        Robots passing by at their planned distance are not in it: the net stays out of the plan's
+        way and only stops a robot that would otherwise drive into one (which the planner then
+        re-plans when it gets late)."""
+        m, k = self.model, self.model.kind
+        ahead = m.ahead()
+        self.waits_for = None
+        if ahead is None or m.busy_until is not None:
+            return False
+        step = min(k.max_speed, m.speed + k.max_accel * dt) * dt
+        others, sweep = [], {}
+        for st in heard.values():
+            if math.hypot(st.x - m.x, st.y - m.y) > k.radius + st.radius + step + 2 * k.max_speed * STALE_S:
+                continue
+            ahead_s = t + dt - st.stamp
+            ahead_s = ahead_s if 0.0 <= ahead_s <= STALE_S else 0.0   # a silent robot stands
+            sweep[st.id] = (st.vx * ahead_s, st.vy * ahead_s)
+            others.append(RobotView(st.id, (st.x, st.y), st.radius))
+        blocker = safety_stop(RobotView(m.id, (m.x, m.y), k.radius, next_waypoint=ahead), others, step,
+                              NET_MARGIN_M, sweep)
+        self.waits_for = blocker.id if blocker is not None else None
+        return blocker is not None
+
+
+# -------------------------------------------------------------------------------------------------
+# behaviour: goals only, the robots resolve conflicts themselves
+# -------------------------------------------------------------------------------------------------
+class BehaviorCoordination(Coordination):
+    """The manager gives goals (a plain A* path, around nobody, whose times bind nothing); robots
+    plan their own way and resolve conflicts by the behaviour rules (:class:`BehaviorDriver`)."""
+
+    name = "behavior"
+    exchanges_wait_messages = True
+
+    def __init__(self) -> None:
+        self._finders: dict[tuple[int, float], PathFinder] = {}  # (id of the map, radius) -> finder
+
+    def start_of(self, robot: FleetRobot, t0: float) -> Point:
+        """Where its status says it is: it drives its own path, so where it is now is all that is known."""
+        return robot.status.x, robot.status.y
+
+    def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
+                 planner: LegPlanner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+        """The robot's shortest path on the map, around nobody, timed at ``speed`` from ``t0``. Only
+        its goal binds the robot, which plans its own way there."""
+        points = self._finder(grid, robot.radius).find(start, target.pose)
+        if points is None:
+            raise LegNotPlanned(f"no way to {target.name} on the map")
+        return timed_path_from_polyline(robot.id, robot.radius, points, speed, t0)
+
+    def _finder(self, grid: GridMap, radius: float) -> PathFinder:
+        key = (id(grid), radius)  # the finder keeps the map alive, so its id stays its own
+        if key not in self._finders:
+            self._finders[key] = PathFinder(grid, radius)
+        return self._finders[key]
+
+    def is_late(self, robot: FleetRobot, tolerance_s: float) -> bool:
+        return False  # the times of a behaviour leg bind nothing
+
+    def must_replan_around(self, path: TimedPath, now: float, point: Point, clearance: float) -> bool:
+        return False  # the robots see it and drive round it themselves
+
+    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams) -> Driver:
+        return BehaviorDriver(model, warehouse, params)
+
+
+class BehaviorDriver(Driver):
+    """A robot that takes only the goal of each leg (and the station there, which it docks at one
+    robot at a time), plans its own path and drives it at its own speed with a
+    :class:`~fleet_planner.behavior.BehaviorController`, from the other robots' statuses and the
+    wait messages addressed to it; its statuses carry its behaviour state."""
+
+    controller: BehaviorController
+
+    def __init__(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams):
+        self.model = model
+        self.warehouse = warehouse
+        self.controller = BehaviorController(warehouse.grid, model.id, model.kind.radius, model.kind.max_speed,
+                                             (model.x, model.y), params)
+        self._leg_length = 0.0
+        self._inbox: list[WaitMessage] = []
+        self._outbox: list[WaitMessageRecord] = []
+
+    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
+        """Only the leg's goal counts: ValueError if there is no way there."""
+        goal = (float(path.waypoints[-1, 0]), float(path.waypoints[-1, 1]))
+        station = station_at(self.warehouse, goal)
+        try:
+            self.controller.assign(goal, station.name if station else None, now if now is not None else t0)
+        except PlanningError as exc:
+            raise ValueError(f"robot {self.model.id!r}: {'; '.join(exc.failures.values())}") from None
+        self.model.steer(path_id)
+        self._leg_length = self.controller.view().remaining
+
+    def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
+        """One step of the behaviour controller from ``t``; the model drives where it says."""
+        m, c, k = self.model, self.controller, self.model.kind
+        views, reach = [], {}
+        for st in heard.values():
+            standing = t - st.stamp > STALE_S
+            views.append(view_of_status(st, standing))
+            reach[st.id] = 0.0 if standing else math.hypot(st.vx, st.vy) * max(0.0, t + dt - st.stamp)
+        inbox, self._inbox = self._inbox, []
+        free = m.busy_until is None and m.battery > 0.0
+        speed = min(k.max_speed, m.speed + k.max_accel * dt)
+        for receiver, msg in c.step(t, min(dt, MAX_STEER_S), views, inbox, reach=reach, speed=speed, move=free):
+            self._outbox.append(WaitMessageRecord(sender=m.id, receiver=receiver, waiting=msg.waiting, stamp=t))
+        if c.arrived or self._leg_length <= 0:
+            progress = 1.0
+        else:  # below 1 until it arrives: the planner takes 1 for "there"
+            progress = min(0.999, max(0.0, 1.0 - c.view().remaining / self._leg_length))
+        m.step(t, dt, to=c.position, progress=progress)
+
+    def behavior_state(self) -> dict[str, Any] | None:
+        return behavior_state(self.controller.view())
+
+    def on_wait_message(self, msg: WaitMessageRecord) -> None:
+        self._inbox.append(WaitMessage(tuple(msg.waiting)))
+
+    def take_wait_messages(self) -> list[WaitMessageRecord]:
+        out, self._outbox = self._outbox, []
+        return out
+
+
+# -------------------------------------------------------------------------------------------------
+# lookup by name
+# -------------------------------------------------------------------------------------------------
+_REGISTRY: dict[str, type[Coordination]] = {c.name: c for c in (CentralCoordination, BehaviorCoordination)}
+
+#: the names of the coordination modes (the values of the nodes' parameter ``coordination``)
+COORDINATION = tuple(_REGISTRY)
+
+
+def coordination_names() -> list[str]:
+    return list(_REGISTRY)
+
+
+def get_coordination(name: str | Coordination) -> Coordination:
+    """A coordination mode by name (a fresh one; a :class:`Coordination` is returned as it is);
+    ValueError naming the modes for an unknown name."""
+    if isinstance(name, Coordination):
+        return name
+    cls = _REGISTRY.get(name) if isinstance(name, str) else None
+    if cls is None:
+        raise ValueError(f"coordination: {name!r} is not one of {', '.join(_REGISTRY)}")
+    return cls()

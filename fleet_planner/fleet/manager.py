@@ -1,0 +1,464 @@
+"""The planner's end of the fleet: :class:`FleetManager` keeps the fleet's state and turns tasks
+and robot statuses into legs and task events.
+
+The planner node feeds it what comes off the wire (:meth:`~FleetManager.submit` for tasks,
+:meth:`~FleetManager.on_status` for robot statuses) and calls :meth:`~FleetManager.step` on a
+timer, which returns :class:`~.legs.Decisions`: new timed paths (:class:`~.legs.Leg`) and task
+events to publish. The job's life and the coordination modes are described in :mod:`fleet_planner.fleet`.
+
+Under central coordination every leg is planned with the planner's ``plan_incremental`` (by
+default the (M,D) planner of You & Ji, "Design of a Multi-robot Bin Packing System in an Automatic
+Warehouse", :class:`~fleet_planner.planners.md.MDPlanner`) around the trajectories of all other
+robots (a standing robot is a one-waypoint path), so planned discs never come closer than the sum
+of radii plus the planner's margin. Legs are planned with each kind's acceleration
+(speed ramps written as short constant-speed pieces, :func:`~fleet_planner.model.drive_profile`)
+at ``speed_factor`` f of its top speed v; a robot tracking such a leg (never ahead, see
+:class:`~fleet_planner.robots.RobotModel`) lags it by at most the ramp approximation,
+(f v)^2 / (8 a n^2) for n pieces per ramp, plus what it drives in one control step. The margin is
+twice the largest such lag plus ``safety_margin``, so the discs as driven stay apart as well.
+
+When things go wrong: a leg that cannot be planned now (someone is parked in the way) is tried
+again at the next step, and an idle robot in the way is sent off first; a robot silent for
+``offline_timeout_s`` (or out of battery) is immobile: its last position becomes a fixed obstacle,
+its job goes back to the queue (or fails, if it was carrying it with an empty battery) and, under
+central coordination, robots whose legs pass near it re-plan; a central robot more than
+``lateness_tolerance_s`` behind its schedule re-plans the rest of its leg from where it is, around
+everyone else.
+
+Times are seconds on one clock (the planner's ROS time): ``now`` is always passed in.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping, Sequence
+from typing import Any, cast
+
+import numpy as np
+
+from msg_schemas.records import RecordError, RobotStatus, Schedule, Task, TaskEvent
+
+from ..model import Point, TimedPath
+from ..planners import get_planner
+from ..robots import RobotKind
+from ..warehouse import Station, Warehouse
+from .coordination import Coordination, LegNotPlanned, LegPlanner, get_coordination
+from .legs import ACTING, AT_STATION_M, Decisions, DispatchParams, Leg, lag_allowance
+from .state import FleetRobot, Job, Target, can_do
+
+#: an action not seen in any status counts as finished this long after its nominal end
+ACTION_SLACK_S = 2.0
+
+
+class FleetManager:
+    """Keeps the fleet's state and turns tasks and statuses into legs and task events.
+
+    ``kinds`` are the robot kinds robots may report (their sizes, speeds and abilities);
+    ``parking`` are extra places where idle robots may wait out of the way, besides the chargers;
+    ``coordination`` is how the robots avoid each other: a name of
+    :data:`~.coordination.COORDINATION` or a :class:`~.coordination.Coordination`;
+    ``planner`` plans the legs of central coordination (anything with ``plan_incremental``, see
+    :class:`~.coordination.LegPlanner`), by default the registry's ``md`` planner keeping
+    :attr:`margin` (one handed in should keep at least that much between discs).
+    """
+
+    def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
+                 params: DispatchParams | None = None, parking: Sequence[Point] = (),
+                 coordination: str | Coordination = "central", planner: LegPlanner | None = None):
+        if not kinds:
+            raise ValueError("kinds: at least one robot kind is needed")
+        self.strategy = get_coordination(coordination)
+        self.warehouse = warehouse
+        self.kinds = dict(kinds)
+        self.params = params or DispatchParams()
+        largest = max(k.radius for k in self.kinds.values())
+        self.parking: dict[str, Point] = {}
+        for i, spot in enumerate(parking):
+            x, y = (float(v) for v in spot)
+            if not (math.isfinite(x) and math.isfinite(y) and warehouse.grid.disc_is_free(x, y, largest)):
+                raise ValueError(f"parking[{i}]: ({x:g}, {y:g}) has no room for a robot of radius {largest:g} m")
+            self.parking[f"parking_{i + 1}"] = (x, y)
+        self.chargers = {s.name: s.pose for s in warehouse.stations_of("charger")}
+        self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
+        self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
+            + self.params.safety_margin
+        self.planner = planner if planner is not None else cast(LegPlanner, get_planner("md", margin=self.margin))
+        self.robots: dict[str, FleetRobot] = {}
+        self.jobs: dict[str, Job] = {}
+        self._notes: list[str] = []
+        self._plan_id = 0
+
+    @property
+    def coordination(self) -> str:
+        """The name of the coordination mode."""
+        return self.strategy.name
+
+    def set_params(self, params: DispatchParams) -> None:
+        """Change thresholds at run time (not the speed factor or margin: the margin depends on them)."""
+        if (params.speed_factor, params.safety_margin) != (self.params.speed_factor, self.params.safety_margin):
+            raise ValueError("speed_factor and safety_margin cannot change while the fleet runs")
+        self.params = params
+
+    # -- input --------------------------------------------------------------------------------------
+    def submit(self, raw: str | bytes | Mapping | Task, now: float) -> list[TaskEvent]:
+        """Check a task (a Task, its dict or its JSON) and queue it: ``accepted``, or ``rejected``
+        with the reason (malformed, unknown station or address tag, nobody able, duplicate id)."""
+        try:
+            if isinstance(raw, Task):
+                task = raw
+            elif isinstance(raw, (str, bytes)):
+                task = cast(Task, Task.from_json(raw))
+            else:
+                task = cast(Task, Task.from_dict(raw))
+        except RecordError as exc:
+            return [_event(_guess_id(raw), "rejected", now, reason=str(exc))]
+        problem = self._problem(task)
+        if problem:
+            return [_event(task.id, "rejected", now, reason=problem)]
+        pick = self.warehouse.stations[task.pick]
+        place = self._storing_site(task.place)
+        assert place is not None  # _problem found it
+        self.jobs[task.id] = Job(task, pick, place, len(self.jobs))
+        return [_event(task.id, "accepted", now)]
+
+    def _problem(self, task: Task) -> str | None:
+        if task.id in self.jobs:
+            return f"task.id: duplicate task id {task.id!r} (already {self.jobs[task.id].state})"
+        station = self.warehouse.stations.get(task.pick)
+        if station is None:
+            chutes = ", ".join(s.name for s in self.warehouse.stations_of("chute"))
+            return f"task.pick: unknown station {task.pick!r} (chutes: {chutes})"
+        if station.type != "chute":
+            return f"task.pick: station {task.pick!r} is a {station.type}, not a chute"
+        if self._storing_site(task.place) is None:
+            return f"task.place: unknown address tag or storing site {task.place!r}"
+        if not any(can_do(k, task) for k in self.kinds.values()):
+            needs = "+".join(task.needs)
+            equipped = [k.payload_kg for k in self.kinds.values() if set(task.needs) <= k.capabilities]
+            if not equipped:
+                return f"no robot can do it: no robot kind has {needs}"
+            return (f"no robot can do it: it weighs {task.payload_kg:g} kg and robots "
+                    f"{'with ' + needs + ' ' if needs else ''}carry at most {max(equipped):g} kg")
+        return None
+
+    def _storing_site(self, place: str) -> Station | None:
+        try:
+            return self.warehouse.station_for_tag(place)
+        except KeyError:
+            station = self.warehouse.stations.get(place)
+            return station if station is not None and station.type == "storage" else None
+
+    def on_status(self, status: RobotStatus, now: float) -> None:
+        """Take in a robot's status (``now``: when it arrived). Raises ValueError for a status that
+        cannot be from a robot of this fleet (unknown kind, a kind that changed)."""
+        kind = self.kinds.get(status.kind)
+        if kind is None:
+            raise ValueError(f"robot {status.id!r}: kind {status.kind!r} is not one of the known kinds "
+                             f"({', '.join(self.kinds)})")
+        r = self.robots.get(status.id)
+        if r is None:
+            self.robots[status.id] = FleetRobot(kind, status, now, now)
+            self._notes.append(f"robot {status.id} ({status.kind}) joined at ({status.x:.2f}, {status.y:.2f})")
+            return
+        if kind is not r.kind:
+            raise ValueError(f"robot {status.id!r}: reports kind {status.kind!r}, earlier {r.kind.name!r}")
+        if status.stamp < r.status.stamp:
+            return  # an old status overtaken by a newer one
+        r.status, r.seen = status, now
+        if not r.online:
+            r.online, r.immobile, r.idle_since = True, status.mode == "error", now
+            r.stop = not r.immobile  # it may still drive a leg the others no longer keep clear of
+            self._notes.append(f"robot {r.id} is back online at ({status.x:.2f}, {status.y:.2f})")
+            return
+        self._note_arrival(r, now)
+
+    def _note_arrival(self, r: FleetRobot, now: float) -> None:
+        """Note when ``r``'s status first shows it at the end of the leg to its target, and whether
+        it shows it doing what it went there for."""
+        status, leg, target = r.status, r.leg, r.target
+        if (leg is not None and target is not None and leg.goal == target.name and not r.replan
+                and status.path_id == leg.path_id and status.progress >= 1.0):
+            if r.arrived_at is None:
+                r.arrived_at = now
+            if status.mode == ACTING.get(target.purpose):
+                r.saw_action = True
+
+    # -- the periodic decision ------------------------------------------------------------------------
+    def step(self, now: float) -> Decisions:
+        """Decide what changes now: offline robots, finished picks and places, late robots, legs to
+        (re)plan, jobs to assign, robots to send charging or parking."""
+        d = Decisions(notes=self._notes)
+        self._notes = []
+        self._find_immobile(now, d)
+        for r in self.robots.values():
+            if r.stop and r.online:
+                self._hold(r, now, d)
+                r.stop = False
+        self._arrivals(now, d)
+        self._find_late(d)
+        self._replan(now, d)
+        self._allocate(now, d)
+        self._housekeeping(now, d)
+        if d.legs:
+            self._plan_id += 1
+        return d
+
+    def _find_immobile(self, now: float, d: Decisions) -> None:
+        for r in self.robots.values():
+            if r.online and now - r.seen > self.params.offline_timeout_s:
+                r.online = False
+                self._immobilise(r, now, d, f"offline: no status for {now - r.seen:.1f} s")
+            elif r.online and not r.immobile and r.status.mode == "error":
+                self._immobilise(r, now, d, "out of battery")
+
+    def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
+        """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
+        (or fails, if it holds the goods and is out of battery) and legs passing near it re-plan."""
+        r.immobile = True
+        r.leg, r.target, r.replan, r.conflict, r.arrived_at = None, None, False, False, None
+        d.notes.append(f"robot {r.id} {why}; it is an obstacle at ({r.status.x:.2f}, {r.status.y:.2f})")
+        if r.job is not None:
+            job = self.jobs[r.job]
+            r.job = None
+            if job.picked and r.online:
+                job.state = "failed"
+                d.events.append(_event(job.task.id, "failed", now, r.id, f"robot {r.id} is {why} with the goods"))
+            else:
+                job.state, job.robot, job.picked = "queued", None, False
+                d.notes.append(f"job {job.task.id} is queued again for another robot")
+        for o in self._replan_around(r, r.pos, now):
+            d.notes.append(f"robot {o.id} re-plans around {r.id}")
+
+    def _arrivals(self, now: float, d: Decisions) -> None:
+        """Robots at the end of their legs: a pick or place done (seen done, or its nominal time
+        gone by) moves the job on; any other target is simply reached."""
+        for r in self.robots.values():
+            if r.arrived_at is None or r.target is None or not r.online:
+                continue
+            target = r.target
+            if target.purpose in ACTING:
+                if r.status.mode == ACTING[target.purpose]:
+                    continue
+                nominal = r.kind.action_s(target.purpose) + ACTION_SLACK_S
+                if not (r.saw_action or now - r.arrived_at >= nominal):
+                    continue
+                self._action_done(r, target, now, d)
+            else:
+                r.target, r.idle_since = None, now
+            r.arrived_at, r.saw_action = None, False
+
+    def _action_done(self, r: FleetRobot, target: Target, now: float, d: Decisions) -> None:
+        """``r`` picked (it heads for the storing site next) or placed (its job is done)."""
+        assert r.job is not None  # a robot picks and places only for its job
+        job = self.jobs[r.job]
+        if target.purpose == "pick":
+            job.picked = True
+            d.events.append(_event(job.task.id, "picked", now, r.id))
+            r.target = Target("place", job.place.name, job.place.pose)
+            r.replan = True
+        else:
+            job.state = "done"
+            d.events.append(_event(job.task.id, "placed", now, r.id))
+            d.events.append(_event(job.task.id, "done", now, r.id))
+            r.job, r.target, r.idle_since = None, None, now
+
+    def _find_late(self, d: Decisions) -> None:
+        for r in self.robots.values():
+            if (r.target is not None and not r.replan and r.on_leg and r.status.mode != "error"
+                    and self.strategy.is_late(r, self.params.lateness_tolerance_s)):
+                r.replan = True
+                d.notes.append(f"robot {r.id} is {r.status.lateness_s:.1f} s late: re-planning its leg")
+
+    def _replan(self, now: float, d: Decisions) -> None:
+        """Plan the legs of robots that have somewhere to go: those that just picked first (they
+        hold a chute), then those re-planning. A robot whose new leg is not yet acknowledged waits."""
+        waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
+                   and not r.immobile and r.online and (r.leg is None or r.status.path_id == r.leg.path_id)]
+        waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
+        for r, target in waiting:
+            if self._plan_leg(r, target, now, d) is not None:
+                r.replan = r.conflict = False
+            elif r.conflict and r.on_leg:
+                self._hold(r, now, d)
+
+    def _hold(self, r: FleetRobot, now: float, d: Decisions) -> None:
+        """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
+        that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
+        more must stop at once, not drive on for another ``lead_s``."""
+        path_id = max(round(now * 1e9), r.last_path_id + 1)
+        x, y = self.strategy.start_of(r, path_id / 1e9)
+        leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
+        self._give(r, leg, d)
+        r.conflict = False
+        d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
+        self._replan_around(r, (x, y), now)
+
+    def _replan_around(self, r: FleetRobot, point: Point, now: float) -> list[FleetRobot]:
+        """Mark the robots whose legs must now keep clear of ``r`` standing at ``point`` to re-plan
+        (as the coordination mode says); they are returned."""
+        marked = []
+        for o in self.robots.values():
+            if o is r or o.leg is None or o.immobile or o.target is None:
+                continue
+            if self.strategy.must_replan_around(o.leg.path, now, point, o.radius + r.radius + self.margin):
+                o.replan = o.conflict = True
+                marked.append(o)
+        return marked
+
+    def _allocate(self, now: float, d: Decisions) -> None:
+        queued = sorted((j for j in self.jobs.values() if j.state == "queued"),
+                        key=lambda j: (-j.task.priority, j.seq))
+        for job in queued:
+            pose = job.pick.pose
+            if self._reserved(pose):
+                continue
+            able = [r for r in self.robots.values() if r.free and can_do(r.kind, job.task)
+                    and r.status.battery >= self.params.min_task_battery]
+            if not able:
+                continue
+            r = min(able, key=lambda r: (math.dist(r.pos, pose), -r.status.battery, r.id))
+            occupant = self._occupant(pose, r.radius, exclude=r)
+            if occupant is not None:
+                if occupant.free:
+                    self._send_away(occupant, now, d)
+                continue
+            if self._plan_leg(r, Target("pick", job.pick.name, pose), now, d) is None:
+                continue
+            r.job = job.task.id
+            job.state, job.robot = "active", r.id
+            d.events.append(_event(job.task.id, "assigned", now, r.id))
+
+    def _housekeeping(self, now: float, d: Decisions) -> None:
+        for r in sorted(self.robots.values(), key=lambda r: r.status.battery):
+            if not r.free or self._at(r.pos, self.chargers):
+                continue
+            low = r.status.battery < self.params.low_battery
+            idle = now - r.idle_since >= self.params.idle_s
+            if not (low or idle):
+                continue
+            spot = self._free_spot(r, self.chargers)
+            if spot is not None:
+                self._plan_leg(r, Target("charge", *spot), now, d)
+            elif idle and self._at(r.pos, self.work_stops):
+                self._send_away(r, now, d)
+
+    # -- helpers ---------------------------------------------------------------------------------------
+    def _send_away(self, r: FleetRobot, now: float, d: Decisions) -> None:
+        """Move a free robot that is in the way to a free charger, else to a free parking spot."""
+        if self._at(r.pos, self.chargers) or self._at(r.pos, self.parking):
+            return
+        spot = self._free_spot(r, self.chargers)
+        purpose = "charge"
+        if spot is None:
+            spot, purpose = self._free_spot(r, self.parking), "park"
+        if spot is None:
+            d.notes.append(f"robot {r.id} is in the way but no charger or parking spot is free")
+            return
+        self._plan_leg(r, Target(purpose, *spot), now, d, clear_way=False)
+
+    def _plan_leg(self, r: FleetRobot, target: Target, now: float, d: Decisions,
+                  clear_way: bool = True) -> Leg | None:
+        """Plan ``r`` from where it is (or will be, if it is driving) to ``target``, as the
+        coordination mode plans legs; on success ``r`` gets the leg and the target. On failure None
+        is returned (the caller tries again later; why is noted once) and, with ``clear_way``, a free
+        robot named as the blocker is sent off."""
+        path_id = self._next_path_id(r, now)
+        t0 = path_id / 1e9
+        start = self.strategy.start_of(r, t0)
+        if math.dist(start, target.pose) < 1e-6:
+            path = TimedPath(r.id, r.radius, np.array([[*target.pose, t0]]))
+        else:
+            try:
+                path = self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
+                                              speed=r.kind.max_speed * self.params.speed_factor,
+                                              fleet=self.robots.values())
+            except LegNotPlanned as exc:
+                if exc.why != r.trouble:
+                    d.notes.append(f"robot {r.id}: {exc.why}")
+                r.trouble = exc.why
+                blocker = self.robots.get(exc.blocker) if exc.blocker is not None else None
+                if clear_way and blocker is not None and blocker.free:
+                    self._send_away(blocker, now, d)
+                return None
+        leg = Leg(r.id, path, path_id, target.purpose, target.name)
+        self._give(r, leg, d)
+        r.target, r.trouble = target, ""
+        return leg
+
+    def _give(self, r: FleetRobot, leg: Leg, d: Decisions) -> None:
+        r.leg, r.last_path_id = leg, leg.path_id
+        r.arrived_at, r.saw_action = None, False
+        d.legs.append(leg)
+
+    def _next_path_id(self, r: FleetRobot, now: float) -> int:
+        return max(round((now + self.params.lead_s) * 1e9), r.last_path_id + 1)
+
+    def _occupant(self, pose: Point, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:
+        """A robot standing on, or bound for, a disc of ``radius`` at ``pose``."""
+        for o in self.robots.values():
+            if o is exclude:
+                continue
+            near = o.radius + radius
+            ends = [o.pos] + ([tuple(o.leg.path.waypoints[-1, :2])] if o.leg is not None and not o.immobile else [])
+            if any(math.dist(p, pose) < near for p in ends):
+                return o
+        return None
+
+    def _reserved(self, pose: Point) -> bool:
+        """Some robot is working at ``pose`` or has it as its target."""
+        return any(o.target is not None and math.dist(o.target.pose, pose) < AT_STATION_M
+                   or o.status.mode in ("picking", "placing") and math.dist(o.pos, pose) < AT_STATION_M
+                   for o in self.robots.values())
+
+    def _free_spot(self, r: FleetRobot, spots: Mapping[str, Point]) -> tuple[str, Point] | None:
+        """The nearest spot no other robot stands on or is bound for."""
+        free = [(name, p) for name, p in spots.items() if self._occupant(p, r.radius, exclude=r) is None]
+        return min(free, key=lambda item: math.dist(item[1], r.pos), default=None)
+
+    @staticmethod
+    def _at(pos: Point, spots: Mapping[str, Point]) -> bool:
+        return any(math.dist(pos, p) < AT_STATION_M for p in spots.values())
+
+    # -- views for tools -------------------------------------------------------------------------------
+    def trajectories(self) -> list[TimedPath]:
+        """Every robot's current trajectory (absolute times)."""
+        return [r.trajectory() for r in self.robots.values()]
+
+    def statuses(self) -> list[RobotStatus]:
+        return [r.status for r in self.robots.values()]
+
+    def schedule(self, now: float) -> Schedule:
+        """The current legs as a schedule record: per robot its departure delay from the leg's start
+        and its travel time; priority in the order the legs were planned (later legs were planned
+        around earlier ones). Collision links are not listed: legs are planned one at a time."""
+        order = sorted(self.robots.values(), key=lambda r: r.leg.path_id if r.leg and not r.immobile else -1)
+        nodes = {}
+        for r in order:
+            if r.leg is None or r.immobile:
+                nodes[r.id] = {"delay": 0.0, "travel": 0.0}
+            else:
+                p = r.leg.path
+                nodes[r.id] = {"delay": max(0.0, p.start_time - r.leg.t0),
+                               "travel": max(0.0, p.arrival_time - p.start_time)}
+        return Schedule(plan_id=self._plan_id, stamp=float(now), priority=tuple(nodes), nodes=nodes)
+
+
+def _event(task_id: str, event: str, now: float, robot_id: str | None = None, reason: str | None = None) -> TaskEvent:
+    return TaskEvent(task_id=task_id, event=event, stamp=float(now), robot_id=robot_id, reason=reason)
+
+
+def _guess_id(raw: Any) -> str:
+    """The ``id`` of a task that failed validation, when one can be made out (else "?")."""
+    if isinstance(raw, Mapping):
+        value = raw.get("id")
+        return value if isinstance(value, str) and value.strip() else "?"
+    if isinstance(raw, bytes):
+        raw = raw.decode("utf-8", "replace")
+    if isinstance(raw, str):
+        try:
+            return _guess_id(json.loads(raw))
+        except (ValueError, AttributeError):
+            m = re.search(r'"id"\s*:\s*"([^"\\]+)"', raw)
+            return m.group(1) if m and m.group(1).strip() else "?"
+    return "?"

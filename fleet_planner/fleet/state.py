@@ -1,0 +1,94 @@
+"""What the fleet manager knows: its robots (:class:`FleetRobot`, built from their statuses), its
+jobs (:class:`Job`) and where a robot is bound (:class:`Target`); :func:`can_do` says which robot
+kinds may take a job."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from msg_schemas.records import RobotStatus, Task
+
+from ..model import Point, TimedPath
+from ..robots import RobotKind
+from ..warehouse import Station
+from .legs import Leg
+
+
+def can_do(kind: RobotKind, task: Task) -> bool:
+    """The kind has every capability the task needs and carries its payload."""
+    return set(task.needs) <= kind.capabilities and task.payload_kg <= kind.payload_kg
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where a robot is bound and why: a station or parking spot and the purpose of the leg there."""
+
+    purpose: str  # one of legs.PURPOSES
+    name: str
+    pose: Point
+
+
+@dataclass
+class Job:
+    """An accepted task: its pick station (a chute), its storing site and how far it has got."""
+
+    task: Task
+    pick: Station
+    place: Station
+    seq: int                 # order of submission (ties between equal priorities)
+    state: str = "queued"    # queued | active | done | failed
+    robot: str | None = None
+    picked: bool = False
+
+
+@dataclass
+class FleetRobot:
+    """What the fleet manager knows about one robot (its last status and what it was given)."""
+
+    kind: RobotKind
+    status: RobotStatus
+    seen: float                       # when its last status arrived
+    idle_since: float
+    online: bool = True
+    immobile: bool = False            # offline or out of battery: a fixed obstacle
+    leg: Leg | None = None            # the trajectory it follows (None: it stands where it is)
+    target: Target | None = None      # where it is going and why
+    job: str | None = None
+    replan: bool = False              # its leg to ``target`` must be (re)planned
+    conflict: bool = False            # ... because its current leg runs into an obstacle
+    arrived_at: float | None = None   # when it was first seen at the end of its leg
+    saw_action: bool = False          # a status showed it picking / placing there
+    last_path_id: int = -1
+    trouble: str = ""                 # why its last leg could not be planned (noted once)
+    stop: bool = False                # back online: stop it wherever it is heading
+
+    @property
+    def id(self) -> str:
+        return self.status.id
+
+    @property
+    def radius(self) -> float:
+        return self.kind.radius
+
+    @property
+    def pos(self) -> Point:
+        return self.status.x, self.status.y
+
+    @property
+    def free(self) -> bool:
+        """Online, able to move, with nothing to do and not in the middle of a pick or place."""
+        return (self.online and not self.immobile and self.target is None and self.job is None
+                and self.status.mode not in ("picking", "placing", "error"))
+
+    @property
+    def on_leg(self) -> bool:
+        """Its status shows it on its current leg, not yet at the end."""
+        return (self.leg is not None and self.status.path_id == self.leg.path_id
+                and self.status.progress < 1.0)
+
+    def trajectory(self) -> TimedPath:
+        """Where it will be: its leg, or standing where its status says for ever."""
+        if self.leg is not None and not self.immobile:
+            return self.leg.path
+        return TimedPath(self.id, self.radius, np.array([[self.status.x, self.status.y, 0.0]]))
