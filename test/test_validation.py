@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from fleet_planner.fleet_file_spec import FleetError
+from fleet_planner.fleet.fleet_file import FleetError
 from fleet_planner.robots import KindsError
 from fleet_planner.scenario import ScenarioError, parse_scenario
 from fleet_planner.validation import ValidationError, Vocabulary, all_of, anything, in_file, optional, read_yaml

@@ -38,7 +38,6 @@ from .coordination import (
     Coordination,
     Driver,
     LegNotPlanned,
-    LegPlanner,
     coordination_names,
     get_coordination,
 )
@@ -50,5 +49,5 @@ from .wire import behavior_state, samples_to_path, view_of_status
 
 __all__ = ["ACTING", "AGENT_BEHAVIOR", "COORDINATION", "PURPOSES", "BehaviorCoordination", "CentralCoordination",
            "Coordination", "Decisions", "DispatchParams", "Driver", "FleetError", "FleetManager", "FleetMember", "Leg",
-           "LegNotPlanned", "LegPlanner", "RobotAgent", "behavior_state", "can_do", "coordination_names",
+           "LegNotPlanned", "RobotAgent", "behavior_state", "can_do", "coordination_names",
            "get_coordination", "lag_allowance", "load_fleet", "samples_to_path", "view_of_status"]

@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, ClassVar, Protocol
+from collections.abc import Iterable, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from ..geometry import point_at_arc, polyline_passes_near
 from ..grid import GridMap
 from ..model import PlanningError, Point, RobotSpec, TimedPath, timed_path_from_polyline
 from ..paths import PathFinder
+from ..planners import Planner
 from ..robots import RobotModel
 from ..warehouse import Warehouse
 from .legs import CONTROL_PERIOD_S, station_at
@@ -61,15 +62,6 @@ MAX_STEER_S = 2 * CONTROL_PERIOD_S
 #: the behaviour layer of a robot on its own: it hears the others a status period late, so its
 #: safety layer grows their discs (see BehaviorController.keeps_clear), and passes leave room for that
 AGENT_BEHAVIOR = BehaviorParams(safety_margin=0.05, avoid_margin=0.3)
-
-
-class LegPlanner(Protocol):
-    """What the fleet manager needs of a planner (:mod:`fleet_planner.planners`): legs for
-    ``robots`` from ``t0`` around trajectories being driven (``fixed``, absolute times), or a
-    :class:`~fleet_planner.model.PlanningError` naming who is in the way."""
-
-    def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
-                         t0: float) -> list[TimedPath]: ...
 
 
 class LegNotPlanned(Exception):
@@ -130,7 +122,7 @@ class Coordination(ABC):
 
     @abstractmethod
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
-                 planner: LegPlanner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+                 planner: Planner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
         """A leg for ``robot`` from ``start`` at ``t0`` to ``target`` at ``speed`` (``fleet``: every
         robot, ``robot`` included); :class:`LegNotPlanned` if there is none now."""
 
@@ -173,7 +165,7 @@ class CentralCoordination(Coordination):
         return point_at_arc(wp[:, :2], arc, s)
 
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
-                 planner: LegPlanner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+                 planner: Planner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
         """Planned with ``planner`` around the trajectories of all other robots."""
         kind = robot.kind
         spec = RobotSpec(robot.id, robot.radius, speed, start, target.pose, kind.name,
@@ -268,7 +260,7 @@ class BehaviorCoordination(Coordination):
         return robot.status.x, robot.status.y
 
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
-                 planner: LegPlanner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+                 planner: Planner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
         """The robot's shortest path on the map, around nobody, timed at ``speed`` from ``t0``. Only
         its goal binds the robot, which plans its own way there."""
         points = self._finder(grid, robot.radius).find(start, target.pose)

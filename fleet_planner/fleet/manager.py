@@ -40,10 +40,10 @@ import numpy as np
 from msg_schemas.records import RecordError, RobotStatus, Schedule, Task, TaskEvent
 
 from ..model import Point, TimedPath
-from ..planners import get_planner
+from ..planners import Planner, get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
-from .coordination import Coordination, LegNotPlanned, LegPlanner, get_coordination
+from .coordination import Coordination, LegNotPlanned, get_coordination
 from .legs import ACTING, AT_STATION_M, Decisions, DispatchParams, Leg, lag_allowance
 from .state import FleetRobot, Job, Target, can_do
 
@@ -59,13 +59,13 @@ class FleetManager:
     ``coordination`` is how the robots avoid each other: a name of
     :data:`~.coordination.COORDINATION` or a :class:`~.coordination.Coordination`;
     ``planner`` plans the legs of central coordination (anything with ``plan_incremental``, see
-    :class:`~.coordination.LegPlanner`), by default the registry's ``md`` planner keeping
+    :class:`~fleet_planner.planners.Planner`), by default the registry's ``md`` planner keeping
     :attr:`margin` (one handed in should keep at least that much between discs).
     """
 
     def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
                  params: DispatchParams | None = None, parking: Sequence[Point] = (),
-                 coordination: str | Coordination = "central", planner: LegPlanner | None = None):
+                 coordination: str | Coordination = "central", planner: Planner | None = None):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
         self.strategy = get_coordination(coordination)
@@ -83,7 +83,7 @@ class FleetManager:
         self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
-        self.planner = planner if planner is not None else cast(LegPlanner, get_planner("md", margin=self.margin))
+        self.planner = planner if planner is not None else get_planner("md", margin=self.margin)
         self.robots: dict[str, FleetRobot] = {}
         self.jobs: dict[str, Job] = {}
         self._notes: list[str] = []

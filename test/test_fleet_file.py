@@ -1,9 +1,9 @@
-"""The fleet file in the validation vocabulary (fleet_file_spec): the messages of load_fleet."""
+"""The fleet file in the validation vocabulary (fleet_planner.fleet.fleet_file): the messages of load_fleet."""
 import json
 
 import pytest
 
-from fleet_planner.fleet_file_spec import MEMBER_FIELDS, FleetError, read_fleet_file
+from fleet_planner.fleet.fleet_file import MEMBER_FIELDS, FleetError, read_fleet_file
 from fleet_planner.robots import load_kinds
 from fleet_planner.validation import ValidationError
 from fleet_planner.warehouse import config_path, generate_warehouse, load_warehouse
