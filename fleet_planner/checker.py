@@ -16,8 +16,8 @@ evaluated for all of them at once with numpy.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import shapely
@@ -243,7 +243,7 @@ def _check_obstacles(grid: GridMap, specs: Sequence[RobotSpec], paths: Sequence[
                      tol: float) -> list[Violation]:
     """Every segment's swept disc (and every parked disc) must keep ``radius - tol`` from obstacles."""
     geoms, owner, first_wp = [], [], []
-    for idx, (spec, path) in enumerate(zip(specs, paths)):
+    for idx, (_spec, path) in enumerate(zip(specs, paths)):
         wp = path.waypoints
         if not np.all(np.isfinite(wp)):
             continue

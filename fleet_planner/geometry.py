@@ -17,7 +17,7 @@ of the segment, so "the capsules of two robots overlap" is "a distance below a s
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -7,10 +7,10 @@ the first row of a ``.map`` file and also the first row of a ``nav_msgs/Occupanc
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -38,7 +38,7 @@ class GridMap:
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
-    def from_rows(cls, rows: Sequence[str], resolution: float = 1.0, name: str = "inline") -> "GridMap":
+    def from_rows(cls, rows: Sequence[str], resolution: float = 1.0, name: str = "inline") -> GridMap:
         rows = [r.rstrip("\n") for r in rows]
         if not rows or not rows[0]:
             raise MapError(f"{name}: no rows")
@@ -50,7 +50,7 @@ class GridMap:
         return cls(blocked, resolution, name)
 
     @classmethod
-    def from_movingai(cls, path: str | Path, resolution: float = 1.0) -> "GridMap":
+    def from_movingai(cls, path: str | Path, resolution: float = 1.0) -> GridMap:
         path = Path(path)
         try:
             lines = path.read_text().splitlines()

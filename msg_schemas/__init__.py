@@ -7,8 +7,17 @@
 
 Import the last two as submodules; importing this package alone does not load ROS.
 """
-from .records import (RECORDS, Record, RecordError, RobotStatus, Schedule, Task, TaskEvent, WaitMessageRecord,
-                      robot_id_problem)
+from .records import (
+                      RECORDS,
+                      Record,
+                      RecordError,
+                      RobotStatus,
+                      Schedule,
+                      Task,
+                      TaskEvent,
+                      WaitMessageRecord,
+                      robot_id_problem,
+)
 
 __all__ = ["RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "Task", "TaskEvent",
            "WaitMessageRecord", "robot_id_problem"]

@@ -9,8 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fleet_planner.behavior import (Behavior, BehaviorController, HeardDocking, RobotView, WaitMessage,
-                                    safety_stop)
+from fleet_planner.behavior import Behavior, BehaviorController, HeardDocking, RobotView, WaitMessage, safety_stop
 from fleet_planner.checker import min_separation
 from fleet_planner.fleet import DispatchParams, FleetManager, RobotAgent, samples_to_path
 from fleet_planner.grid import GridMap

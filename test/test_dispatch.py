@@ -9,8 +9,15 @@ import numpy as np
 import pytest
 
 from fleet_planner.checker import min_separation
-from fleet_planner.fleet import (DispatchParams, FleetError, FleetManager, RobotAgent, lag_allowance,
-                                 load_fleet, samples_to_path)
+from fleet_planner.fleet import (
+    DispatchParams,
+    FleetError,
+    FleetManager,
+    RobotAgent,
+    lag_allowance,
+    load_fleet,
+    samples_to_path,
+)
 from fleet_planner.grid import GridMap
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import RobotModel, load_kinds

@@ -6,8 +6,8 @@ import pytest
 import shapely
 from shapely.geometry import LineString, Point, box
 
-from fleet_planner.grid import GridMap
 from fleet_planner.geometry import polyline_length
+from fleet_planner.grid import GridMap
 from fleet_planner.paths import PathFinder
 
 

@@ -8,8 +8,16 @@ import pytest
 
 from fleet_planner.checker import check_plan
 from fleet_planner.model import Link, Network, Plan, RobotSpec, timed_path_from_polyline
-from fleet_planner.scenario import (ScenarioError, dump_scenario, load_scenario, parse_scenario,
-                                    plan_to_dict, read_plan, scenario_from_movingai, write_plan)
+from fleet_planner.scenario import (
+    ScenarioError,
+    dump_scenario,
+    load_scenario,
+    parse_scenario,
+    plan_to_dict,
+    read_plan,
+    scenario_from_movingai,
+    write_plan,
+)
 
 ROWS = ["........",
         "..@@....",
