@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 import shapely
@@ -39,8 +40,17 @@ _TOL = 1e-9
 _CUT_CACHE_SIZE = 100_000  # disc centres whose nearby moves are remembered per PathFinder
 _CUT_HEADROOM = 1.25       # a centre's moves are computed out to this times the keep-out asked for
 _RESULT_CACHE_SIZE = 256   # find() answers remembered per PathFinder (same inputs, same answer)
+_PAIR_BATCH = 5000         # string pulling tests all vertex pairs at once up to this many pairs
+_SAMPLES = 17              # points per segment of the cheap wall rejection
 # bit d of a cell's move mask says move _DIRS[d] = (dcol, drow) is allowed
 _BIT = {d: 1 << k for k, d in enumerate(_DIRS)}
+
+
+class _ExtraWalls(NamedTuple):
+    """The ``blocked_cells`` of one call: their union (prepared) and the wall raster with them."""
+
+    geom: object
+    solid: np.ndarray
 
 
 class PathFinder:
@@ -89,6 +99,8 @@ class PathFinder:
                 ok &= shifted(d[0], 0) & shifted(0, d[1])
             moves[1:-1, 1:-1] |= ok.astype(np.uint8) * np.uint8(_BIT[d])
         self._free_p = free_p
+        #: padded wall cells (the outside of the map is a wall): a point inside one is not free
+        self._solid = np.pad(grid.blocked, 1, constant_values=True)
         self._moves = moves.ravel()
         # when a cell b stops being traversable, its neighbour at b + rel loses these moves:
         # the move into b, and the diagonal moves that cut b's corner
@@ -155,9 +167,12 @@ class PathFinder:
         extra_walls = None
         if len(cells):
             res = self.grid.resolution
-            extra_walls = shapely.union_all(shapely.box(cells[:, 0] * res, cells[:, 1] * res,
-                                                        (cells[:, 0] + 1) * res, (cells[:, 1] + 1) * res))
-            shapely.prepare(extra_walls)
+            geom = shapely.union_all(shapely.box(cells[:, 0] * res, cells[:, 1] * res,
+                                                 (cells[:, 0] + 1) * res, (cells[:, 1] + 1) * res))
+            shapely.prepare(geom)
+            solid = self._solid.copy()
+            solid[cells[:, 1] + 1, cells[:, 0] + 1] = True
+            extra_walls = _ExtraWalls(geom, solid)
 
         if smooth and self._free_many(start[None], goal[None], discs, extra_walls)[0]:
             return np.array([start, goal])
@@ -202,47 +217,85 @@ class PathFinder:
         return self._graph
 
     # -- geometry -----------------------------------------------------------------------------
-    def _free_many(self, a: np.ndarray, b: np.ndarray, discs: np.ndarray, extra_walls) -> np.ndarray:
-        """Vectorised :meth:`segment_free` over segments ``a[i] -> b[i]``."""
+    def _free_many(self, a: np.ndarray, b: np.ndarray, discs: np.ndarray,
+                   extra_walls: _ExtraWalls | None) -> np.ndarray:
+        """Vectorised :meth:`segment_free` over segments ``a[i] -> b[i]`` (and extra walls).
+
+        A cheap exact rejection comes first: points sampled along each segment (every half cell)
+        that fall in a wall cell prove it is not free.  The disc distances and the GEOS distance
+        test, which decide, run only on the segments that remain.
+        """
         ok = np.ones(len(a), dtype=bool)
-        if len(discs):  # only discs reaching into the segments' bounding box can touch them
-            lo, hi = np.minimum(a, b).min(axis=0), np.maximum(a, b).max(axis=0)
+        if not len(a):
+            return ok
+        ok &= ~self._crosses_wall(a, b, self._solid if extra_walls is None else extra_walls.solid)
+        if len(discs) and ok.any():  # only discs reaching into the segments' bounding box can touch them
+            idx = np.nonzero(ok)[0]
+            sa, sb = a[idx], b[idx]
+            lo, hi = np.minimum(sa, sb).min(axis=0), np.maximum(sa, sb).max(axis=0)
             reach = discs[:, 2:]
             discs = discs[np.all((discs[:, :2] >= lo - reach) & (discs[:, :2] <= hi + reach), axis=1)]
-        if len(discs):
-            dist = segment_point_distance(a[:, None, :], b[:, None, :], discs[None, :, :2])
-            ok &= np.all(dist > discs[None, :, 2], axis=1)
+            if len(discs):
+                dist = segment_point_distance(sa[:, None, :], sb[:, None, :], discs[None, :, :2])
+                ok[idx] = np.all(dist > discs[None, :, 2], axis=1)
         if not ok.any():
             return ok
+        idx = np.nonzero(ok)[0]
+        sa, sb = a[idx], b[idx]
         # prepared dwithin is wrong for zero-length lines (GEOS 3.14), so those are points
-        degenerate = np.all(a == b, axis=1)
-        geoms = np.where(degenerate, shapely.points(a),
-                         shapely.linestrings(np.stack([a, b], axis=1)))
+        degenerate = np.all(sa == sb, axis=1)
+        geoms = np.where(degenerate, shapely.points(sa),
+                         shapely.linestrings(np.stack([sa, sb], axis=1)))
         limit = self.radius - _TOL
-        for walls in (self.grid.obstacle_geometry, extra_walls):
-            if walls is not None:
-                idx = np.nonzero(ok)[0]
-                ok[idx] = ~shapely.dwithin(walls, geoms[idx], limit)
+        free = ~shapely.dwithin(self.grid.obstacle_geometry, geoms, limit)
+        if extra_walls is not None and free.any():
+            free[free] = ~shapely.dwithin(extra_walls.geom, geoms[free], limit)
+        ok[idx] = free
         return ok
 
-    def _pull_string(self, pts: np.ndarray, discs: np.ndarray, extra_walls) -> np.ndarray:
+    def _crosses_wall(self, a: np.ndarray, b: np.ndarray, solid: np.ndarray) -> np.ndarray:
+        """True for segments with a sampled point in a wall cell of ``solid`` (padded): such a
+        segment touches a wall, so it is not free.  Points are half a cell apart (ends included),
+        at most ``_SAMPLES`` per segment: a long segment through the shelves is caught anyway, and
+        what is missed is decided by the exact test."""
+        res = self.grid.resolution
+        count = np.minimum(np.ceil(np.hypot(*(b - a).T) / (0.5 * res)).astype(np.int64) + 1, _SAMPLES)
+        first = np.concatenate([[0], np.cumsum(count)[:-1]])
+        seg = np.repeat(np.arange(len(a)), count)
+        t = (np.arange(int(count.sum())) - first[seg]) / np.maximum(count - 1, 1)[seg]
+        p = a[seg] + t[:, None] * (b[seg] - a[seg])
+        hp, wp = solid.shape
+        col = np.clip(np.floor(p[:, 0] / res).astype(np.int64) + 1, 0, wp - 1)
+        row = np.clip(np.floor(p[:, 1] / res).astype(np.int64) + 1, 0, hp - 1)
+        return np.logical_or.reduceat(solid[row, col], first)
+
+    def _pull_string(self, pts: np.ndarray, discs: np.ndarray, extra_walls: _ExtraWalls | None) -> np.ndarray:
         """Greedy string pulling: from each kept vertex jump to the farthest vertex in free sight.
 
         Consecutive vertices are joined by grid moves (or checked connector pieces), so the
         fallback of keeping the next vertex never makes the path less valid than the grid path.
+        The sight lines of all pairs of vertices are tested in one batch (for very long vertex
+        lists, those from each kept vertex in one batch), then the greedy walk only reads them.
         """
+        n = len(pts)
+        if n <= 2:
+            return pts
+        sight: np.ndarray | None = None
+        if n * (n - 1) // 2 <= _PAIR_BATCH:
+            i, j = np.nonzero(np.triu(np.ones((n, n), dtype=bool), 2))
+            sight = np.zeros((n, n), dtype=bool)
+            sight[i, j] = self._free_many(pts[i], pts[j], discs, extra_walls)
         out = [0]
-        i, n = 0, len(pts)
-        while i < n - 1:
-            later = np.arange(i + 2, n)
-            nxt = i + 1
-            if len(later):
-                ok = self._free_many(np.broadcast_to(pts[i], (len(later), 2)), pts[later], discs, extra_walls)
-                seen = np.nonzero(ok)[0]
-                if len(seen):
-                    nxt = int(later[seen[-1]])
-            out.append(nxt)
-            i = nxt
+        k = 0
+        while k < n - 1:
+            if sight is not None:
+                seen = np.nonzero(sight[k])[0]
+            else:
+                later = np.arange(k + 2, n)
+                ok = self._free_many(np.repeat(pts[k:k + 1], len(later), axis=0), pts[later], discs, extra_walls)
+                seen = later[ok]
+            k = int(seen[-1]) if len(seen) else k + 1
+            out.append(k)
         return pts[out]
 
     # -- cut moves ----------------------------------------------------------------------------
@@ -348,7 +401,7 @@ class PathFinder:
                 for n, key in enumerate(keys)}
 
     def _connect(self, p: np.ndarray, walled: frozenset[int], discs: np.ndarray,
-                 extra_walls) -> dict[int, float]:
+                 extra_walls: _ExtraWalls | None) -> dict[int, float]:
         """Cells a point joins the grid at, with the connector length in cells.
 
         The point's own cell if the straight piece to its centre is free, else those of the 8
@@ -363,7 +416,7 @@ class PathFinder:
             if not cand:
                 continue
             centres = (np.array(cand, dtype=float) + 0.5) * res
-            ok = self._free_many(np.broadcast_to(p, centres.shape), centres, discs, extra_walls)
+            ok = self._free_many(np.repeat(p[None], len(centres), axis=0), centres, discs, extra_walls)
             found = {(r + 1) * self._wp + c + 1: float(np.hypot(*(centre - p))) / res
                      for (c, r), centre, good in zip(cand, centres, ok) if good}
             if found:
