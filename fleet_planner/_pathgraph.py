@@ -17,6 +17,9 @@ search imports ``scipy.sparse.csgraph``; nothing here imports ``scipy.ndimage``.
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
+from typing import Any
 
 import numpy as np
 
@@ -24,8 +27,9 @@ _SQRT2 = math.sqrt(2.0)
 #: the 8 moves as (dcol, drow); bit d of a cell's move mask says move d is allowed
 DIRS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))
 _COST = np.array([_SQRT2 if dc and dr else 1.0 for dc, dr in DIRS])
-_FIRST_LIMIT = 4.0     # cells of detour over the heuristic the first search allows
+_FIRST_LIMIT = 12.0    # cells of detour over the heuristic the first search allows
 _LIMIT_GROWTH = 4.0
+_OCTILE_CACHE_SIZE = 16   # octile fields (one per start or goal cell) kept per graph
 
 
 def dilate(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
@@ -59,59 +63,84 @@ def dilate(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 class MoveGraph:
     """The move graph of a padded move table (``moves[flat]``: bit d = move ``DIRS[d]`` allowed).
 
-    Nodes ``0 .. n-1`` are the padded cells themselves (flat index = node; cells that are not
-    traversable simply have no finite edge), node ``n`` is the source (joined to the start cells
-    by the start connectors) and ``n + 1`` the target (joined from the goal cells).  Every cell
-    has 9 slots: its 8 moves in ``DIRS`` order, then one to the target, finite only for the goal
-    cells of the current search.  Edge ``9 * flat + d`` is move d out of cell ``flat``, and the
-    heuristic's change along every move is a shifted copy of one array (no gathers).
+    Nodes ``0 .. V-1`` are the traversable cells (``cells[v]`` is the padded flat index), node
+    ``V`` is the source (joined to the start cells by the start connectors) and ``V + 1`` the
+    target (joined from the goal cells).  Every cell has 9 slots: its 8 moves in ``DIRS`` order
+    (infinite weight where the move is not allowed), then one to the target, finite only for the
+    goal cells of the current search.  Edge ``9 * v + d`` is move d out of node v.
     """
 
     def __init__(self, free_padded: np.ndarray, moves: np.ndarray, wp: int):
-        n = moves.size
-        self.n, self.wp = n, wp
-        self.source, self.target = n, n + 1
-        self.free = free_padded.ravel().copy()
-        self.col = np.tile(np.arange(wp, dtype=float), n // wp)
-        self.row = np.repeat(np.arange(n // wp, dtype=float), wp)
-        self.offsets = [dc + dr * wp for dc, dr in DIRS]
-        allowed = ((moves[:, None] >> np.arange(8)[None, :]) & 1).astype(bool)
-        self.weights = np.full((n, 9), np.inf)
+        flat_free = free_padded.ravel()
+        self.cells = np.nonzero(flat_free)[0]
+        v = len(self.cells)
+        self.n_cells, self.wp = v, wp
+        self.source, self.target = v, v + 1
+        self.node_of = np.full(flat_free.size, -1, dtype=np.int64)
+        self.node_of[self.cells] = np.arange(v)
+        self.col = (self.cells % wp).astype(float)
+        self.row = (self.cells // wp).astype(float)
+        allowed = ((moves[self.cells, None] >> np.arange(8)[None, :]) & 1).astype(bool)
+        self.weights = np.full((v, 9), np.inf)
         self.weights[:, :8] = np.where(allowed, _COST[None, :], np.inf)
-        heads = np.empty((n, 9), dtype=np.int32)
-        for d, off in enumerate(self.offsets):
-            heads[:, d] = np.clip(np.arange(n) + off, 0, n - 1)
+        heads = np.empty((v, 9), dtype=np.int32)
+        for d, (dc, dr) in enumerate(DIRS):
+            head = self.node_of[np.clip(self.cells + dc + dr * wp, 0, flat_free.size - 1)]
+            heads[:, d] = np.where(allowed[:, d], head, np.arange(v))
         heads[:, 8] = self.target
-        self.indices = np.concatenate([heads.ravel(), np.full(9, self.target, dtype=np.int32)])
-        self.indptr = np.concatenate([np.arange(0, 9 * (n + 2), 9), [9 * (n + 1)]]).astype(np.int32)
+        self.heads = heads
+        # the source's 9 slots at the end are rewritten by each search (under the lock)
+        self._indices = np.concatenate([heads.ravel(), np.full(9, self.target, dtype=np.int32)])
+        self._indptr = np.concatenate([np.arange(0, 9 * (v + 2), 9), [9 * (v + 1)]]).astype(np.int32)
+        self._lock = threading.Lock()
+        self._csr: Any = None   # one CSR matrix over these arrays; each search swaps in its weights
+        self._octile: OrderedDict[tuple[int, int], np.ndarray] = OrderedDict()
         self._labels: np.ndarray | None = None
         #: disc centre -> (keep-out it was computed for, edge ids of the moves near it, their
         #: distances to the centre); filled by the path finders that share this graph
         self.cuts: dict[tuple[float, float], tuple[float, np.ndarray, np.ndarray]] = {}
 
     def has_move(self, flat: np.ndarray, d: int) -> np.ndarray:
-        return np.isfinite(self.weights[flat, d])
+        """Whether move d is allowed out of each padded cell ``flat``."""
+        node = self.node_of[flat]
+        return (node >= 0) & np.isfinite(self.weights[node, d])
 
-    @staticmethod
-    def edges(flat: np.ndarray, bits: np.ndarray) -> np.ndarray:
-        """Edge ids of the moves ``bits`` (move masks) out of padded cells ``flat``."""
+    def edge_ids(self, flat: np.ndarray, d: int | np.ndarray) -> np.ndarray:
+        """Edge ids of move(s) d out of padded cells ``flat`` (cells must be traversable)."""
+        return 9 * self.node_of[flat] + d
+
+    def edges(self, flat: np.ndarray, bits: np.ndarray) -> np.ndarray:
+        """Edge ids of the moves ``bits`` (move masks) out of traversable padded cells ``flat``."""
         if not len(flat):
             return np.zeros(0, dtype=np.int64)
         want = ((bits[:, None].astype(np.int64) >> np.arange(8)[None, :]) & 1).astype(bool)
-        return (9 * flat.astype(np.int64)[:, None] + np.arange(8)[None, :])[want]
+        return (9 * self.node_of[flat][:, None] + np.arange(8)[None, :])[want]
 
     def labels(self) -> np.ndarray:
-        """Connected component of each cell (moves are symmetric)."""
+        """Connected component of each padded cell (-1 where not traversable; moves are symmetric)."""
         if self._labels is None:
             from scipy.sparse import csr_matrix
             from scipy.sparse.csgraph import connected_components
 
-            n = self.n
+            v = self.n_cells
             tails, dirs = np.nonzero(np.isfinite(self.weights[:, :8]))
-            heads = self.indices[:9 * n].reshape(n, 9)[tails, dirs]
-            graph = csr_matrix((np.ones(len(tails)), (tails, heads)), shape=(n, n))
-            self._labels = connected_components(graph, directed=False)[1]
+            graph = csr_matrix((np.ones(len(tails)), (tails, self.heads[tails, dirs])), shape=(v, v))
+            labels = np.full(self.node_of.size, -1, dtype=np.int64)
+            labels[self.cells] = connected_components(graph, directed=False)[1]
+            self._labels = labels
         return self._labels
+
+    def _octile_from(self, cell: tuple[int, int]) -> np.ndarray:
+        """Octile distance of every node from a padded (col, row) cell (a few kept: goals and
+        starts come back call after call)."""
+        field = self._octile.get(cell)
+        if field is None:
+            field = self._octile[cell] = _octile(self.col, self.row, cell)
+            if len(self._octile) > _OCTILE_CACHE_SIZE:
+                self._octile.popitem(last=False)
+        else:
+            self._octile.move_to_end(cell)
+        return field
 
     def search(self, sources: dict[int, float], targets: dict[int, float], start: tuple[int, int],
                goal: tuple[int, int], slack: float, removed: np.ndarray) -> list[int] | None:
@@ -123,59 +152,64 @@ class MoveGraph:
         neighbours of that cell); ``removed``: edge ids that are cut.
 
         Only the edges out of cells that a search with the current limit can reach need reduced
-        weights, and those cells lie in an octile "ellipse" around start and goal (below), so
-        the weights are reduced there only, and the ellipse grows with the limit.
+        weights: such a cell has g + h - h_source <= limit, and g(v) >= oct(start, v) - sqrt 2 (a
+        source is within one cell of the start cell), h(v) >= oct(v, goal) - slack, so it lies
+        in the octile "ellipse" oct(start, v) + oct(v, goal) <= limit + h_source + slack + sqrt 2.
+        The weights are reduced there only (elsewhere they stay the non-negative base weights,
+        never scanned), and the ellipse grows with the limit.
         """
         from scipy.sparse import csr_matrix
         from scipy.sparse.csgraph import dijkstra
 
-        n = self.n
-        src = np.fromiter(sources, dtype=np.int64, count=len(sources))
+        v = self.n_cells
+        src = self.node_of[np.fromiter(sources, dtype=np.int64, count=len(sources))]
         src_cost = np.fromiter(sources.values(), dtype=float, count=len(sources))
-        tgt = np.fromiter(targets, dtype=np.int64, count=len(targets))
+        tgt = self.node_of[np.fromiter(targets, dtype=np.int64, count=len(targets))]
         tgt_cost = np.fromiter(targets.values(), dtype=float, count=len(targets))
+        with self._lock:
+            to_goal = self._octile_from(goal)
+            ellipse = self._octile_from(start) + to_goal
         # octile distance to the goal cell: consistent for these moves, and 0 at every target
-        to_goal = _octile(self.col, self.row, goal)
         h = np.maximum(to_goal - slack, 0.0)
         h_source = float(np.min(src_cost + h[src]))
-        # g(v) >= oct(start, v) - sqrt 2 (a source is within one cell of the start cell) and
-        # h(v) >= oct(v, goal) - slack, so a cell whose reduced distance g + h - h_source is
-        # <= limit has oct(start, v) + oct(v, goal) <= limit + h_source + slack + sqrt 2
-        ellipse = _octile(self.col, self.row, start) + to_goal
-        w = np.empty(9 * (n + 1))
-        w[:9 * n] = self.weights.ravel()   # non-negative; replaced wherever a search can scan
+        w = np.empty(9 * (v + 1))
+        w[:9 * v] = self.weights.ravel()
         w[9 * tgt + 8] = tgt_cost - h[tgt]
-        indices = self.indices.copy()
-        indices[9 * n:9 * n + len(src)] = src
-        w[9 * n:] = np.inf
-        w[9 * n:9 * n + len(src)] = src_cost + h[src] - h_source
-        graph = csr_matrix((w, indices, self.indptr), shape=(n + 2, n + 2))
-        reduced = np.zeros(n, dtype=bool)
+        w[9 * v:] = np.inf
+        w[9 * v:9 * v + len(src)] = src_cost + h[src] - h_source
+        reduced = np.zeros(v, dtype=bool)
         # a bound on the reduced weight of any edge (a move: w + h(head) - h(tail) <= 2 sqrt 2; a
         # connector: its cost plus the heuristic's spread over the 3x3 block, <= 2): a reachable
         # node beyond the limit is one such edge from a reached node within it
         step = 2.0 * _SQRT2 + 2.0 + float(src_cost.max()) + float(tgt_cost.max())
         limit = _FIRST_LIMIT
-        while True:
-            cells = np.nonzero(~reduced & (ellipse <= limit + h_source + slack + _SQRT2 + 1e-6))[0]
-            if len(cells):
-                ids = (9 * cells[:, None] + np.arange(8)[None, :]).ravel()
-                w_ids = self.weights[cells, :8].ravel() + h[self.indices[ids]] - np.repeat(h[cells], 8)
-                w[ids] = np.maximum(w_ids, 0.0)   # rounding of the reduced weights of tight moves
-                reduced[cells] = True
-                if len(removed):
-                    w[removed] = np.inf
-            dist, pred = dijkstra(graph, directed=True, indices=self.source, return_predecessors=True,
-                                  limit=limit)
-            if math.isfinite(dist[self.target]):
-                break
-            if float(dist[np.isfinite(dist)].max()) < limit - step:   # nothing more can be reached
-                return None
-            limit *= _LIMIT_GROWTH
+        with self._lock:
+            self._indices[9 * v:] = self.target
+            self._indices[9 * v:9 * v + len(src)] = src
+            if self._csr is None:
+                self._csr = csr_matrix((w, self._indices, self._indptr), shape=(v + 2, v + 2))
+            graph = self._csr
+            graph.data = w
+            while True:
+                cells = np.nonzero(~reduced & (ellipse <= limit + h_source + slack + _SQRT2 + 1e-6))[0]
+                if len(cells):
+                    ids = (9 * cells[:, None] + np.arange(8)[None, :]).ravel()
+                    w_ids = self.weights[cells, :8] + h[self.heads[cells, :8]] - h[cells][:, None]
+                    w[ids] = np.maximum(w_ids.ravel(), 0.0)   # rounding of the reduced weights of tight moves
+                    reduced[cells] = True
+                    if len(removed):
+                        w[removed] = np.inf
+                dist, pred = dijkstra(graph, directed=True, indices=self.source, return_predecessors=True,
+                                      limit=limit)
+                if math.isfinite(dist[self.target]):
+                    break
+                if float(dist[np.isfinite(dist)].max()) < limit - step:   # nothing more can be reached
+                    return None
+                limit *= _LIMIT_GROWTH
         path = []
         node = int(pred[self.target])
         while node != self.source:
-            path.append(node)
+            path.append(int(self.cells[node]))
             node = int(pred[node])
         return path[::-1]
 

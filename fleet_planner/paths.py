@@ -385,8 +385,8 @@ class PathFinder:
             t, f, wh = tail[has], flat[has], which[has]
             dist = segment_point_distance(t, t + (dcol * res, drow * res), centres[wh])
             hit = dist <= keep[wh]
-            fwd = 9 * f[hit] + d_tail
-            back = 9 * (f[hit] + dcol + drow * wp) + d_head
+            fwd = graph.edge_ids(f[hit], d_tail)
+            back = graph.edge_ids(f[hit] + dcol + drow * wp, d_head)
             out_eid += [fwd, back]
             out_dist += [dist[hit]] * 2
             out_which += [wh[hit]] * 2
@@ -409,6 +409,12 @@ class PathFinder:
         """
         res = self.grid.resolution
         col, row = (int(v) for v in np.floor(p / res))
+        own = (row + 1) * self._wp + col + 1
+        if (self.grid.in_bounds(col, row) and self.free[row, col] and own not in walled
+                and p[0] == (col + 0.5) * res and p[1] == (row + 0.5) * res):
+            # at its cell's centre: the connector is that point, clear of the walls (the cell is
+            # traversable) and of the extra walls (not walled); the discs around it were dropped
+            return {own: 0.0}
         for ring in (((0, 0),), _DIRS):
             cand = [(col + dc, row + dr) for dc, dr in ring
                     if self.grid.in_bounds(col + dc, row + dr) and self.free[row + dr, col + dc]
