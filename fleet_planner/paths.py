@@ -47,10 +47,42 @@ _BIT = {d: 1 << k for k, d in enumerate(_DIRS)}
 
 
 class _ExtraWalls(NamedTuple):
-    """The ``blocked_cells`` of one call: their union (prepared) and the wall raster with them."""
+    """The ``blocked_cells`` of one call: their boxes and the wall raster with them."""
 
-    geom: object
+    boxes: np.ndarray
     solid: np.ndarray
+
+
+class _WallIndex:
+    """The walls of a map for exact distance tests: one box per horizontal run of blocked cells
+    in an STRtree (built in milliseconds; no union of the boxes is needed, since the distance to
+    the walls is the smallest distance to a box), and the map's edge, tested analytically."""
+
+    def __init__(self, grid: GridMap):
+        res = grid.resolution
+        runs = np.diff(np.pad(grid.blocked, ((0, 0), (1, 1))).astype(np.int8), axis=1)
+        row, c0 = np.nonzero(runs == 1)
+        _, c1 = np.nonzero(runs == -1)   # row-major order: the ends pair up with the starts
+        self.tree = shapely.STRtree(shapely.box(c0 * res, row * res, c1 * res, (row + 1) * res))
+        self.size = (grid.width * res, grid.height * res)
+
+    @classmethod
+    def of(cls, grid: GridMap) -> _WallIndex:
+        index = grid.__dict__.get("_path_wall_index")
+        if index is None:
+            index = grid.__dict__["_path_wall_index"] = cls(grid)
+        return index
+
+    def near(self, a: np.ndarray, b: np.ndarray, geoms: np.ndarray, limit: float) -> np.ndarray:
+        """True for segments ``a[i] -> b[i]`` (``geoms[i]``) within ``limit`` of a wall or the
+        outside of the map.  Inside the (convex) map the distance to its edge is smallest at an
+        end of the segment, and an end outside the map is at distance 0."""
+        w, h = self.size
+        edge = np.minimum(np.minimum(a, b).min(axis=1), np.minimum(w - np.maximum(a[:, 0], b[:, 0]),
+                                                                  h - np.maximum(a[:, 1], b[:, 1])))
+        out = edge <= limit
+        out[self.tree.query(geoms, predicate="dwithin", distance=limit)[0]] = True
+        return out
 
 
 class PathFinder:
@@ -119,7 +151,7 @@ class PathFinder:
         self._half_moves = [(dcol, drow, _DIRS.index((dcol, drow)), _DIRS.index((-dcol, -drow)))
                             for dcol, drow in ((1, 0), (0, 1), (1, 1), (-1, 1))]
         self._graph: MoveGraph | None = None
-        _ = grid.obstacle_geometry  # build the (cached) wall geometry now, not in the first find()
+        self._walls = _WallIndex.of(grid)
         self._results: OrderedDict[tuple, np.ndarray | None] = OrderedDict()
 
     # -- public -------------------------------------------------------------------------------
@@ -167,12 +199,10 @@ class PathFinder:
         extra_walls = None
         if len(cells):
             res = self.grid.resolution
-            geom = shapely.union_all(shapely.box(cells[:, 0] * res, cells[:, 1] * res,
-                                                 (cells[:, 0] + 1) * res, (cells[:, 1] + 1) * res))
-            shapely.prepare(geom)
+            boxes = shapely.box(cells[:, 0] * res, cells[:, 1] * res, (cells[:, 0] + 1) * res, (cells[:, 1] + 1) * res)
             solid = self._solid.copy()
             solid[cells[:, 1] + 1, cells[:, 0] + 1] = True
-            extra_walls = _ExtraWalls(geom, solid)
+            extra_walls = _ExtraWalls(boxes, solid)
 
         if smooth and self._free_many(start[None], goal[None], discs, extra_walls)[0]:
             return np.array([start, goal])
@@ -247,9 +277,9 @@ class PathFinder:
         geoms = np.where(degenerate, shapely.points(sa),
                          shapely.linestrings(np.stack([sa, sb], axis=1)))
         limit = self.radius - _TOL
-        free = ~shapely.dwithin(self.grid.obstacle_geometry, geoms, limit)
+        free = ~self._walls.near(sa, sb, geoms, limit)
         if extra_walls is not None and free.any():
-            free[free] = ~shapely.dwithin(extra_walls.geom, geoms[free], limit)
+            free[free] = ~shapely.dwithin(extra_walls.boxes[None, :], geoms[free][:, None], limit).any(axis=1)
         ok[idx] = free
         return ok
 
