@@ -1,7 +1,7 @@
 """Compiled shortest-path search over the move graph of :class:`~fleet_planner.paths.PathFinder`.
 
 The move graph (cells whose centre keeps the disc clear of walls, joined by the 8 grid moves that
-do not cut a corner) is stored once per path finder as a CSR matrix.  One search is an A* done by
+do not cut a corner) is stored once per move table as a CSR matrix.  One search is an A* done by
 SciPy's compiled Dijkstra: edge weights are reduced by a consistent heuristic ``h`` (``w'(u, v) =
 w(u, v) - h(u) + h(v) >= 0``), so the distance of a node from the source in the reduced graph is
 ``g(v) + h(v) - h(source)``, and Dijkstra with a ``limit`` on it settles exactly the nodes A* would
@@ -11,8 +11,9 @@ reduced distances only grow along a path), in compiled code, and a failed search
 the reached set can grow no further.
 
 Per-call changes (moves removed by keep-out discs or extra walls, the start and goal connectors)
-only touch the weight array: the structure (``indptr``, ``indices``) is built once.  The first
-search imports ``scipy.sparse.csgraph``; nothing here imports ``scipy.ndimage``.
+only touch the weight array: the structure (``indptr``, ``indices``) is built once, and weights
+are reduced only where a search with the current limit can scan (see :meth:`MoveGraph.search`).
+The first search imports ``scipy.sparse.csgraph``; nothing here imports ``scipy.ndimage``.
 """
 from __future__ import annotations
 

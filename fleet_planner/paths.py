@@ -15,6 +15,12 @@ at an end of the move or of a side of the 2x2 block it crosses; requiring both o
 neighbours of a diagonal move to be traversable (no corner cutting) therefore keeps the whole move
 as clear as its cells.  Keep-out discs are not on the lattice, so moves that pass within a disc are
 removed exactly (segment-to-centre distance), not only the cells whose centre lies inside it.
+
+How it runs: the A* is done in compiled code, by SciPy's Dijkstra on reduced weights
+(:mod:`fleet_planner._pathgraph`, exact: optimal for this move set); the move graph, its
+components and the disc cuts are built once per map and move table and shared by every finder
+with that table.  String pulling tests all its sight lines in one batch, each first by a cheap
+exact rejection (a point of the segment inside a wall cell), then by the exact distance tests.
 """
 from __future__ import annotations
 
@@ -37,7 +43,7 @@ Disc = tuple[Point, float]
 
 _SQRT2 = math.sqrt(2.0)
 _TOL = 1e-9
-_CUT_CACHE_SIZE = 100_000  # disc centres whose nearby moves are remembered per PathFinder
+_CUT_CACHE_SIZE = 100_000  # disc centres whose nearby moves are remembered per move graph
 _CUT_HEADROOM = 1.25       # a centre's moves are computed out to this times the keep-out asked for
 _RESULT_CACHE_SIZE = 256   # find() answers remembered per PathFinder (same inputs, same answer)
 _PAIR_BATCH = 5000         # string pulling tests all vertex pairs at once up to this many pairs
