@@ -20,7 +20,8 @@ How it runs: the A* is done in compiled code, by SciPy's Dijkstra on reduced wei
 (:mod:`fleet_planner._pathgraph`, exact: optimal for this move set); the move graph, its
 components and the disc cuts are built once per map and move table and shared by every finder
 with that table.  String pulling tests all its sight lines in one batch, each first by a cheap
-exact rejection (a point of the segment inside a wall cell), then by the exact distance tests.
+exact rejection (a point of the segment inside a wall cell), then by the exact distance tests,
+and keeps the shortest chain of vertices in sight of each other.
 """
 from __future__ import annotations
 
@@ -306,33 +307,42 @@ class PathFinder:
         return np.logical_or.reduceat(solid[row, col], first)
 
     def _pull_string(self, pts: np.ndarray, discs: np.ndarray, extra_walls: _ExtraWalls | None) -> np.ndarray:
-        """Greedy string pulling: from each kept vertex jump to the farthest vertex in free sight.
+        """String pulling: the shortest chain of vertices, each in free sight of the next.
 
-        Consecutive vertices are joined by grid moves (or checked connector pieces), so the
-        fallback of keeping the next vertex never makes the path less valid than the grid path.
-        The sight lines of all pairs of vertices are tested in one batch (for very long vertex
-        lists, those from each kept vertex in one batch), then the greedy walk only reads them.
+        Consecutive vertices are joined by grid moves (or checked connector pieces), so keeping
+        them is always allowed and the result is never less valid than the grid path.  The sight
+        lines of all pairs of vertices are tested in one batch and the shortest chain over them
+        is found by a compiled Dijkstra (never longer than jumping greedily to the farthest
+        vertex in sight); for very long vertex lists the greedy jumps are kept, with the sight
+        lines from each kept vertex tested in one batch.
         """
         n = len(pts)
         if n <= 2:
             return pts
-        sight: np.ndarray | None = None
-        if n * (n - 1) // 2 <= _PAIR_BATCH:
-            i, j = np.nonzero(np.triu(np.ones((n, n), dtype=bool), 2))
-            sight = np.zeros((n, n), dtype=bool)
-            sight[i, j] = self._free_many(pts[i], pts[j], discs, extra_walls)
-        out = [0]
-        k = 0
-        while k < n - 1:
-            if sight is not None:
-                seen = np.nonzero(sight[k])[0]
-            else:
+        if n * (n - 1) // 2 > _PAIR_BATCH:
+            out = [0]
+            k = 0
+            while k < n - 1:
                 later = np.arange(k + 2, n)
                 ok = self._free_many(np.repeat(pts[k:k + 1], len(later), axis=0), pts[later], discs, extra_walls)
                 seen = later[ok]
-            k = int(seen[-1]) if len(seen) else k + 1
-            out.append(k)
-        return pts[out]
+                k = int(seen[-1]) if len(seen) else k + 1
+                out.append(k)
+            return pts[out]
+        from scipy.sparse import csr_matrix
+        from scipy.sparse.csgraph import dijkstra
+
+        i, j = np.nonzero(np.triu(np.ones((n, n), dtype=bool), 2))
+        ok = self._free_many(pts[i], pts[j], discs, extra_walls)
+        i = np.concatenate([np.arange(n - 1), i[ok]])
+        j = np.concatenate([np.arange(1, n), j[ok]])
+        # lengths + a tiny cost per vertex: of equal chains, the one with fewer vertices
+        length = np.hypot(*(pts[j] - pts[i]).T) + 1e-12
+        _, pred = dijkstra(csr_matrix((length, (i, j)), shape=(n, n)), indices=0, return_predecessors=True)
+        out = [n - 1]
+        while out[-1] != 0:
+            out.append(int(pred[out[-1]]))
+        return pts[out[::-1]]
 
     # -- cut moves ----------------------------------------------------------------------------
     def _extra_cells(self, blocked_cells: Iterable[tuple[int, int]]) -> np.ndarray:

@@ -368,7 +368,7 @@ def test_a_long_detour_is_still_shortest_and_a_sealed_goal_is_none():
     assert finder.find(start, goal, blocked_cells=[(39, 2)]) is None
 
 
-def test_many_corners_are_pulled_the_same_in_one_batch_or_row_by_row(monkeypatch):
+def test_many_corners_are_pulled_in_one_batch_or_row_by_row(monkeypatch):
     # a serpentine of 60 aisles: over a hundred corners, more sight lines than one batch takes
     rows = []
     for k in range(60):
@@ -383,7 +383,8 @@ def test_many_corners_are_pulled_the_same_in_one_batch_or_row_by_row(monkeypatch
 
     monkeypatch.setattr(paths_module, "_PAIR_BATCH", 10 ** 9)
     batched = PathFinder(grid, 0.45).find(start, goal)
-    assert np.array_equal(batched, row_by_row)
+    assert_valid(batched, grid, 0.45, start, goal)
+    assert polyline_length(batched) <= polyline_length(row_by_row) + 1e-9
 
 
 def test_radii_that_inflate_alike_share_one_move_graph():
