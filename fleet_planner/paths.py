@@ -26,6 +26,7 @@ and keeps the shortest chain of vertices in sight of each other.
 from __future__ import annotations
 
 import math
+import threading
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from typing import NamedTuple
@@ -160,6 +161,7 @@ class PathFinder:
         self._graph: MoveGraph | None = None
         self._walls = _WallIndex.of(grid)
         self._results: OrderedDict[tuple, np.ndarray | None] = OrderedDict()
+        self._results_lock = threading.Lock()
 
     # -- public -------------------------------------------------------------------------------
     def find(self, start: Point, goal: Point, avoid: Sequence[Disc] = (),
@@ -181,14 +183,17 @@ class PathFinder:
             discs = discs[keep]
         cells = self._extra_cells(blocked_cells)
         key = (a.tobytes(), b.tobytes(), discs.tobytes(), cells.tobytes(), smooth)
-        if key in self._results:
-            self._results.move_to_end(key)
-            found = self._results[key]
-            return None if found is None else found.copy()
-        found = self._find(a, b, discs, cells, smooth)
-        self._results[key] = found
-        if len(self._results) > _RESULT_CACHE_SIZE:
-            self._results.popitem(last=False)
+        with self._results_lock:
+            hit = key in self._results
+            if hit:
+                self._results.move_to_end(key)
+                found = self._results[key]
+        if not hit:
+            found = self._find(a, b, discs, cells, smooth)
+            with self._results_lock:
+                self._results[key] = found
+                if len(self._results) > _RESULT_CACHE_SIZE:
+                    self._results.popitem(last=False)
         return None if found is None else found.copy()
 
     def segment_free(self, a: Point, b: Point, avoid: Sequence[Disc] = ()) -> bool:

@@ -434,3 +434,29 @@ def test_dilate_is_an_exact_binary_dilation():
                     if 0 <= rr < mask.shape[0] and 0 <= cc < mask.shape[1]:
                         want[rr, cc] = True
             assert np.array_equal(dilate(mask, kernel), want)
+
+
+def test_threads_sharing_a_move_graph_get_the_answers_of_sequential_calls():
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(23)
+    grid = random_map(rng, 14, 18, 0.15)
+    finders = [PathFinder(grid, 0.35), PathFinder(grid, 0.45)]   # one move graph at 1 m cells
+    queries = []
+    for k in range(40):
+        radius = (0.35, 0.45)[k % 2]
+        start, goal = random_free_point(rng, grid, radius), random_free_point(rng, grid, radius)
+        avoid = [(random_free_point(rng, grid, 0.0), float(rng.uniform(0.3, 0.8))) for _ in range(3)]
+        queries.append((k % 2, start, goal, avoid))
+
+    def run(q):
+        which, start, goal, avoid = q
+        return PathFinder(grid, (0.35, 0.45)[which]).find(start, goal, avoid=avoid)
+
+    sequential = [run(q) for q in queries]
+    with ThreadPoolExecutor(4) as pool:
+        threaded = list(pool.map(lambda q: finders[q[0]].find(q[1], q[2], avoid=q[3]), queries * 3))
+    for got, want in zip(threaded, sequential * 3):
+        assert (got is None) == (want is None)
+        if got is not None:
+            assert polyline_length(got) == pytest.approx(polyline_length(want), abs=1e-9)
