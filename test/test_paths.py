@@ -281,3 +281,182 @@ def test_bad_input_is_named():
         finder.find((float("nan"), 0.5), (3.5, 0.5))
     with pytest.raises(ValueError, match="avoid"):
         finder.find((0.5, 0.5), (3.5, 0.5), avoid=[((1.0, 0.5), -1.0)])
+
+
+# -- the compiled search is exact: grid paths as short as an independent Dijkstra finds -------
+def shortest_grid_length(grid, radius, start_cell, goal_cell, avoid=(), virtual=()):
+    """Length of the shortest 8-connected path between two cell centres, built here from
+    geometry alone: a cell is traversable when its centre is >= radius from every wall (blocked,
+    virtual or outside); a diagonal needs both cells it passes traversable; a move must keep
+    strictly outside every disc. Plain Dijkstra with heapq. None when unreachable."""
+    import heapq
+
+    res = grid.resolution
+    walls = walls_of(grid)
+    if virtual:
+        walls = walls.union(shapely.union_all([box(c * res, r * res, (c + 1) * res, (r + 1) * res)
+                                               for c, r in virtual]))
+    ok = {(c, r) for r in range(grid.height) for c in range(grid.width)
+          if Point((c + 0.5) * res, (r + 0.5) * res).distance(walls) >= radius - 1e-9}
+
+    def move_ok(a, b):
+        if b not in ok or (a[0] != b[0] and a[1] != b[1] and ((a[0], b[1]) not in ok or (b[0], a[1]) not in ok)):
+            return False
+        seg = LineString([((a[0] + 0.5) * res, (a[1] + 0.5) * res), ((b[0] + 0.5) * res, (b[1] + 0.5) * res)])
+        return all(seg.distance(Point(c)) > k for c, k in avoid)
+
+    if start_cell not in ok or goal_cell not in ok:
+        return None
+    dist, heap = {start_cell: 0.0}, [(0.0, start_cell)]
+    while heap:
+        d, a = heapq.heappop(heap)
+        if a == goal_cell:
+            return d * res
+        if d > dist[a]:
+            continue
+        for dc in (-1, 0, 1):
+            for dr in (-1, 0, 1):
+                b = (a[0] + dc, a[1] + dr)
+                if (dc or dr) and move_ok(a, b):
+                    nd = d + (math.sqrt(2) if dc and dr else 1.0)
+                    if nd < dist.get(b, math.inf):
+                        dist[b] = nd
+                        heapq.heappush(heap, (nd, b))
+    return None
+
+
+@pytest.mark.parametrize("radius, density", [(0.3, 0.2), (0.45, 0.2), (0.7, 0.04)])
+def test_grid_paths_are_as_short_as_an_independent_dijkstra_finds(radius, density):
+    rng = np.random.default_rng(17)
+    compared = found = 0
+    for _ in range(5):
+        grid = random_map(rng, 12, 16, density)
+        finder = PathFinder(grid, radius)
+        cells = [(c, r) for r in range(grid.height) for c in range(grid.width) if not grid.blocked[r, c]]
+        for _ in range(6):
+            s, g = (cells[i] for i in rng.choice(len(cells), 2, replace=False))
+            start, goal = grid.centre(*s), grid.centre(*g)
+            avoid = [((float(rng.uniform(0, 16)), float(rng.uniform(0, 12))), float(rng.uniform(0.2, 1.0)))
+                     for _ in range(int(rng.integers(0, 5)))]
+            kept = [(c, k) for c, k in avoid if math.dist(c, start) > k and math.dist(c, goal) > k]
+            virtual = {tuple(int(v) for v in c) for c in rng.integers(0, (16, 12), size=(int(rng.integers(0, 3)), 2))}
+            virtual -= {s, g}
+            want = shortest_grid_length(grid, radius, s, g, kept, sorted(virtual))
+            path = finder.find(start, goal, avoid=avoid, blocked_cells=virtual, smooth=False)
+            compared += 1
+            assert (path is None) == (want is None), (s, g, avoid, virtual)
+            if path is not None:
+                found += 1
+                assert polyline_length(path) == pytest.approx(want, abs=1e-9)
+                pulled = finder.find(start, goal, avoid=avoid, blocked_cells=virtual)
+                assert polyline_length(pulled) <= want + 1e-9
+    assert found >= 5 and compared == 30
+
+
+def test_a_long_detour_is_still_shortest_and_a_sealed_goal_is_none():
+    # the only way round is far longer than the straight line: the search's limit must grow
+    # several times; then a disc seals the one gap and the search must give up
+    rows = ["." * 40] * 3 + ["@" * 39 + "."] + ["." * 40] * 3
+    grid = GridMap.from_rows(rows)
+    finder = PathFinder(grid, 0.4)
+    start, goal = grid.centre(0, 1), grid.centre(0, 5)
+    path = finder.find(start, goal, smooth=False)
+    assert polyline_length(path) == pytest.approx(shortest_grid_length(grid, 0.4, (0, 1), (0, 5)), abs=1e-9)
+    assert polyline_length(path) > 70
+    assert_valid(finder.find(start, goal), grid, 0.4, start, goal)
+    assert finder.find(start, goal, avoid=[((39.5, 3.5), 0.3)]) is None
+    assert finder.find(start, goal, blocked_cells=[(39, 2)]) is None
+
+
+def test_many_corners_are_pulled_in_one_batch_or_row_by_row(monkeypatch):
+    # a serpentine of 60 aisles: over a hundred corners, more sight lines than one batch takes
+    rows = []
+    for k in range(60):
+        rows.append("......")
+        rows.append("@@@@@." if k % 2 == 0 else ".@@@@@")
+    rows.append("......")
+    grid = GridMap.from_rows(rows)
+    start, goal = (0.5, 0.5), (0.5, len(rows) - 0.5)
+    row_by_row = PathFinder(grid, 0.45).find(start, goal)
+    assert_valid(row_by_row, grid, 0.45, start, goal)
+    import fleet_planner.paths as paths_module
+
+    monkeypatch.setattr(paths_module, "_PAIR_BATCH", 10 ** 9)
+    batched = PathFinder(grid, 0.45).find(start, goal)
+    assert_valid(batched, grid, 0.45, start, goal)
+    assert polyline_length(batched) <= polyline_length(row_by_row) + 1e-9
+
+
+def test_radii_that_inflate_alike_share_one_move_graph():
+    grid = GridMap.from_rows(["." * 10, "....@@....", "." * 10, "." * 10, "." * 10])
+    small, large, wide = PathFinder(grid, 0.35), PathFinder(grid, 0.45), PathFinder(grid, 0.6)
+    for finder in (small, large, wide):
+        assert finder.find((2.5, 2.5), (7.5, 2.5), avoid=[((5.0, 2.6), 0.3)]) is not None
+    assert small._move_graph() is large._move_graph()
+    assert wide._move_graph() is not small._move_graph()
+
+
+def test_a_returned_path_can_be_changed_without_changing_the_next_answer():
+    rows = ["..........", "..........", "@@@@@@@...", "..........", ".........."]
+    finder = PathFinder(GridMap.from_rows(rows), 0.4)
+    first = finder.find((0.5, 0.5), (0.5, 4.5))
+    kept = first.copy()
+    first[:] = -1.0
+    assert np.array_equal(finder.find((0.5, 0.5), (0.5, 4.5)), kept)
+
+
+def test_path_finding_does_not_import_scipy_ndimage():
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from fleet_planner.grid import GridMap\n"
+            "from fleet_planner.paths import PathFinder\n"
+            "grid = GridMap.from_rows(['......', '.@@@..', '......'])\n"
+            "assert PathFinder(grid, 0.4).find((0.5, 0.5), (0.5, 2.5), avoid=[((3.0, 2.5), 0.2)]) is not None\n"
+            "assert 'scipy.ndimage' not in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_dilate_is_an_exact_binary_dilation():
+    from fleet_planner._pathgraph import dilate
+
+    rng = np.random.default_rng(2)
+    for k in (1, 2, 3):
+        for _ in range(4):
+            mask = rng.random((9, 13)) < 0.15
+            kernel = rng.random((2 * k + 1, 2 * k + 1)) < 0.6
+            kernel = kernel | kernel[::-1, ::-1]        # symmetric, rows may have gaps
+            want = np.zeros_like(mask)
+            for dr, dc in zip(*np.nonzero(kernel)):
+                for r, c in zip(*np.nonzero(mask)):
+                    rr, cc = r - (dr - k), c - (dc - k)
+                    if 0 <= rr < mask.shape[0] and 0 <= cc < mask.shape[1]:
+                        want[rr, cc] = True
+            assert np.array_equal(dilate(mask, kernel), want)
+
+
+def test_threads_sharing_a_move_graph_get_the_answers_of_sequential_calls():
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(23)
+    grid = random_map(rng, 14, 18, 0.15)
+    finders = [PathFinder(grid, 0.35), PathFinder(grid, 0.45)]   # one move graph at 1 m cells
+    queries = []
+    for k in range(40):
+        radius = (0.35, 0.45)[k % 2]
+        start, goal = random_free_point(rng, grid, radius), random_free_point(rng, grid, radius)
+        avoid = [(random_free_point(rng, grid, 0.0), float(rng.uniform(0.3, 0.8))) for _ in range(3)]
+        queries.append((k % 2, start, goal, avoid))
+
+    def run(q):
+        which, start, goal, avoid = q
+        return PathFinder(grid, (0.35, 0.45)[which]).find(start, goal, avoid=avoid)
+
+    sequential = [run(q) for q in queries]
+    with ThreadPoolExecutor(4) as pool:
+        threaded = list(pool.map(lambda q: finders[q[0]].find(q[1], q[2], avoid=q[3]), queries * 3))
+    for got, want in zip(threaded, sequential * 3):
+        assert (got is None) == (want is None)
+        if got is not None:
+            assert polyline_length(got) == pytest.approx(polyline_length(want), abs=1e-9)
