@@ -13,20 +13,17 @@ resolves conflicts by the BBMRCA rules, with wait messages on ``/fleet/wait_mess
 """
 from __future__ import annotations
 
-import sys
-from typing import Mapping
+from collections.abc import Mapping
 
-import rclpy
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
 
 from fleet_planner.dispatch import COORDINATION, RobotAgent
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
+from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns
@@ -138,20 +135,7 @@ class AgentNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = AgentNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
-        print(f"robot_agent: {exc}", file=sys.stderr)
-        sys.exit(2)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(AgentNode, args, prog="robot_agent")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,6 @@ with a logged warning.
 """
 from __future__ import annotations
 
-import sys
 import traceback
 from dataclasses import fields, replace
 from typing import Mapping
@@ -18,8 +17,7 @@ from typing import Mapping
 import rclpy
 from nav_msgs.msg import OccupancyGrid, Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
@@ -28,6 +26,7 @@ from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.dispatch import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.robots import RobotKind, load_kinds
+from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import grid_to_msg, ns_to_stamp, plan_markers, record_to_string, timed_path_to_msg
@@ -200,20 +199,7 @@ class PlannerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PlannerNode()
-        rclpy.spin(node, executor=DrainingExecutor())
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
-        print(f"planner: {exc}", file=sys.stderr)
-        sys.exit(2)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(PlannerNode, args, prog="planner", spin=lambda node: rclpy.spin(node, executor=DrainingExecutor()))
 
 
 if __name__ == "__main__":

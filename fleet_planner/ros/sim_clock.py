@@ -17,14 +17,13 @@ import sys
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rclpy.time_source import CLOCK_TOPIC
 from rosgraph_msgs.msg import Clock as ClockMsg
 
+from fleet_planner.ros.entry import run_node
 from msg_schemas.convert import ns_to_stamp
 
 
@@ -66,21 +65,9 @@ def main(args: list[str] | None = None) -> None:
     parser.add_argument("--step", type=float, default=0.1, help="simulated seconds per tick (default 0.1)")
     parser.add_argument("--start", type=float, default=0.0, help="simulated time of the first tick (default 0)")
     opts = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
-    rclpy.init(args=argv)
-    node = None
-    try:
-        node = SimClock(parameter_overrides=[Parameter("rate", value=opts.rate), Parameter("step_s", value=opts.step),
-                                             Parameter("start_s", value=opts.start)])
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
-        print(f"sim_clock: {exc}", file=sys.stderr)
-        sys.exit(2)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    overrides = [Parameter("rate", value=opts.rate), Parameter("step_s", value=opts.step),
+                 Parameter("start_s", value=opts.start)]
+    run_node(lambda: SimClock(parameter_overrides=overrides), argv, prog="sim_clock")
 
 
 if __name__ == "__main__":

@@ -13,11 +13,12 @@ import time
 import uuid
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import String
 
 from fleet_planner.model import CAPABILITIES
+from fleet_planner.ros.entry import run_node
 from msg_schemas import topics
 from msg_schemas.records import RecordError, Task, TaskEvent
 
@@ -81,6 +82,34 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def follow(node: Submitter, timeout: float) -> int:
+    """Send the task once the planner hears us, print its events until it ends or ``timeout`` wall
+    seconds pass; the exit status (``ENDS``, 1 when it did not end)."""
+    task = node.task
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    deadline = time.monotonic() + timeout
+    while not node.planner_ready() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.1)
+    if not node.planner_ready():
+        print(f"{task.id}: no planner on {topics.TASKS} within {timeout:g} s", file=sys.stderr)
+        return 1
+    node.send()
+    shown = 0
+    while time.monotonic() < deadline and not any(e.event in ENDS for e in node.events):
+        executor.spin_once(timeout_sec=0.1)
+        for ev in node.events[shown:]:
+            print(describe(ev), flush=True)
+        shown = len(node.events)
+    for ev in node.events[shown:]:
+        print(describe(ev), flush=True)
+    end = next((e.event for e in node.events if e.event in ENDS), None)
+    if end is None:
+        print(f"{task.id}: not finished within {timeout:g} s", file=sys.stderr)
+        return 1
+    return ENDS[end]
+
+
 def main(args: list[str] | None = None) -> None:
     argv = sys.argv if args is None else args
     opts = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
@@ -89,39 +118,9 @@ def main(args: list[str] | None = None) -> None:
                     needs=tuple(opts.needs), payload_kg=opts.payload, priority=opts.priority)
     except RecordError as exc:
         _parser().error(str(exc))
-    rclpy.init(args=argv)
-    node = None
-    code = 1
-    try:
-        node = Submitter(task)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        deadline = time.monotonic() + opts.timeout
-        while not node.planner_ready() and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-        if not node.planner_ready():
-            print(f"{task.id}: no planner on {topics.TASKS} within {opts.timeout:g} s", file=sys.stderr)
-        else:
-            node.send()
-            shown = 0
-            while time.monotonic() < deadline and not any(e.event in ENDS for e in node.events):
-                executor.spin_once(timeout_sec=0.1)
-                for ev in node.events[shown:]:
-                    print(describe(ev), flush=True)
-                shown = len(node.events)
-            for ev in node.events[shown:]:
-                print(describe(ev), flush=True)
-            end = next((e.event for e in node.events if e.event in ENDS), None)
-            if end is None:
-                print(f"{task.id}: not finished within {opts.timeout:g} s", file=sys.stderr)
-            code = ENDS.get(end, 1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    sys.exit(code)
+    # interrupted: 1 (not done); a bad --ros-args shows its traceback, as before
+    run_node(lambda: Submitter(task), argv, prog="fleet-submit", spin=lambda node: follow(node, opts.timeout),
+             errors=(), interrupted=1)
 
 
 if __name__ == "__main__":
