@@ -6,9 +6,9 @@ stamped with the wall time it is sent) on ``/fleet/robot_status`` with the topic
 effort, depth 100), as fast as it can (``--rate 0``, the default: the planner's capacity) or at
 ``--rate`` messages per wall second (9 robots at 10 Hz in a 10x simulated demo offer 900/s).
 This process runs a :class:`~fleet_planner.ros.planner_node.PlannerNode` on the shipped warehouse
-and kinds, beside ``--listeners`` nodes that also subscribe to the statuses and parse them (the
-agents and the monitor of the in-process demo, all on one executor; 0: the planner alone, as in
-``fleet-demo --mode procs``), on the executor the fleet's nodes run on (before issue 7 the
+and kinds, beside ``--listeners`` fleet monitors (the demo's :class:`FleetMonitor`, which hear and
+parse every status as the agents of the in-process demo do; 0: the planner alone, as in
+``fleet-demo --mode procs``), all on the executor the fleet's nodes run on (before issue 7 the
 planner's ``DrainingExecutor``, since then rclpy's ``SingleThreadedExecutor``).
 
 Counted is what reaches the fleet manager (``FleetManager.on_status``); printed per repetition:
@@ -43,10 +43,10 @@ import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.logging import LoggingSeverity  # noqa: E402
-from rclpy.node import Node  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from fleet_planner.ros import planner_node  # noqa: E402
+from fleet_planner.ros.demo import FleetMonitor  # noqa: E402
 from fleet_planner.warehouse import load_warehouse  # noqa: E402
 from msg_schemas import topics  # noqa: E402
 from msg_schemas.records import RobotStatus  # noqa: E402
@@ -99,23 +99,10 @@ def publish(count: int, robots: int, rate: float, subscribers: int) -> None:
 
 
 # -- the planner side ---------------------------------------------------------------------------------
-class Listener(Node):
-    """A node that hears every status and parses it, as each agent and the monitor do."""
-
-    def __init__(self, name: str, context: Context):
-        super().__init__(name, context=context)
-        self.heard = 0
-        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
-
-    def _on_status(self, msg: String) -> None:
-        RobotStatus.from_json(msg.data)
-        self.heard += 1
-
-
 def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
     node = planner_node.PlannerNode(f"bench_planner_{index}", context=context)
     node.get_logger().set_level(LoggingSeverity.WARN)  # not a note per robot joining
-    listeners = [Listener(f"bench_listener_{index}_{i}", context) for i in range(opts.listeners)]
+    listeners = [FleetMonitor(f"bench_listener_{index}_{i}", context=context) for i in range(opts.listeners)]
     executor = fleet_executor(context)
     for each in [node, *listeners]:
         executor.add_node(each)
@@ -175,7 +162,6 @@ def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
     span = (ingested[-1] - t_go) if ingested else float("nan")
     return {"published": int(sent), "pub_rate": int(sent) / float(secs), "ingested": len(ingested),
             "rate": len(ingested) / span if ingested else 0.0,
-            "listener_heard": min((ln.heard for ln in listeners), default=None),
             "stale_med_ms": 1e3 * statistics.median(stale) if stale else float("nan"),
             "stale_max_ms": 1e3 * max(stale) if stale else float("nan")}
 

@@ -14,6 +14,7 @@ resolves conflicts by the BBMRCA rules, with wait messages on ``/fleet/wait_mess
 from __future__ import annotations
 
 from collections.abc import Mapping
+from functools import partial
 
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
@@ -23,6 +24,7 @@ from std_msgs.msg import String
 from fleet_planner.dispatch import COORDINATION, RobotAgent
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
+from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
@@ -79,14 +81,16 @@ class AgentNode(Node):
         self.robot_id = robot_id
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
-        self.create_subscription(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
-        self.create_subscription(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
-        self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
-        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        # every waiting message at each wake-up: the whole fleet's statuses keep coming (see drain.py)
+        subscribe = partial(create_draining_subscription, self)
+        subscribe(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
+        subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._waits = None
         if mode == "behavior":
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
-            self.create_subscription(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
+            subscribe(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
         self._timer = self.create_timer(1.0 / rate, self._on_timer)
         self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}, "
                                f"{mode} coordination")

@@ -33,7 +33,7 @@ import numpy as np
 import rclpy
 import yaml
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -44,7 +44,8 @@ from fleet_planner.checker import min_separation
 from fleet_planner.dispatch import COORDINATION, FleetMember, load_fleet, samples_to_path
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import load_kinds
-from fleet_planner.ros.planner_node import DrainingExecutor, PlannerNode
+from fleet_planner.ros.drain import create_draining_subscription
+from fleet_planner.ros.planner_node import PlannerNode
 from fleet_planner.ros.sim_clock import SimClock
 from fleet_planner.ros.submit import planner_matched
 from fleet_planner.warehouse import config_path, load_warehouse
@@ -72,8 +73,9 @@ class FleetMonitor(Node):
         self.radius: dict[str, float] = {}
         self.status: dict[str, RobotStatus] = {}
         self._tasks = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
-        self._events = self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
-        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        self._events = create_draining_subscription(self, String, topics.TASK_EVENTS, self._on_event,
+                                                    topics.TASK_EVENTS_QOS)
+        create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
@@ -136,7 +138,7 @@ class Fleet:
     planner: PlannerNode
     agents: dict[str, AgentNode]
     monitor: FleetMonitor
-    executor: DrainingExecutor
+    executor: SingleThreadedExecutor
 
     @property
     def nodes(self) -> list[Node]:
@@ -163,7 +165,7 @@ def bring_up(context: Context, warehouse, kinds: Mapping, members: Sequence[Flee
     agents = {m.id: AgentNode(f"agent_{m.id}", context=context, warehouse=warehouse, kinds=kinds,
                               parameter_overrides=sim + mode + _agent_params(m)) for m in members}
     monitor = FleetMonitor(context=context, parameter_overrides=sim)
-    fleet = Fleet(clock, planner, agents, monitor, DrainingExecutor(context=context))
+    fleet = Fleet(clock, planner, agents, monitor, SingleThreadedExecutor(context=context))
     for node in fleet.nodes:
         fleet.executor.add_node(node)
     return fleet
@@ -391,7 +393,7 @@ def main(args: list[str] | None = None) -> None:
             procs = start_processes(members, opts.rate, params_file, opts.warehouse, log_dir=log_dir,
                                     coordination=opts.coordination)
             monitor = FleetMonitor(context=context, parameter_overrides=[Parameter("use_sim_time", value=True)])
-            executor, parking = DrainingExecutor(context=context), _parking_of(params_file)
+            executor, parking = SingleThreadedExecutor(context=context), _parking_of(params_file)
             executor.add_node(monitor)
         summary = _run(executor, monitor, members, jobs, opts)
         title = (f"fleet-demo ({opts.coordination}): {summary.done}/{summary.jobs} jobs, {len(members)} robots, "

@@ -14,10 +14,8 @@ import traceback
 from dataclasses import fields, replace
 from typing import Mapping
 
-import rclpy
 from nav_msgs.msg import OccupancyGrid, Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
@@ -26,6 +24,7 @@ from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.dispatch import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.robots import RobotKind, load_kinds
+from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
@@ -44,29 +43,6 @@ _HELP = {
     "min_task_battery": "battery fraction a robot needs to take a job",
     "idle_s": "s a free robot waits before it goes to a charger",
 }
-
-
-class DrainingExecutor(SingleThreadedExecutor):
-    """A single-threaded executor that takes every message waiting in a ready subscription, not
-    just one as rclpy's wait-set executors do: each robot sends its status 10 times a (simulated)
-    second, and with a whole fleet on one executor every wait cycle brings one from each robot.
-    Taking one per cycle, the planner would fall further and further behind (and take robots for
-    offline)."""
-
-    def _take_subscription(self, sub):
-        calls = []
-        while len(calls) < 1000:  # bounded: a flood must not starve the rest of the executor
-            call = super()._take_subscription(sub)
-            if call is None:
-                break
-            calls.append(call)
-        if not calls:
-            return None
-
-        async def run_all():
-            for call in calls:
-                await call()
-        return run_all
 
 
 def _range(description: str, lo: float, hi: float, read_only: bool = True) -> ParameterDescriptor:
@@ -117,8 +93,9 @@ class PlannerNode(Node):
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
         self._paths: dict[str, Publisher] = {}
-        self.create_subscription(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
-        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
+        create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._timer = self.create_timer(period, self._on_timer)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
         self.get_logger().info(
@@ -199,7 +176,7 @@ class PlannerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    run_node(PlannerNode, args, prog="planner", spin=lambda node: rclpy.spin(node, executor=DrainingExecutor()))
+    run_node(PlannerNode, args, prog="planner")
 
 
 if __name__ == "__main__":

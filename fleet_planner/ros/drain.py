@@ -1,0 +1,61 @@
+"""Subscriptions that take every waiting message at once: how the fleet's nodes keep up with the status stream.
+
+Each robot publishes its status 10 times a (simulated) second and the planner, every agent and the
+monitor hear all of them. rclpy's executors take one message per ready subscription per wait
+cycle, and a cycle over a whole in-process fleet (a dozen nodes, one executor) costs far more than
+handling a message: taking one per cycle, a node falls behind the stream, its best-effort queue
+(depth 100) overflows and what it takes is up to 100 messages old (the planner plans legs from
+where robots were and takes live robots for offline; measured in ``bench/bench_status_ingest.py``).
+
+:func:`create_draining_subscription` makes the subscription itself drain its queue: when the
+executor hands it a message, it handles that one and then takes and handles every other message
+waiting, in order, up to ``limit`` (a flood must not starve the node's other callbacks; the rest
+comes on the next cycle). It takes the messages the way rclpy's own :func:`rclpy.wait_for_message`
+does (``Subscription.handle.take_message``), under any executor, without overriding executor
+internals. See docs/ARCHITECTURE.md, "Topics and QoS".
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.exceptions import InvalidHandle
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
+
+#: at most this many messages per wake-up of one subscription
+DRAIN_LIMIT = 1000
+
+
+def take_waiting(sub: Subscription) -> Any | None:
+    """The next message waiting on ``sub`` (``None`` if there is none or ``sub`` is destroyed),
+    taken without an executor."""
+    try:
+        with sub.handle:  # kept alive while taking, as the executors do
+            taken = sub.handle.take_message(sub.msg_type, sub.raw)
+    except InvalidHandle:
+        return None
+    return None if taken is None else taken[0]
+
+
+def create_draining_subscription(node: Node, msg_type: Any, topic: str, callback: Callable[[Any], None],
+                                 qos: QoSProfile, *, limit: int = DRAIN_LIMIT, **kwargs: Any) -> Subscription:
+    """``node.create_subscription(msg_type, topic, callback, qos, **kwargs)`` whose every wake-up
+    handles all waiting messages (at most ``limit``) in the order they came."""
+    if limit < 1:
+        raise ValueError(f"limit must be >= 1 (got {limit})")
+    sub: Subscription | None = None
+
+    def on_message(msg: Any) -> None:
+        callback(msg)
+        for _ in range(limit - 1):
+            if sub is None:
+                return
+            more = take_waiting(sub)
+            if more is None:
+                return
+            callback(more)
+
+    sub = node.create_subscription(msg_type, topic, on_message, qos, **kwargs)
+    return sub
