@@ -15,10 +15,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from functools import partial
+from typing import Any
 
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from std_msgs.msg import String
 
 from fleet_planner.dispatch import COORDINATION, RobotAgent
@@ -28,7 +30,7 @@ from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
-from msg_schemas.convert import msg_to_timed_path, stamp_to_ns
+from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
 from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent, WaitMessageRecord, robot_id_problem
 
 
@@ -47,7 +49,7 @@ class AgentNode(Node):
     The robot's id is the parameter ``id``, or else the last part of the node's namespace."""
 
     def __init__(self, name: str = "robot_agent", *, warehouse: Warehouse | None = None,
-                 kinds: Mapping[str, RobotKind] | None = None, **kwargs):
+                 kinds: Mapping[str, RobotKind] | None = None, **kwargs: Any):
         super().__init__(name, **kwargs)
         robot_id = self.declare_parameter("id", "", _fixed("robot id (letters, digits, _); empty: the namespace")).value
         kind = self.declare_parameter("kind", "cargo", _fixed(f"one of {', '.join(ROBOT_KINDS)}")).value
@@ -87,7 +89,7 @@ class AgentNode(Node):
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
-        self._waits = None
+        self._waits: Publisher | None = None
         if mode == "behavior":
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
             subscribe(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
@@ -106,25 +108,25 @@ class AgentNode(Node):
 
     def _on_task(self, msg: String) -> None:
         try:
-            self.agent.on_task(Task.from_json(msg.data))
+            self.agent.on_task(string_to_record(msg, Task))
         except RecordError:
             pass  # the planner answers bad tasks; the robot only needs the good ones
 
     def _on_event(self, msg: String) -> None:
         try:
-            self.agent.on_event(TaskEvent.from_json(msg.data))
+            self.agent.on_event(string_to_record(msg, TaskEvent))
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.agent.on_status(RobotStatus.from_json(msg.data))
+            self.agent.on_status(string_to_record(msg, RobotStatus))
         except RecordError as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_wait_message(self, msg: String) -> None:
         try:
-            self.agent.on_wait_message(WaitMessageRecord.from_json(msg.data))
+            self.agent.on_wait_message(string_to_record(msg, WaitMessageRecord))
         except RecordError as exc:
             self.get_logger().warning(f"wait message ignored: {exc}", throttle_duration_sec=5.0)
 
@@ -132,8 +134,9 @@ class AgentNode(Node):
         try:
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_json()))
-            for wait in self.agent.take_wait_messages():
-                self._waits.publish(String(data=wait.to_json()))
+            for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any
+                if self._waits is not None:
+                    self._waits.publish(String(data=wait.to_json()))
         except Exception as exc:  # keep reporting: the planner must not take a live robot for dead
             self.get_logger().error(f"robot step failed: {exc!r}", throttle_duration_sec=5.0)
 

@@ -11,8 +11,9 @@ with a logged warning.
 from __future__ import annotations
 
 import traceback
+from collections.abc import Mapping
 from dataclasses import fields, replace
-from typing import Mapping
+from typing import Any
 
 from nav_msgs.msg import OccupancyGrid, Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
@@ -28,7 +29,14 @@ from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
-from msg_schemas.convert import grid_to_msg, ns_to_stamp, plan_markers, record_to_string, timed_path_to_msg
+from msg_schemas.convert import (
+    grid_to_msg,
+    ns_to_stamp,
+    plan_markers,
+    record_to_string,
+    string_to_record,
+    timed_path_to_msg,
+)
 from msg_schemas.records import RecordError, RobotStatus, TaskEvent
 
 #: parameters that shape planned legs and cannot change while the node runs
@@ -55,7 +63,7 @@ class PlannerNode(Node):
     the files named by the parameters ``warehouse_file`` and ``kinds_file`` (empty: the shipped ones)."""
 
     def __init__(self, name: str = "planner", *, warehouse: Warehouse | None = None,
-                 kinds: Mapping[str, RobotKind] | None = None, **kwargs):
+                 kinds: Mapping[str, RobotKind] | None = None, **kwargs: Any):
         super().__init__(name, **kwargs)
         wh_file = self.declare_parameter("warehouse_file", "", ParameterDescriptor(
             description="warehouse YAML (empty: the shipped config/warehouse.yaml)", read_only=True)).value
@@ -121,7 +129,7 @@ class PlannerNode(Node):
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.fleet.on_status(RobotStatus.from_json(msg.data), self._now())
+            self.fleet.on_status(string_to_record(msg, RobotStatus), self._now())
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
         except Exception as exc:
@@ -137,7 +145,7 @@ class PlannerNode(Node):
             return
         self._publish(decisions, now)
 
-    def _on_set_parameters(self, params) -> SetParametersResult:
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         names = {f.name for f in fields(DispatchParams)}
         changes = {p.name: p.value for p in params if p.name in names}
         if not changes:

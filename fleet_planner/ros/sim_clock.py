@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
@@ -36,7 +37,7 @@ class SimClock(Node):
     """Publishes simulated time; parameters ``rate`` (x real time), ``step_s`` (simulated seconds per
     tick) and ``start_s`` (simulated time of the first tick). It runs on the wall clock itself."""
 
-    def __init__(self, name: str = "sim_clock", **kwargs):
+    def __init__(self, name: str = "sim_clock", **kwargs: Any):
         super().__init__(name, **kwargs)
         rate = self.declare_parameter("rate", 1.0, _double("simulated seconds per wall second", 0.01, 1000.0)).value
         step = self.declare_parameter("step_s", 0.1, _double("simulated seconds per tick", 0.001, 10.0)).value

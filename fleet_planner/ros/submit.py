@@ -11,21 +11,25 @@ import argparse
 import sys
 import time
 import uuid
+from typing import Any
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from fleet_planner.model import CAPABILITIES
 from fleet_planner.ros.entry import run_node
 from msg_schemas import topics
+from msg_schemas.convert import string_to_record
 from msg_schemas.records import RecordError, Task, TaskEvent
 
 ENDS = {"done": 0, "rejected": 1, "failed": 1, "cancelled": 1}
 
 
-def planner_matched(node: Node, tasks_pub, events_sub) -> bool:
+def planner_matched(node: Node, tasks_pub: Publisher, events_sub: Subscription) -> bool:
     """A node that takes tasks and publishes task events (the planner) is in the graph, and our task
     publisher and event subscription are matched with every endpoint on those topics: a task sent
     now reaches it, and its answer reaches us."""
@@ -38,7 +42,7 @@ def planner_matched(node: Node, tasks_pub, events_sub) -> bool:
 class Submitter(Node):
     """Publishes one task once the planner can hear it, and collects the task's events."""
 
-    def __init__(self, task: Task, name: str = "fleet_submit", **kwargs):
+    def __init__(self, task: Task, name: str = "fleet_submit", **kwargs: Any):
         super().__init__(name, **kwargs)
         self.task = task
         self.events: list[TaskEvent] = []
@@ -53,7 +57,7 @@ class Submitter(Node):
 
     def _on_event(self, msg: String) -> None:
         try:
-            ev = TaskEvent.from_json(msg.data)
+            ev = string_to_record(msg, TaskEvent)
         except RecordError:
             return
         if ev.task_id == self.task.id:
