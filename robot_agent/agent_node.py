@@ -7,7 +7,8 @@ status on ``/fleet/robot_status`` at ``status_rate_hz`` of ROS time (simulated t
 ``use_sim_time:=true``). It hears the other robots' statuses there too: for the safety net of a
 central robot (it waits rather than drive into one), and for the behaviours of a robot with
 ``coordination:=behavior``, which takes only the goal of each leg, finds its own way there and
-resolves conflicts by the BBMRCA rules, with wait messages on ``/fleet/wait_messages``.
+resolves conflicts by the BBMRCA rules (Sun, Kleiner and Nebel, "Behavior-based Multi-Robot Collision
+Avoidance"; see docs/ARCHITECTURE.md), with wait messages on ``/fleet/wait_messages``.
 
     ros2 run fleet_planner robot_agent --ros-args -p id:=r3 -p kind:=cargo_forklift -p x:=6.25 -p y:=22.75
 """

@@ -4,8 +4,11 @@ Each robot publishes its status 10 times a (simulated) second and the planner, e
 monitor hear all of them. rclpy's executors take one message per ready subscription per wait
 cycle, and a cycle over a whole in-process fleet (a dozen nodes, one executor) costs far more than
 handling a message: taking one per cycle, a node falls behind the stream, its best-effort queue
-(depth 100) overflows and what it takes is up to 100 messages old (the planner plans legs from
-where robots were and takes live robots for offline; measured in ``bench/bench_status_ingest.py``).
+(depth 100) overflows and what it takes is up to 100 messages old. (The demo run that way planned
+legs from where robots had been, which the agents refused, "timed path starts 0.900 m from the
+robot", did 2 of its 20 jobs in 600 s and let two robots' discs overlap.)
+``bench/bench_status_ingest.py`` measures the rate; docs/ARCHITECTURE.md, "Measured facts", has
+the figures.
 
 :func:`create_draining_subscription` makes the subscription itself drain its queue: when the
 executor hands it a message, it handles that one and then takes and handles every other message
