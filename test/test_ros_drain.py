@@ -11,7 +11,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from fleet_planner.ros.drain import DRAIN_LIMIT, create_draining_subscription
+from fleet_planner.ros.drain import DRAIN_LIMIT, create_draining_subscription, drain_limit
+from msg_schemas import topics
 
 WAIT = 30.0  # wall seconds any one wait may take
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2 * DRAIN_LIMIT, reliability=ReliabilityPolicy.RELIABLE)
@@ -70,6 +71,15 @@ def test_a_flood_is_handled_in_bounded_batches(nodes):
     assert len(received) == DRAIN_LIMIT  # the node's other callbacks get their turn
     spin_until_some(executor, received)
     assert received == [str(i) for i in range(DRAIN_LIMIT + 500)]
+
+
+def test_a_wake_up_takes_at_most_what_the_queue_can_hold():
+    # the old DrainingExecutor took what was waiting when it woke: never more than the depth
+    assert drain_limit(topics.ROBOT_STATUS_QOS) == 100
+    assert drain_limit(topics.TASKS_QOS) == DRAIN_LIMIT == 1000
+    assert drain_limit(topics.TIMED_PATH_QOS) == 1
+    assert drain_limit(QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=0)) == DRAIN_LIMIT
+    assert drain_limit(QOS) == DRAIN_LIMIT
 
 
 def test_the_limit_must_be_positive(nodes):

@@ -12,10 +12,11 @@ the figures.
 
 :func:`create_draining_subscription` makes the subscription itself drain its queue: when the
 executor hands it a message, it handles that one and then takes and handles every other message
-waiting, in order, up to ``limit`` (a flood must not starve the node's other callbacks; the rest
-comes on the next cycle). It takes the messages the way rclpy's own :func:`rclpy.wait_for_message`
-does (``Subscription.handle.take_message``), under any executor, without overriding executor
-internals. See docs/ARCHITECTURE.md, "Topics and QoS".
+waiting, in order, up to a bound: the queue's depth (what can wait at the wake-up; 100 for the
+statuses), at most :data:`DRAIN_LIMIT`. A flood must not starve the node's other callbacks, the
+planner's step among them: the rest comes on the next cycle. It takes the messages the way
+rclpy's own :func:`rclpy.wait_for_message` does (``Subscription.handle.take_message``), under any
+executor, without overriding executor internals. See docs/ARCHITECTURE.md, "Topics and QoS".
 """
 from __future__ import annotations
 
@@ -24,11 +25,18 @@ from typing import Any
 
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.subscription import Subscription
 
 #: at most this many messages per wake-up of one subscription
 DRAIN_LIMIT = 1000
+
+
+def drain_limit(qos: QoSProfile) -> int:
+    """Messages one wake-up handles at most: the history depth (keep last), at most DRAIN_LIMIT."""
+    if qos.history == HistoryPolicy.KEEP_LAST and qos.depth > 0:
+        return min(qos.depth, DRAIN_LIMIT)
+    return DRAIN_LIMIT
 
 
 def take_waiting(sub: Subscription) -> Any | None:
@@ -43,9 +51,11 @@ def take_waiting(sub: Subscription) -> Any | None:
 
 
 def create_draining_subscription(node: Node, msg_type: Any, topic: str, callback: Callable[[Any], None],
-                                 qos: QoSProfile, *, limit: int = DRAIN_LIMIT, **kwargs: Any) -> Subscription:
+                                 qos: QoSProfile, *, limit: int | None = None, **kwargs: Any) -> Subscription:
     """``node.create_subscription(msg_type, topic, callback, qos, **kwargs)`` whose every wake-up
-    handles all waiting messages (at most ``limit``) in the order they came."""
+    handles all waiting messages, in the order they came, at most ``limit`` (default:
+    :func:`drain_limit` of ``qos``)."""
+    limit = drain_limit(qos) if limit is None else limit
     if limit < 1:
         raise ValueError(f"limit must be >= 1 (got {limit})")
     sub: Subscription | None = None
