@@ -139,13 +139,13 @@ def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
         child.stdin.flush()
         out = ""
         deadline = time.monotonic() + WAIT + opts.count / 1000.0
-        # until the publisher is done and nothing new came for a second (or the time is up)
+        # until the publisher is done and nothing new came for 2 s (or the time is up)
         while time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.01)
             if "published" not in out and select.select([child.stdout], [], [], 0)[0]:
                 out += child.stdout.readline()  # the publisher's last line, written whole
             last = ingested[-1] if ingested else t_go
-            if "published" in out and time.monotonic() - max(last, t_go) > 1.0:
+            if "published" in out and time.monotonic() - max(last, t_go) > 2.0:
                 break
         child.wait(timeout=WAIT)
         published = [ln for ln in out.splitlines() if ln.startswith("published")]
