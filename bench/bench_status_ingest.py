@@ -14,8 +14,10 @@ planner's ``DrainingExecutor``, since then rclpy's ``SingleThreadedExecutor``).
 Counted is what reaches the fleet manager (``FleetManager.on_status``); printed per repetition:
 messages published and ingested (the rest was dropped by the best-effort queue), the publisher's
 rate, **ingested messages per second** (ingested / wall time from the first message sent to the
-last one ingested), and how stale the newest status of a robot was at each planning step
-(median and maximum over steps and robots, wall ms: what "fresh statuses before each step" means).
+last one ingested), this process's CPU time per ingested status (planner and listeners together:
+less sensitive to a busy machine than the rate), and how stale the newest status of a robot was at
+each planning step while the publisher ran (median and maximum over steps and robots, wall ms:
+what "fresh statuses before each step" means).
 
     .venv/bin/python bench/bench_status_ingest.py [--count 20000] [--robots 9] [--listeners 9]
         [--rate 0] [--repeat 3]
@@ -108,16 +110,20 @@ def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
         executor.add_node(each)
     fleet = node.fleet
     ingested: list[float] = []
+    cpu = [0.0, 0.0]  # this process's CPU time at "go" and at the last status ingested
     stale: list[float] = []
+    publishing = [False]
     on_status, step = fleet.on_status, fleet.step
 
     def counting_on_status(status, now):
         ingested.append(time.monotonic())
+        cpu[1] = time.process_time()
         return on_status(status, now)
 
     def measuring_step(now):
-        wall = node.get_clock().now().nanoseconds / 1e9  # the publisher stamps with the same clock
-        stale.extend(wall - r.status.stamp for r in fleet.robots.values() if ingested)
+        if publishing[0] and ingested:
+            wall = node.get_clock().now().nanoseconds / 1e9  # the publisher stamps with the same clock
+            stale.extend(wall - r.status.stamp for r in fleet.robots.values())
         return step(now)
 
     fleet.on_status = counting_on_status  # type: ignore[method-assign]
@@ -134,7 +140,7 @@ def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
         deadline = time.monotonic() + WAIT
         while node.count_publishers(topics.ROBOT_STATUS) < 1 and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.01)
-        t_go = time.monotonic()
+        t_go, cpu[0], publishing[0] = time.monotonic(), time.process_time(), True
         child.stdin.write("go\n")
         child.stdin.flush()
         out = ""
@@ -144,6 +150,7 @@ def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
             executor.spin_once(timeout_sec=0.01)
             if "published" not in out and select.select([child.stdout], [], [], 0)[0]:
                 out += child.stdout.readline()  # the publisher's last line, written whole
+                publishing[0] = "published" not in out
             last = ingested[-1] if ingested else t_go
             if "published" in out and time.monotonic() - max(last, t_go) > 2.0:
                 break
@@ -162,6 +169,7 @@ def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
     span = (ingested[-1] - t_go) if ingested else float("nan")
     return {"published": int(sent), "pub_rate": int(sent) / float(secs), "ingested": len(ingested),
             "rate": len(ingested) / span if ingested else 0.0,
+            "cpu_us": 1e6 * (cpu[1] - cpu[0]) / len(ingested) if ingested else float("nan"),
             "stale_med_ms": 1e3 * statistics.median(stale) if stale else float("nan"),
             "stale_max_ms": 1e3 * max(stale) if stale else float("nan")}
 
@@ -188,15 +196,17 @@ def main() -> None:
               f"{'flood' if opts.rate <= 0 else f'{opts.rate:g}/s offered'}, {opts.listeners} other subscribers, "
               f"executor {executor_name}, ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}")
         print(f"{'run':>3} {'published':>9} {'pub/s':>8} {'ingested':>8} {'lost':>6} {'ingested/s':>10} "
-              f"{'stale med ms':>12} {'stale max ms':>12}")
-        rates = []
+              f"{'cpu us/msg':>10} {'stale med ms':>12} {'stale max ms':>12}")
+        rates, cpus = [], []
         for i in range(opts.repeat):
             r = run_once(context, opts, i)
             rates.append(r["rate"])
+            cpus.append(r["cpu_us"])
             print(f"{i + 1:>3} {r['published']:>9} {r['pub_rate']:>8.0f} {r['ingested']:>8} "
-                  f"{r['published'] - r['ingested']:>6} {r['rate']:>10.0f} {r['stale_med_ms']:>12.1f} "
-                  f"{r['stale_max_ms']:>12.1f}", flush=True)
-        print(f"median ingested/s: {statistics.median(rates):.0f}")
+                  f"{r['published'] - r['ingested']:>6} {r['rate']:>10.0f} {r['cpu_us']:>10.0f} "
+                  f"{r['stale_med_ms']:>12.1f} {r['stale_max_ms']:>12.1f}", flush=True)
+        print(f"median ingested/s: {statistics.median(rates):.0f}; median CPU per ingested status: "
+              f"{statistics.median(cpus):.0f} us")
     finally:
         rclpy.try_shutdown(context=context)
 
