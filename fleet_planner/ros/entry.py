@@ -6,7 +6,7 @@ down; a bad file or parameter (``ValueError``, ``ParameterException``) is said i
 stderr, naming the program, with exit status 2::
 
     def main(args: list[str] | None = None) -> None:
-        run_node(lambda: PlannerNode(), args, prog="planner")
+        run_node(PlannerNode, args, prog="planner")
 """
 from __future__ import annotations
 
