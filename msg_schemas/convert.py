@@ -16,7 +16,8 @@ import array
 import colorsys
 import math
 import zlib
-from typing import Iterable, Sequence, TypeVar
+from collections.abc import Iterable, Sequence
+from typing import TypeVar, cast
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -201,4 +202,4 @@ def record_to_string(rec: Record) -> String:
 
 def string_to_record(msg: String, cls: type[R]) -> R:
     """The record in a ``std_msgs/String``; :class:`RecordError` naming the field if it is not one."""
-    return cls.from_json(msg.data)
+    return cast(R, cls.from_json(msg.data))  # from_json builds cls

@@ -1,4 +1,4 @@
-"""Every fleet topic name and its QoS profile, in one place (ARCHITECTURE.md, "Interfaces on the wire").
+"""Every fleet topic name and its QoS profile, in one place (docs/ARCHITECTURE.md, "Topics and QoS").
 
 Nodes create publishers and subscriptions with the pair from here, e.g.
 ``node.create_subscription(String, TASKS, cb, TASKS_QOS)``, so both ends always match.
@@ -11,7 +11,8 @@ QoS choices:
 * ``ROBOT_STATUS``: best effort, depth 100. Each robot repeats its status at 10 Hz and each message
   supersedes the last, so a lost one costs nothing, and a slow planner never holds the agents
   back. A best-effort subscription also matches reliable publishers (``ros2 topic pub`` defaults).
-  Tests must wait for a status that satisfies a condition, not count messages.
+  Tests must wait for a status that satisfies a condition, not count messages. Every subscriber
+  takes all waiting statuses at each wake-up (``fleet_planner/ros/drain.py``).
 * ``WAIT_MESSAGES`` (behaviour coordination): reliable, volatile, depth 100. A waiting robot
   repeats its message every couple of seconds, but a wait cycle is only found when a message
   gets all the way round it, so none should be lost on the way.

@@ -7,29 +7,31 @@ status on ``/fleet/robot_status`` at ``status_rate_hz`` of ROS time (simulated t
 ``use_sim_time:=true``). It hears the other robots' statuses there too: for the safety net of a
 central robot (it waits rather than drive into one), and for the behaviours of a robot with
 ``coordination:=behavior``, which takes only the goal of each leg, finds its own way there and
-resolves conflicts by the BBMRCA rules, with wait messages on ``/fleet/wait_messages``.
+resolves conflicts by the BBMRCA rules (Sun, Kleiner and Nebel, "Behavior-based Multi-Robot Collision
+Avoidance"; see docs/ARCHITECTURE.md), with wait messages on ``/fleet/wait_messages``.
 
     ros2 run fleet_planner robot_agent --ros-args -p id:=r3 -p kind:=cargo_forklift -p x:=6.25 -p y:=22.75
 """
 from __future__ import annotations
 
-import sys
-from typing import Mapping
+from collections.abc import Mapping
+from functools import partial
+from typing import Any
 
-import rclpy
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from std_msgs.msg import String
 
 from fleet_planner.fleet import COORDINATION, RobotAgent
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
+from fleet_planner.ros.drain import create_draining_subscription
+from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
-from msg_schemas.convert import msg_to_timed_path, stamp_to_ns
+from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
 from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent, WaitMessageRecord, robot_id_problem
 
 
@@ -48,7 +50,7 @@ class AgentNode(Node):
     The robot's id is the parameter ``id``, or else the last part of the node's namespace."""
 
     def __init__(self, name: str = "robot_agent", *, warehouse: Warehouse | None = None,
-                 kinds: Mapping[str, RobotKind] | None = None, **kwargs):
+                 kinds: Mapping[str, RobotKind] | None = None, **kwargs: Any):
         super().__init__(name, **kwargs)
         robot_id = self.declare_parameter("id", "", _fixed("robot id (letters, digits, _); empty: the namespace")).value
         kind = self.declare_parameter("kind", "cargo", _fixed(f"one of {', '.join(ROBOT_KINDS)}")).value
@@ -82,14 +84,16 @@ class AgentNode(Node):
         self.robot_id = robot_id
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
-        self.create_subscription(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
-        self.create_subscription(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
-        self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
-        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
-        self._waits = None
+        # every waiting message at each wake-up: the whole fleet's statuses keep coming (see drain.py)
+        subscribe = partial(create_draining_subscription, self)
+        subscribe(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
+        subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        self._waits: Publisher | None = None
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
-            self.create_subscription(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
+            subscribe(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
         self._timer = self.create_timer(1.0 / rate, self._on_timer)
         self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}, "
                                f"{mode} coordination")
@@ -105,25 +109,25 @@ class AgentNode(Node):
 
     def _on_task(self, msg: String) -> None:
         try:
-            self.agent.on_task(Task.from_json(msg.data))
+            self.agent.on_task(string_to_record(msg, Task))
         except RecordError:
             pass  # the planner answers bad tasks; the robot only needs the good ones
 
     def _on_event(self, msg: String) -> None:
         try:
-            self.agent.on_event(TaskEvent.from_json(msg.data))
+            self.agent.on_event(string_to_record(msg, TaskEvent))
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.agent.on_status(RobotStatus.from_json(msg.data))
+            self.agent.on_status(string_to_record(msg, RobotStatus))
         except RecordError as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_wait_message(self, msg: String) -> None:
         try:
-            self.agent.on_wait_message(WaitMessageRecord.from_json(msg.data))
+            self.agent.on_wait_message(string_to_record(msg, WaitMessageRecord))
         except RecordError as exc:
             self.get_logger().warning(f"wait message ignored: {exc}", throttle_duration_sec=5.0)
 
@@ -131,27 +135,15 @@ class AgentNode(Node):
         try:
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_json()))
-            for wait in self.agent.take_wait_messages():
-                self._waits.publish(String(data=wait.to_json()))
+            for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any
+                if self._waits is not None:
+                    self._waits.publish(String(data=wait.to_json()))
         except Exception as exc:  # keep reporting: the planner must not take a live robot for dead
             self.get_logger().error(f"robot step failed: {exc!r}", throttle_duration_sec=5.0)
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = AgentNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
-        print(f"robot_agent: {exc}", file=sys.stderr)
-        sys.exit(2)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(AgentNode, args, prog="robot_agent")
 
 
 if __name__ == "__main__":

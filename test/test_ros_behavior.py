@@ -3,10 +3,10 @@ goals, the agents find their own ways and avoid each other from the statuses the
 small warehouse and mixed fleet as test_ros_system.py; contact is checked on the robots' own status
 reports, not by asking the planner."""
 import pytest
-
-from fleet_planner.ros.demo import spin_until
-from msg_schemas.records import Task
 from test_ros_system import WAIT, ended, no_contact, running_fleet
+
+from fleet_planner.ros.demo.monitor import spin_until
+from msg_schemas.records import Task
 
 
 @pytest.fixture(scope="module")

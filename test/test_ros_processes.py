@@ -6,7 +6,7 @@ import subprocess
 import yaml
 
 from fleet_planner.fleet import FleetMember
-from fleet_planner.ros.demo import node_command, start_processes, stop_processes
+from fleet_planner.ros.demo.bringup import node_command, start_processes, stop_processes
 from fleet_planner.warehouse import config_path, generate_warehouse, save_warehouse
 
 WH = generate_warehouse(2, 2, 8, 2, 4, 0.5, "small", chutes=2, chargers=4)

@@ -9,7 +9,8 @@ from std_msgs.msg import String
 
 from fleet_planner.fleet import FleetMember
 from fleet_planner.robots import load_kinds
-from fleet_planner.ros.demo import bring_up, spin_until
+from fleet_planner.ros.demo.bringup import bring_up
+from fleet_planner.ros.demo.monitor import spin_until
 from fleet_planner.warehouse import generate_warehouse
 from msg_schemas import topics
 from msg_schemas.records import Task

@@ -10,16 +10,13 @@ with a logged warning.
 """
 from __future__ import annotations
 
-import sys
 import traceback
+from collections.abc import Mapping
 from dataclasses import fields, replace
-from typing import Mapping
+from typing import Any
 
-import rclpy
 from nav_msgs.msg import OccupancyGrid, Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
@@ -28,9 +25,18 @@ from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.robots import RobotKind, load_kinds
+from fleet_planner.ros.drain import create_draining_subscription
+from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
-from msg_schemas.convert import grid_to_msg, ns_to_stamp, plan_markers, record_to_string, timed_path_to_msg
+from msg_schemas.convert import (
+    grid_to_msg,
+    ns_to_stamp,
+    plan_markers,
+    record_to_string,
+    string_to_record,
+    timed_path_to_msg,
+)
 from msg_schemas.records import RecordError, RobotStatus, TaskEvent
 
 #: parameters that shape planned legs and cannot change while the node runs
@@ -47,29 +53,6 @@ _HELP = {
 }
 
 
-class DrainingExecutor(SingleThreadedExecutor):
-    """A single-threaded executor that takes every message waiting in a ready subscription, not
-    just one as rclpy's wait-set executors do: each robot sends its status 10 times a (simulated)
-    second, and with a whole fleet on one executor every wait cycle brings one from each robot.
-    Taking one per cycle, the planner would fall further and further behind (and take robots for
-    offline)."""
-
-    def _take_subscription(self, sub):
-        calls = []
-        while len(calls) < 1000:  # bounded: a flood must not starve the rest of the executor
-            call = super()._take_subscription(sub)
-            if call is None:
-                break
-            calls.append(call)
-        if not calls:
-            return None
-
-        async def run_all():
-            for call in calls:
-                await call()
-        return run_all
-
-
 def _range(description: str, lo: float, hi: float, read_only: bool = True) -> ParameterDescriptor:
     return ParameterDescriptor(description=description, read_only=read_only,
                                floating_point_range=[FloatingPointRange(from_value=float(lo), to_value=float(hi))])
@@ -80,7 +63,7 @@ class PlannerNode(Node):
     the files named by the parameters ``warehouse_file`` and ``kinds_file`` (empty: the shipped ones)."""
 
     def __init__(self, name: str = "planner", *, warehouse: Warehouse | None = None,
-                 kinds: Mapping[str, RobotKind] | None = None, **kwargs):
+                 kinds: Mapping[str, RobotKind] | None = None, **kwargs: Any):
         super().__init__(name, **kwargs)
         wh_file = self.declare_parameter("warehouse_file", "", ParameterDescriptor(
             description="warehouse YAML (empty: the shipped config/warehouse.yaml)", read_only=True)).value
@@ -118,8 +101,9 @@ class PlannerNode(Node):
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
         self._paths: dict[str, Publisher] = {}
-        self.create_subscription(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
-        self.create_subscription(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
+        create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._timer = self.create_timer(period, self._on_timer)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
         self.get_logger().info(
@@ -145,7 +129,7 @@ class PlannerNode(Node):
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.fleet.on_status(RobotStatus.from_json(msg.data), self._now())
+            self.fleet.on_status(string_to_record(msg, RobotStatus), self._now())
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
         except Exception as exc:
@@ -161,7 +145,7 @@ class PlannerNode(Node):
             return
         self._publish(decisions, now)
 
-    def _on_set_parameters(self, params) -> SetParametersResult:
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         names = {f.name for f in fields(DispatchParams)}
         changes = {p.name: p.value for p in params if p.name in names}
         if not changes:
@@ -200,20 +184,7 @@ class PlannerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PlannerNode()
-        rclpy.spin(node, executor=DrainingExecutor())
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
-        print(f"planner: {exc}", file=sys.stderr)
-        sys.exit(2)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(PlannerNode, args, prog="planner")
 
 
 if __name__ == "__main__":

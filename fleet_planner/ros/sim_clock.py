@@ -13,18 +13,18 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rclpy.time_source import CLOCK_TOPIC
 from rosgraph_msgs.msg import Clock as ClockMsg
 
+from fleet_planner.ros.entry import run_node
 from msg_schemas.convert import ns_to_stamp
 
 
@@ -37,7 +37,7 @@ class SimClock(Node):
     """Publishes simulated time; parameters ``rate`` (x real time), ``step_s`` (simulated seconds per
     tick) and ``start_s`` (simulated time of the first tick). It runs on the wall clock itself."""
 
-    def __init__(self, name: str = "sim_clock", **kwargs):
+    def __init__(self, name: str = "sim_clock", **kwargs: Any):
         super().__init__(name, **kwargs)
         rate = self.declare_parameter("rate", 1.0, _double("simulated seconds per wall second", 0.01, 1000.0)).value
         step = self.declare_parameter("step_s", 0.1, _double("simulated seconds per tick", 0.001, 10.0)).value
@@ -66,21 +66,9 @@ def main(args: list[str] | None = None) -> None:
     parser.add_argument("--step", type=float, default=0.1, help="simulated seconds per tick (default 0.1)")
     parser.add_argument("--start", type=float, default=0.0, help="simulated time of the first tick (default 0)")
     opts = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
-    rclpy.init(args=argv)
-    node = None
-    try:
-        node = SimClock(parameter_overrides=[Parameter("rate", value=opts.rate), Parameter("step_s", value=opts.step),
-                                             Parameter("start_s", value=opts.start)])
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:  # a bad file or parameter: say which, and why
-        print(f"sim_clock: {exc}", file=sys.stderr)
-        sys.exit(2)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    overrides = [Parameter("rate", value=opts.rate), Parameter("step_s", value=opts.step),
+                 Parameter("start_s", value=opts.start)]
+    run_node(lambda: SimClock(parameter_overrides=overrides), argv, prog="sim_clock")
 
 
 if __name__ == "__main__":

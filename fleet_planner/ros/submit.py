@@ -11,20 +11,25 @@ import argparse
 import sys
 import time
 import uuid
+from typing import Any
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from fleet_planner.model import CAPABILITIES
+from fleet_planner.ros.entry import run_node
 from msg_schemas import topics
+from msg_schemas.convert import string_to_record
 from msg_schemas.records import RecordError, Task, TaskEvent
 
 ENDS = {"done": 0, "rejected": 1, "failed": 1, "cancelled": 1}
 
 
-def planner_matched(node: Node, tasks_pub, events_sub) -> bool:
+def planner_matched(node: Node, tasks_pub: Publisher, events_sub: Subscription) -> bool:
     """A node that takes tasks and publishes task events (the planner) is in the graph, and our task
     publisher and event subscription are matched with every endpoint on those topics: a task sent
     now reaches it, and its answer reaches us."""
@@ -37,7 +42,7 @@ def planner_matched(node: Node, tasks_pub, events_sub) -> bool:
 class Submitter(Node):
     """Publishes one task once the planner can hear it, and collects the task's events."""
 
-    def __init__(self, task: Task, name: str = "fleet_submit", **kwargs):
+    def __init__(self, task: Task, name: str = "fleet_submit", **kwargs: Any):
         super().__init__(name, **kwargs)
         self.task = task
         self.events: list[TaskEvent] = []
@@ -52,7 +57,7 @@ class Submitter(Node):
 
     def _on_event(self, msg: String) -> None:
         try:
-            ev = TaskEvent.from_json(msg.data)
+            ev = string_to_record(msg, TaskEvent)
         except RecordError:
             return
         if ev.task_id == self.task.id:
@@ -81,6 +86,34 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def follow(node: Submitter, timeout: float) -> int:
+    """Send the task once the planner hears us, print its events until it ends or ``timeout`` wall
+    seconds pass; the exit status (``ENDS``, 1 when it did not end)."""
+    task = node.task
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    deadline = time.monotonic() + timeout
+    while not node.planner_ready() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.1)
+    if not node.planner_ready():
+        print(f"{task.id}: no planner on {topics.TASKS} within {timeout:g} s", file=sys.stderr)
+        return 1
+    node.send()
+    shown = 0
+    while time.monotonic() < deadline and not any(e.event in ENDS for e in node.events):
+        executor.spin_once(timeout_sec=0.1)
+        for ev in node.events[shown:]:
+            print(describe(ev), flush=True)
+        shown = len(node.events)
+    for ev in node.events[shown:]:
+        print(describe(ev), flush=True)
+    end = next((e.event for e in node.events if e.event in ENDS), None)
+    if end is None:
+        print(f"{task.id}: not finished within {timeout:g} s", file=sys.stderr)
+        return 1
+    return ENDS[end]
+
+
 def main(args: list[str] | None = None) -> None:
     argv = sys.argv if args is None else args
     opts = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
@@ -89,39 +122,9 @@ def main(args: list[str] | None = None) -> None:
                     needs=tuple(opts.needs), payload_kg=opts.payload, priority=opts.priority)
     except RecordError as exc:
         _parser().error(str(exc))
-    rclpy.init(args=argv)
-    node = None
-    code = 1
-    try:
-        node = Submitter(task)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        deadline = time.monotonic() + opts.timeout
-        while not node.planner_ready() and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-        if not node.planner_ready():
-            print(f"{task.id}: no planner on {topics.TASKS} within {opts.timeout:g} s", file=sys.stderr)
-        else:
-            node.send()
-            shown = 0
-            while time.monotonic() < deadline and not any(e.event in ENDS for e in node.events):
-                executor.spin_once(timeout_sec=0.1)
-                for ev in node.events[shown:]:
-                    print(describe(ev), flush=True)
-                shown = len(node.events)
-            for ev in node.events[shown:]:
-                print(describe(ev), flush=True)
-            end = next((e.event for e in node.events if e.event in ENDS), None)
-            if end is None:
-                print(f"{task.id}: not finished within {opts.timeout:g} s", file=sys.stderr)
-            code = ENDS.get(end, 1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    sys.exit(code)
+    # interrupted: 1 (not done); a bad --ros-args shows its traceback, as before
+    run_node(lambda: Submitter(task), argv, prog="fleet-submit", spin=lambda node: follow(node, opts.timeout),
+             errors=(), interrupted=1)
 
 
 if __name__ == "__main__":

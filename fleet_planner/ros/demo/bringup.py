@@ -1,0 +1,144 @@
+"""Bringing a fleet up: in one process on one executor (:func:`bring_up`, the demo's ``--mode inproc``
+and the system tests), or as one process per node (:func:`start_processes`, ``--mode procs``: the
+console scripts, or ``python -m`` where a script is not installed, in the same ROS environment).
+
+Everything a fleet needs is handed in (context, warehouse, kinds, members, rate, configuration);
+nothing is read from globals.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from fleet_planner.fleet import FleetMember
+from fleet_planner.robots import RobotKind
+from fleet_planner.ros.demo.monitor import FleetMonitor
+from fleet_planner.ros.planner_node import PlannerNode
+from fleet_planner.ros.sim_clock import SimClock
+from fleet_planner.warehouse import Warehouse
+from robot_agent.agent_node import AgentNode
+
+
+# -------------------------------------------------------------------------------------------------
+# in one process
+# -------------------------------------------------------------------------------------------------
+@dataclass
+class Fleet:
+    """The nodes of an in-process fleet, all on one executor."""
+
+    clock: SimClock
+    planner: PlannerNode
+    agents: dict[str, AgentNode]
+    monitor: FleetMonitor
+    executor: SingleThreadedExecutor
+
+    @property
+    def nodes(self) -> list[Node]:
+        return [self.clock, self.planner, *self.agents.values(), self.monitor]
+
+    def destroy(self) -> None:
+        self.executor.shutdown()
+        for node in self.nodes:
+            node.destroy_node()
+
+
+def bring_up(context: Context, warehouse: Warehouse, kinds: Mapping[str, RobotKind], members: Sequence[FleetMember],
+             rate: float, planner_params: Sequence[Parameter] = (), params_file: str | Path | None = None,
+             coordination: str = "central") -> Fleet:
+    """Sim clock, planner, one agent per fleet member and a monitor, all on simulated time in
+    ``context`` and on one executor. ``planner_params`` and ``params_file`` (a ros__parameters
+    YAML) configure the planner; ``coordination`` goes to the planner and every agent."""
+    sim = [Parameter("use_sim_time", value=True)]
+    mode = [Parameter("coordination", value=coordination)]
+    clock = SimClock(context=context, parameter_overrides=[Parameter("rate", value=float(rate))])
+    cli = ["--ros-args", "--params-file", str(params_file)] if params_file else None
+    planner = PlannerNode(context=context, warehouse=warehouse, kinds=kinds, cli_args=cli,
+                          parameter_overrides=sim + mode + list(planner_params))
+    agents = {m.id: AgentNode(f"agent_{m.id}", context=context, warehouse=warehouse, kinds=kinds,
+                              parameter_overrides=sim + mode + agent_params(m)) for m in members}
+    monitor = FleetMonitor(context=context, parameter_overrides=sim)
+    fleet = Fleet(clock, planner, agents, monitor, SingleThreadedExecutor(context=context))
+    for node in fleet.nodes:
+        fleet.executor.add_node(node)
+    return fleet
+
+
+def agent_params(m: FleetMember) -> list[Parameter]:
+    """The parameters of one fleet member's agent node."""
+    return [Parameter("id", value=m.id), Parameter("kind", value=m.kind), Parameter("x", value=m.x),
+            Parameter("y", value=m.y), Parameter("yaw", value=m.yaw), Parameter("battery", value=m.battery)]
+
+
+# -------------------------------------------------------------------------------------------------
+# one process per node
+# -------------------------------------------------------------------------------------------------
+def node_command(script: str, module: str) -> list[str]:
+    """How to start a node as a process: the console script beside this Python, else ``-m module``."""
+    exe = Path(sys.executable).parent / script
+    return [str(exe)] if exe.is_file() and os.access(exe, os.X_OK) else [sys.executable, "-m", module]
+
+
+def start_processes(members: Sequence[FleetMember], rate: float, params_file: Path, warehouse_file: Path | None,
+                    kinds_file: Path | None = None, log_dir: Path | None = None,
+                    coordination: str = "central") -> list[subprocess.Popen]:
+    """Sim clock, planner and agents as processes in this environment (stop them with stop_processes)."""
+    common = ["-p", f"coordination:={coordination}"]
+    if warehouse_file:
+        common += ["-p", f"warehouse_file:={warehouse_file}"]
+    if kinds_file:
+        common += ["-p", f"kinds_file:={kinds_file}"]
+    sim = ["-p", "use_sim_time:=true"]
+    commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)],
+                "planner": node_command("planner", "fleet_planner.ros.planner_node")
+                + ["--ros-args", "--params-file", str(params_file)] + sim + common}
+    for m in members:
+        commands[f"agent_{m.id}"] = node_command("robot_agent", "robot_agent.agent_node") + [
+            "--ros-args", "-r", f"__node:=agent_{m.id}", "-p", f"id:={m.id}", "-p", f"kind:={m.kind}",
+            "-p", f"x:={m.x!r}", "-p", f"y:={m.y!r}", "-p", f"yaw:={m.yaw!r}", "-p", f"battery:={m.battery!r}"] \
+            + sim + common
+    procs: list[subprocess.Popen] = []
+    try:
+        for name, cmd in commands.items():
+            if log_dir is None:
+                procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT))
+                continue
+            with open(log_dir / f"{name}.log", "w") as log:  # the child keeps its own copy open
+                procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT))
+    except BaseException:
+        stop_processes(procs)
+        raise
+    return procs
+
+
+def stop_processes(procs: Sequence[subprocess.Popen], grace: float = 5.0) -> None:
+    """SIGINT (the nodes shut down cleanly), then kill what is still running after ``grace`` s."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + grace
+    for p in procs:
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def parking_of(params_file: Path) -> list[tuple[float, float]]:
+    """The parking spots of a planner ros__parameters file (what the planner of a process fleet uses)."""
+    data = yaml.safe_load(Path(params_file).read_text()) or {}
+    flat: list[float] = next((v["ros__parameters"].get("parking", []) for v in data.values()
+                              if isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict)), [])
+    return [(flat[i], flat[i + 1]) for i in range(0, len(flat) - 1, 2)]

@@ -1,0 +1,164 @@
+"""The fleet demo: the planner and a mixed fleet on the default warehouse, fed a stream of jobs.
+
+``fleet-demo`` brings up a simulated clock (``--rate`` x real time), the planner node and one agent
+per robot of ``config/fleet.yaml``, then submits ``--jobs`` random pick-and-place jobs on
+``/fleet/tasks`` and shows progress until all are done. Nodes share one process and one executor
+(``--mode inproc``, the default) or run as separate processes (``--mode procs``: the console
+scripts, or ``python -m`` where a script is not installed, in the same ROS environment).
+``--coordination behavior`` runs the same fleet with the robots avoiding each other by the BBMRCA
+behaviours instead of timed paths (the planner only allocates and gives goals).
+
+At the end it prints a summary (jobs done, completion time, average speed, and the smallest
+distance ever seen between two robots against the sum of their radii, computed here from the
+robots' own status reports, not by the planner) and draws the robots' trajectories over the map
+to ``out/fleet_demo.png``.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.logging import LoggingSeverity
+from rclpy.parameter import Parameter
+from tqdm import tqdm
+
+from fleet_planner.fleet import COORDINATION, load_fleet
+from fleet_planner.robots import load_kinds
+from fleet_planner.ros.demo.bringup import Fleet, bring_up, parking_of, start_processes, stop_processes
+from fleet_planner.ros.demo.jobs import TERMINAL, random_jobs
+from fleet_planner.ros.demo.monitor import FleetMonitor, spin_until
+from fleet_planner.ros.demo.summary import Summary, plot_run, summarise
+from fleet_planner.ros.entry import ros_session
+from fleet_planner.warehouse import config_path, load_warehouse
+from msg_schemas.records import Task
+
+DEMO_PARAMS = "planner_params.yaml"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="fleet-demo", description=(__doc__ or "").split("\n\n")[0])
+    p.add_argument("--mode", choices=("inproc", "procs"), default="inproc",
+                   help="nodes in this process on one executor (default), or one process each")
+    p.add_argument("--coordination", choices=COORDINATION, default="central",
+                   help="central: timed paths planned around each other (default); behavior: the robots "
+                        "get only goals and avoid each other by BBMRCA behaviours")
+    p.add_argument("--jobs", type=int, default=20, help="how many jobs to submit (default 20)")
+    p.add_argument("--interval", type=float, default=4.0, help="simulated seconds between jobs (default 4)")
+    p.add_argument("--rate", type=float, default=10.0, help="simulated seconds per wall second, at most (default 10)")
+    p.add_argument("--fleet", type=Path, help="fleet file (default: config/fleet.yaml)")
+    p.add_argument("--warehouse", type=Path, help="warehouse YAML (default: config/warehouse.yaml)")
+    p.add_argument("--params", type=Path, help="planner ros__parameters YAML (default: config/planner_params.yaml)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the random jobs (default 1)")
+    p.add_argument("--out", type=Path, default=Path("out"), help="where the picture goes (default out/)")
+    p.add_argument("--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--verbose", action="store_true", help="show the nodes' info messages (in-process mode)")
+    return p
+
+
+def main(args: list[str] | None = None) -> None:
+    argv = sys.argv if args is None else args
+    # DDS stays on this machine and on a domain of its own unless the caller chose one (before
+    # rclpy.init, which reads them)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    opts = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    if opts.jobs < 1 or not opts.rate > 0 or not opts.interval >= 0:
+        _parser().error("--jobs must be >= 1, --rate > 0 and --interval >= 0")
+
+    warehouse = load_warehouse(opts.warehouse)
+    kinds = load_kinds()
+    members = load_fleet(opts.fleet, kinds, warehouse)
+    params_file = opts.params or config_path(DEMO_PARAMS)
+    jobs = random_jobs(warehouse, kinds, members, opts.jobs, opts.seed)
+    opts.out.mkdir(parents=True, exist_ok=True)
+
+    context = Context()
+    procs: list[subprocess.Popen] = []
+    fleet: Fleet | None = None
+    monitor: FleetMonitor | None = None
+    # a failure while the fleet comes up shows its traceback, as it always did (errors=())
+    with ros_session(argv, prog="fleet-demo", context=context, errors=()):
+        try:
+            executor: Executor
+            if opts.mode == "inproc":
+                fleet = bring_up(context, warehouse, kinds, members, opts.rate, params_file=params_file,
+                                 coordination=opts.coordination)
+                executor, monitor = fleet.executor, fleet.monitor
+                parking = list(fleet.planner.fleet.parking.values())
+                if not opts.verbose:
+                    for node in fleet.nodes:
+                        node.get_logger().set_level(LoggingSeverity.WARN)
+            else:
+                log_dir = opts.out / "logs"
+                log_dir.mkdir(exist_ok=True)
+                procs = start_processes(members, opts.rate, params_file, opts.warehouse, log_dir=log_dir,
+                                        coordination=opts.coordination)
+                monitor = FleetMonitor(context=context, parameter_overrides=[Parameter("use_sim_time", value=True)])
+                executor, parking = SingleThreadedExecutor(context=context), parking_of(params_file)
+                executor.add_node(monitor)
+            summary = run_jobs(executor, monitor, [m.id for m in members], jobs, interval=opts.interval,
+                               timeout=opts.timeout, progress=not opts.no_progress)
+            title = (f"fleet-demo ({opts.coordination}): {summary.done}/{summary.jobs} jobs, {len(members)} robots, "
+                     f"closest approach {summary.min_gap:+.2f} m beyond the sum of radii")
+            png = opts.out / "fleet_demo.png"
+            plot_run(warehouse, monitor.trajectories(), png, title, parking)
+            print("\n".join(summary.lines(monitor.radius) + [f"picture: {png}"]))
+            if summary.done < summary.jobs:
+                sys.exit(1)
+        finally:
+            stop_processes(procs)
+            if fleet is not None:
+                fleet.destroy()
+            elif monitor is not None:
+                monitor.destroy_node()
+
+
+def run_jobs(executor: Executor, monitor: FleetMonitor, robot_ids: Sequence[str], jobs: Sequence[Task], *,
+             interval: float, timeout: float, progress: bool = True) -> Summary:
+    """Wait for the fleet (the planner and every robot in ``robot_ids``), submit the jobs one by one
+    every ``interval`` simulated seconds, show progress, summarise; ``timeout`` wall seconds in all."""
+    wall0 = time.monotonic()
+    deadline = wall0 + timeout
+    ids = set(robot_ids)
+    if not spin_until(executor, lambda: monitor.planner_ready() and ids <= set(monitor.status), timeout):
+        raise SystemExit(f"fleet-demo: the planner or some robots did not come up within {timeout:g} s "
+                         f"(seen: {', '.join(sorted(monitor.status)) or 'none'})")
+    # once every robot has reported, give the planner one status round before the first job
+    t_ready = monitor.now()
+    spin_until(executor, lambda: monitor.now() > t_ready + 0.5, 30.0)
+    bar = None
+    if progress:
+        bar = tqdm(total=len(jobs), desc="jobs done", unit="job", file=sys.stderr, dynamic_ncols=True)
+    first = monitor.now()
+    submitted = 0
+    wall_start = time.monotonic()
+
+    def finished() -> int:
+        return sum(j.id in monitor.last_event and monitor.last_event[j.id].event in TERMINAL for j in jobs)
+
+    try:
+        while finished() < len(jobs) and time.monotonic() < deadline:
+            now = monitor.now()
+            while submitted < len(jobs) and now >= first + submitted * interval:
+                monitor.submit(jobs[submitted])
+                submitted += 1
+            executor.spin_once(timeout_sec=0.05)
+            if bar is not None:
+                done = sum(e.event == "done" for e in monitor.last_event.values())
+                if done != bar.n:
+                    bar.update(done - bar.n)
+                bar.set_postfix_str(f"sim t = {now - first:6.1f} s, submitted {submitted}", refresh=False)
+    finally:
+        if bar is not None:
+            bar.close()
+    return summarise(monitor, jobs, first, time.monotonic() - wall_start)

@@ -1,0 +1,87 @@
+"""Watching the fleet: :class:`FleetMonitor`, the demo's (and the system tests') eyes and hands on the
+topics, and :func:`spin_until`, a bounded wait on an executor."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.executors import Executor
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from fleet_planner.checker import min_separation
+from fleet_planner.fleet import samples_to_path
+from fleet_planner.model import TimedPath
+from fleet_planner.ros.drain import create_draining_subscription
+from fleet_planner.ros.submit import planner_matched
+from msg_schemas import topics
+from msg_schemas.convert import string_to_record
+from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent
+
+
+class FleetMonitor(Node):
+    """Submits tasks and records what the fleet reports: every task event, and every robot's
+    positions (x, y, stamp) from its status messages."""
+
+    def __init__(self, name: str = "fleet_monitor", **kwargs: Any):
+        super().__init__(name, **kwargs)
+        self.events: list[TaskEvent] = []
+        self.last_event: dict[str, TaskEvent] = {}
+        self.tracks: dict[str, list[tuple[float, float, float]]] = {}
+        self.radius: dict[str, float] = {}
+        self.status: dict[str, RobotStatus] = {}
+        self._tasks = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
+        # every waiting message at each wake-up, as the planner and the agents (see drain.py)
+        self._events = create_draining_subscription(self, String, topics.TASK_EVENTS, self._on_event,
+                                                    topics.TASK_EVENTS_QOS)
+        create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+
+    def now(self) -> float:
+        return self.get_clock().now().nanoseconds / 1e9
+
+    def submit(self, task: Task | str) -> None:
+        self._tasks.publish(String(data=task if isinstance(task, str) else task.to_json()))
+
+    def planner_ready(self) -> bool:
+        return planner_matched(self, self._tasks, self._events)
+
+    def _on_event(self, msg: String) -> None:
+        try:
+            ev = string_to_record(msg, TaskEvent)
+        except RecordError as exc:
+            self.get_logger().warning(f"task event ignored: {exc}")
+            return
+        self.events.append(ev)
+        self.last_event[ev.task_id] = ev
+
+    def _on_status(self, msg: String) -> None:
+        try:
+            st = string_to_record(msg, RobotStatus)
+        except RecordError as exc:
+            self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
+            return
+        self.status[st.id] = st
+        self.radius[st.id] = st.radius
+        self.tracks.setdefault(st.id, []).append((st.x, st.y, st.stamp))
+
+    def events_of(self, task_id: str) -> list[TaskEvent]:
+        return [e for e in self.events if e.task_id == task_id]
+
+    def trajectories(self) -> list[TimedPath]:
+        """Each robot's reported positions as a timed path (straight between reports)."""
+        return [samples_to_path(rid, self.radius[rid], track) for rid, track in self.tracks.items()]
+
+    def min_separation(self) -> tuple[float, str | None, str | None, float | None]:
+        """Smallest distance minus the sum of radii over all pairs and all reported times."""
+        return min_separation(self.trajectories())
+
+
+def spin_until(executor: Executor, condition: Callable[[], bool], timeout: float, step: float = 0.05) -> bool:
+    """Spin ``executor`` until ``condition()`` holds or ``timeout`` wall seconds pass; returns it."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        executor.spin_once(timeout_sec=step)
+    return True
