@@ -136,12 +136,16 @@ class ConfigSearch:
         self.n = len(starts)
         fields, row = graph.distance_fields(goals)
         self.fields = fields
-        self.dist = [fields[row[i]] for i in range(self.n)]
+        # plain lists: the PIBT loop reads single entries, which lists serve fastest
+        rows = [r.tolist() for r in fields]
+        self.dist: list[list[int]] = [rows[row[i]] for i in range(self.n)]
         self.rng = random.Random(seed)
+        self.np_rng = np.random.default_rng(seed)
         self.occ_now = [NIL] * graph.n
         self.occ_next = [NIL] * graph.n
         self.expanded = 0
         self.starts_now: Sequence[int] = self.starts
+        self.tie: list[float] = [0.0] * graph.n
 
     def unreachable(self) -> list[int]:
         """Robots whose goal cannot be reached from their start."""
@@ -203,6 +207,7 @@ class ConfigSearch:
         for i, v in enumerate(q_from):
             occ_now[v] = i
         self.starts_now = q_from
+        self.tie = self.np_rng.random(self.graph.n).tolist()   # fresh tie-breaking per step
         try:
             for i, v in zip(c.who, c.where):
                 if occ_next[v] != NIL:
@@ -231,9 +236,14 @@ class ConfigSearch:
         occ_now, occ_next = self.occ_now, self.occ_next
         here = q_from[i]
         d = self.dist[i]
+        if d[here] == 0 and occ_next[here] == NIL:
+            # on its goal with nobody pushing: it stays (the sort below would say so, and no swap applies)
+            q_to[i] = here
+            occ_next[here] = i
+            return True
+        tie = self.tie
         cands = self.graph.neighbours[here] + [here]
-        self.rng.shuffle(cands)
-        cands.sort(key=lambda v: (d[v], occ_now[v] != NIL))
+        cands.sort(key=lambda v: (d[v], occ_now[v] != NIL, tie[v]))
         puller = self._swap_partner(i, cands[0], q_to)
         if puller != NIL:
             cands.reverse()

@@ -137,15 +137,18 @@ def timed_paths(timing: Timing, centres: np.ndarray, starts: Sequence[int], ids:
     """One timed path per robot: holds where a precedence makes it wait, collinear moves driven
     without a stop merged into one segment. ``centres`` is (cells, 2)."""
     out = []
+    start, end = timing.start.tolist(), timing.end.tolist()
+    src, dst = centres[timing.src].tolist(), centres[timing.dst].tolist()
+    first = timing.first.tolist()
+    xy = centres[np.asarray(starts)].tolist()
     for i, rid in enumerate(ids):
-        lo, hi = int(timing.first[i]), int(timing.first[i + 1])
-        x0, y0 = centres[starts[i]]
-        wp: list[list[float]] = [[float(x0), float(y0), 0.0]]
-        last_dir: tuple[int, int] | None = None
+        lo, hi = first[i], first[i + 1]
+        wp: list[list[float]] = [[xy[i][0], xy[i][1], 0.0]]
+        last_dir: tuple[float, float] | None = None
         for k in range(lo, hi):
-            s, e = float(timing.start[k]), float(timing.end[k])
-            p, q = centres[timing.src[k]], centres[timing.dst[k]]
-            direction = (int(np.sign(q[0] - p[0])), int(np.sign(q[1] - p[1])))
+            s, e = start[k], end[k]
+            p, q = src[k], dst[k]
+            direction = (q[0] - p[0], q[1] - p[1])
             if s > wp[-1][2]:
                 wp.append([float(p[0]), float(p[1]), s])
                 last_dir = None
@@ -163,24 +166,25 @@ def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
     k-th such cell along j's path. T1 = i starts to move into the cell (0 for its start cell),
     T4 = i has arrived in its next cell, T2 = j starts to move in, T3 = j has arrived in its next
     cell (inf when the cell is j's goal)."""
-    first, robot = timing.first, timing.robot
+    first, robot = timing.first.tolist(), timing.robot.tolist()
+    start, end = timing.start.tolist(), timing.end.tolist()
     links = []
     count: dict[int, int] = {}
     for out_move, in_move in sorted(timing.visits, key=lambda p: p[1]):
-        hi, lo = int(robot[out_move]), int(robot[in_move])
+        hi, lo = robot[out_move], robot[in_move]
         k = count[lo] = count.get(lo, 0) + 1
         entry_hi = out_move - 1 if out_move > first[hi] else NIL
-        t1 = float(timing.start[entry_hi]) if entry_hi != NIL else 0.0
-        t4 = float(timing.end[out_move])
-        t2 = float(timing.start[in_move])
-        t3 = float(timing.end[in_move + 1]) if in_move + 1 < first[lo + 1] else math.inf
+        t1 = start[entry_hi] if entry_hi != NIL else 0.0
+        t4 = end[out_move]
+        t2 = start[in_move]
+        t3 = end[in_move + 1] if in_move + 1 < first[lo + 1] else math.inf
         ls = (in_move - first[lo]) * step_m
         le = ls + (2 if math.isfinite(t3) else 1) * step_m
         links.append(Link(ids[hi], ids[lo], k, t3 - t1, t4 - t2, t1, t4, float(ls), float(le)))
     n = len(ids)
     delay, travel = {}, {}
     for i in range(n):
-        lo, hi_ = int(first[i]), int(first[i + 1])
-        delay[ids[i]] = float(timing.start[lo]) if hi_ > lo else 0.0
-        travel[ids[i]] = float(timing.end[hi_ - 1]) - delay[ids[i]] if hi_ > lo else 0.0
+        lo, hi_ = first[i], first[i + 1]
+        delay[ids[i]] = start[lo] if hi_ > lo else 0.0
+        travel[ids[i]] = end[hi_ - 1] - delay[ids[i]] if hi_ > lo else 0.0
     return Network(list(ids), delay, travel, links, None)
