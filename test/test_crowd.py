@@ -13,7 +13,7 @@ from fleet_planner.grid import GridMap
 from fleet_planner.model import Plan, PlanningError, RobotSpec, TimedPath
 from fleet_planner.planners import get_planner
 from fleet_planner.planners.crowd import CrowdPlanner
-from fleet_planner.planners.crowd_pibt import CellGraph, ConfigSearch, _valid_step
+from fleet_planner.planners.crowd_pibt import CellGraph, ConfigSearch, _valid_step, remove_loops
 from fleet_planner.planners.crowd_timing import time_moves
 
 # a 1-cell aisle with one side pocket; two robots each way must pass each other
@@ -89,6 +89,15 @@ def test_timing_keeps_each_cell_order_and_own_speed():
              TimedPath("r1", 0.4, [[0.5, 0.5, 0.8], [1.5, 0.5, 1.8]])]
     assert check_plan(grid, robots, Plan("by-hand", paths)) == []
     assert 0.0 <= min_separation(paths)[0] < 0.2   # close behind, never touching
+
+
+def test_detours_are_cut_where_nobody_else_needs_the_cell():
+    # r0 goes 5 -> 6 -> 5 -> 4; r1 passes through 6 meanwhile, nobody through 5
+    configs = np.array([[5, 7], [6, 8], [5, 9], [4, 9]])
+    assert remove_loops(configs)[:, 0].tolist() == [5, 5, 5, 4]
+    # r1 uses 5 while r0 is away: r0's detour stays (r1's own 4 -> 5 -> 4 is cut: 4 stays free)
+    busy = np.array([[5, 4], [6, 5], [5, 4], [4, 3]])
+    assert remove_loops(busy).tolist() == [[5, 4], [6, 4], [5, 4], [4, 3]]
 
 
 def test_no_rings_of_followers():

@@ -8,7 +8,8 @@ safe for discs in continuous time:
    for Quick Multi-Agent Pathfinding", AAAI 2023) with PIBT (Okumura et al., "Priority Inheritance
    with Backtracking for Iterative Multi-agent Path Finding", AIJ 2022) as the successor generator,
    on the 4-connected graph of cell centres, with transition rules for discs (no vertex or swap
-   conflicts, no rings of robots following each other).
+   conflicts, no rings of robots following each other); then detours are cut where a robot could
+   have waited instead (:func:`.crowd_pibt.remove_loops`).
 2. **Timing by precedence** (:mod:`.crowd_timing`): the order in which the discrete plan visits each
    cell is kept as (M,D)-network links with a chosen order (docs/ARCHITECTURE.md, "The (M,D)
    vocabulary"); each robot's earliest times along its cell path follow by a longest-path pass
@@ -35,7 +36,7 @@ import numpy as np
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from .base import Planner, Progress
-from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, moves_of
+from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, moves_of, remove_loops
 from .crowd_timing import network, time_moves, timed_paths
 
 
@@ -78,7 +79,7 @@ class CrowdPlanner(Planner):
             progress(1, 2, "timing by precedence")
         res = grid.resolution
         centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
-        timing = time_moves(moves_of(configs), [res / r.max_speed for r in robots], centres,
+        timing = time_moves(remove_loops(moves_of(configs)), [res / r.max_speed for r in robots], centres,
                             [r.radius for r in robots], res)
         paths = timed_paths(timing, centres, starts, [r.id for r in robots], [r.radius for r in robots])
         net = network(timing, [r.id for r in robots], res) if self.with_network else None

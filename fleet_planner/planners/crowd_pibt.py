@@ -373,3 +373,33 @@ def _valid_step(q_from: Sequence[int], q_to: Sequence[int], occ_now: Sequence[in
 def moves_of(configs: Sequence[Config]) -> np.ndarray:
     """The configurations as an array (steps + 1, robots)."""
     return np.asarray(configs, dtype=np.int64).reshape(len(configs), -1)
+
+
+def remove_loops(configs: np.ndarray) -> np.ndarray:
+    """The plan with detours cut: where a robot leaves a cell and comes back to it later while no
+    other robot enters that cell in between, it waits there instead (PIBT wanders when it gives
+    way). Cutting a detour only removes moves and occupancies of that robot, and the cell it waits
+    on is nobody else's meanwhile, so every step stays valid under the transition rules."""
+    out = configs.copy()
+    n = out.shape[1]
+    for i in range(n):
+        path = out[:, i]
+        starts = np.flatnonzero(np.concatenate([[True], path[1:] != path[:-1]]))   # runs of one cell
+        cells = path[starts].tolist()
+        ends = np.concatenate([starts[1:] - 1, [len(path) - 1]]).tolist()
+        last: dict[int, int] = {}
+        for k, c in enumerate(cells):
+            last[c] = k
+        k = 0
+        while k < len(cells):
+            back = last[cells[k]]
+            if back > k:
+                t, u = ends[k], starts[back]   # it leaves after t and is back at u
+                window = out[t:u + 1] == cells[k]
+                window[:, i] = False
+                if not window.any():
+                    path[t:u + 1] = cells[k]
+                    k = back
+                    continue
+            k += 1
+    return out
