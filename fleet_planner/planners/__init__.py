@@ -48,6 +48,7 @@ register("md-box", "fleet_planner.planners.md:MDPlanner",
          "the (M,D) network of You & Ji with the paper's collision boxes", mode="box")
 register("prior", "fleet_planner.planners.prior:PriorPlanner",
          "prioritized planning in space-time (van den Berg & Overmars)")
+register("crowd", "fleet_planner.planners.crowd:CrowdPlanner", "LaCAM/PIBT for dense crowds, timed by precedence")
 
 
 def planner_names() -> list[str]:

@@ -1,0 +1,138 @@
+"""The crowd planner: dense crowds of disc robots on the grid graph (issue 11, deliverables 1-2).
+
+Prioritized planning (md, PRIOR) fails by construction where robots must step aside for each other
+in 1-cell aisles. This planner searches the space of configurations instead and makes the result
+safe for discs in continuous time:
+
+1. **Configuration search** (:mod:`.crowd_pibt`): LaCAM (Okumura, "LaCAM: Search-Based Algorithm
+   for Quick Multi-Agent Pathfinding", AAAI 2023) with PIBT (Okumura et al., "Priority Inheritance
+   with Backtracking for Iterative Multi-agent Path Finding", AIJ 2022) as the successor generator,
+   on the 4-connected graph of cell centres, with transition rules for discs (no vertex or swap
+   conflicts, no rings of robots following each other); then detours are cut where a robot could
+   have waited instead (:func:`.crowd_pibt.remove_loops`).
+2. **Timing by precedence** (:mod:`.crowd_timing`): the order in which the discrete plan visits each
+   cell is kept as (M,D)-network links with a chosen order (docs/ARCHITECTURE.md, "The (M,D)
+   vocabulary"); each robot's earliest times along its cell path follow by a longest-path pass
+   over those precedences at its own top speed; collinear moves without a stop are merged.
+
+Why the result is valid (the independent checker, ``checker.check_plan``, is the judge of every
+test and benchmark): no cell is ever held by two robots at once, and two robots on distinct cells
+of the lattice are at least one cell step apart, which is >= r_i + r_j - the planner refuses
+(PlanningError) pairs with a larger sum, starts and goals off cell centres, and goals that cannot
+be reached. Robots drive at constant speed between waypoints (``max_accel`` is not used yet: speed
+changes are instantaneous, which the plan contract allows).
+
+``plan_incremental`` plans new legs around driven trajectories with PRIOR's space-time search
+(the fixed robots as moving obstacles): a configuration search cannot move robots that are not its
+own.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..grid import GridMap
+from ..model import Plan, PlanningError, RobotSpec, TimedPath
+from .base import Planner, Progress
+from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, moves_of, remove_loops
+from .crowd_timing import network, time_moves, timed_paths
+
+
+class CrowdPlanner(Planner):
+    """LaCAM/PIBT on the grid graph, timed by precedence (see the module docstring).
+
+    ``time_limit_s``: budget of the configuration search; ``seed``: PIBT's tie-breaking;
+    ``network``: also return the (M,D) network of the chosen order (``Plan.network``).
+    """
+
+    name = "crowd"
+
+    def __init__(self, time_limit_s: float = 30.0, seed: int = 0, network: bool = True):
+        if not time_limit_s > 0:
+            raise ValueError(f"time_limit_s: must be > 0 (got {time_limit_s!r})")
+        self.time_limit_s = float(time_limit_s)
+        self.seed = int(seed)
+        self.with_network = bool(network)
+
+    def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
+        t_start = time.perf_counter()
+        robots = list(robots)
+        if not robots:
+            return Plan(self.name, [], 0.0, {"steps": 0, "configurations": 0})
+        _check_radii(grid, robots)
+        graph = CellGraph(grid, max(r.radius for r in robots))
+        starts, goals = _cells(graph, robots)
+        if progress:
+            progress(0, 2, "configuration search")
+        search = ConfigSearch(graph, starts, goals, self.seed)
+        cut = search.unreachable()
+        if cut:
+            raise PlanningError({robots[i].id: "its goal cannot be reached from its start on the grid graph "
+                                 "of cells its disc fits on" for i in cut})
+        try:
+            configs = search.solve(t_start + self.time_limit_s)
+        except SearchFailed as exc:
+            raise PlanningError({r.id: f"crowd planner: {exc.reason}" for r in robots}) from None
+        if progress:
+            progress(1, 2, "timing by precedence")
+        res = grid.resolution
+        centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
+        timing = time_moves(remove_loops(moves_of(configs)), [res / r.max_speed for r in robots], centres,
+                            [r.radius for r in robots], res)
+        paths = timed_paths(timing, centres, starts, [r.id for r in robots], [r.radius for r in robots])
+        net = network(timing, [r.id for r in robots], res) if self.with_network else None
+        if progress:
+            progress(2, 2, "done")
+        info = {"steps": len(configs) - 1, "configurations": search.expanded,
+                "precedences": len(timing.visits)}
+        return Plan(self.name, paths, time.perf_counter() - t_start, info, net)
+
+    def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
+                         t0: float) -> list[TimedPath]:
+        """New legs around driven trajectories: the fixed robots are moving obstacles, the new ones
+        are planned one after another in space-time (PRIOR, van den Berg & Overmars)."""
+        from .prior import PriorPlanner
+
+        return PriorPlanner().plan_incremental(grid, robots, fixed, t0)
+
+
+def _check_radii(grid: GridMap, robots: Sequence[RobotSpec]) -> None:
+    """Distinct cells are one step apart: every pair's radius sum must fit in that."""
+    step = grid.resolution
+    widest = max(r.radius for r in robots)
+    second = sorted(r.radius for r in robots)[-2] if len(robots) > 1 else 0.0
+    if widest + second > step + 1e-9:
+        wide = {}
+        for r in robots:
+            other = second if r.radius == widest else widest
+            if r.radius + other > step + 1e-9:
+                wide[r.id] = (f"radius {r.radius:g} m: the crowd planner needs r_i + r_j <= the cell step "
+                              f"{step:g} m for every pair")
+        raise PlanningError(wide)
+
+
+def _cells(graph: CellGraph, robots: Sequence[RobotSpec]) -> tuple[list[int], list[int]]:
+    failures: dict[str, str] = {}
+    starts, goals = [], []
+    for r in robots:
+        s, g = graph.cell(*r.start), graph.cell(*r.goal)
+        if s == NIL:
+            failures[r.id] = f"start {r.start} is not the centre of a free cell its disc fits on"
+        elif g == NIL:
+            failures[r.id] = f"goal {r.goal} is not the centre of a free cell its disc fits on"
+        starts.append(s)
+        goals.append(g)
+    for what, cells in (("start", starts), ("goal", goals)):
+        seen: dict[int, str] = {}
+        for r, c in zip(robots, cells):
+            if c != NIL and c in seen:
+                failures[r.id] = f"its {what} cell is {seen[c]}'s {what} cell too"
+            seen.setdefault(c, r.id)
+    if failures:
+        raise PlanningError(failures)
+    return starts, goals
+
+
+__all__ = ["CrowdPlanner"]

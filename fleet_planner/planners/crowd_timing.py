@@ -1,0 +1,190 @@
+"""The continuous half of the crowd planner: from a discrete plan to timed paths by precedence.
+
+A discrete plan (one cell per robot per step, from :mod:`.crowd_pibt`) says in which order robots
+visit each cell. We keep that order and nothing else of its timing:
+
+* each robot drives its own cell sequence at its own top speed, one *move* (centre to centre) after
+  the other; a robot *holds* a cell from the start of the move into it to the end of the move out
+  of it (parked robots hold their start from the beginning and their goal for ever);
+* for every cell, each visit may begin (the next robot starts to move in) only when the previous
+  visit by another robot has ended (that robot has *arrived* in its next cell). These are the links
+  of the (M,D) network of You & Ji, "Design of a Multi-robot Bin Packing System in an Automatic
+  Warehouse" (docs/ARCHITECTURE.md, "The (M,D) vocabulary") with the order chosen by the discrete
+  plan: the earlier visitor is the higher robot, and with D <= 0 no link is dangerous;
+* earliest times follow by a longest-path pass over those precedences (each move has at most two
+  predecessors: the robot's own previous move and the previous visitor's move out of the cell),
+  level by level with numpy.
+
+Why this is safe for discs with r_i + r_j <= cell step: at any instant a robot is on the segment
+between the (one or two) cells it holds, and no cell is held by two robots at once except at the
+instant of hand-over, when the leaving robot is exactly on its next centre and the entering one
+exactly on its previous centre. Two axis-aligned unit segments of the lattice of cell centres that
+share no point are at least one step apart, so every pair keeps >= step >= r_i + r_j.
+
+The one exception: a robot that follows another in the same direction may start to move into the
+cell while the other is still leaving it (see :func:`time_moves`); the two are then on one line and
+their gap is computed exactly, while every other robot keeps off that cell as before. Trains of
+robots thus drive down an aisle one step apart instead of two.
+
+Collinear moves driven without a stop in between are merged into one segment.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import Link, Network, TimedPath
+
+NIL = -1
+
+
+@dataclass
+class Timing:
+    """Timed moves: move m of robot ``robot[m]`` at discrete ``step[m]`` from cell ``src[m]`` to
+    ``dst[m]``, starting at ``start[m]`` and ending at ``end[m]``; ``after_cell[m]`` is the move
+    (of another robot, or NIL) it waits for."""
+
+    robot: np.ndarray
+    step: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    after_cell: np.ndarray
+    first: np.ndarray      # (robots + 1,) robot i's moves are first[i]:first[i + 1]
+    visits: list[tuple[int, int]]   # consecutive visits of a cell by two robots: (move out, move in)
+
+
+def time_moves(configs: np.ndarray, durations: Sequence[float], centres: np.ndarray | None = None,
+               radii: Sequence[float] | None = None, step_m: float = 1.0) -> Timing:
+    """Earliest start and end of every move of the discrete plan ``configs`` ((steps + 1, robots)
+    cell indices) under the precedences of the module docstring; ``durations[i]`` is how long
+    robot i takes for one move of ``step_m`` metres.
+
+    With ``centres`` ((cells, 2) metres) and ``radii``, a robot that follows another in the same
+    direction (its move into the cell is collinear with the other's move out of it) may start
+    before the other has arrived: both are on one line, the follower behind, and the gap between
+    them, ``step + (t - S_j) v_j - (t - S_i) v_i``, is smallest when the leader arrives (or at the
+    follower's start), so ``S_i >= max(S_j, E_j - (2 step - r_i - r_j) / v_i)`` keeps it >= r_i + r_j."""
+    n = configs.shape[1]
+    moving = configs[1:] != configs[:-1]                       # (steps, robots)
+    robot, step = np.nonzero(moving.T)                         # robot-major, steps ascending
+    src, dst = configs[step, robot], configs[step + 1, robot]
+    m = len(robot)
+    first = np.searchsorted(robot, np.arange(n + 1))
+    idx = np.arange(m)
+    after_own = np.where((idx > 0) & (np.roll(robot, 1) == robot), idx - 1, NIL)
+    next_own = np.where((idx < m - 1) & (np.roll(robot, -1) == robot), idx + 1, NIL)
+    # visits: every start (entry step -1, no entry move) and every move's destination
+    has_moves = first[1:] > first[:-1]
+    v_cell = np.concatenate([configs[0], dst])
+    v_entry_step = np.concatenate([np.full(n, -1), step])
+    v_entry_move = np.concatenate([np.full(n, NIL), idx])
+    v_exit_move = np.concatenate([np.where(has_moves, first[:-1], NIL), next_own])
+    v_robot = np.concatenate([np.arange(n), robot])
+    order = np.lexsort((v_entry_step, v_cell))
+    same = v_cell[order[1:]] == v_cell[order[:-1]]
+    a, b = order[:-1][same], order[1:][same]                   # a visited the cell just before b
+    if np.any(v_exit_move[a] == NIL) or np.any(v_entry_move[b] == NIL):
+        raise AssertionError("discrete plan: a cell is visited after a robot parked on it for good")
+    after_cell = np.full(m, NIL)
+    other = v_robot[a] != v_robot[b]
+    after_cell[v_entry_move[b]] = np.where(other, v_exit_move[a], NIL)
+    visits = list(zip(v_exit_move[a][other].tolist(), v_entry_move[b][other].tolist()))
+    # levels: by step, then by depth in the chains of robots following each other within a step
+    depth = np.zeros(m, dtype=np.int64)
+    chained = (after_cell != NIL) & (step[np.maximum(after_cell, 0)] == step)
+    src_c, dst_c = np.nonzero(chained)[0], after_cell[chained]
+    for _ in range(n):
+        new = depth[dst_c] + 1
+        if np.all(depth[src_c] >= new):
+            break
+        depth[src_c] = np.maximum(depth[src_c], new)
+    dur = np.asarray(durations, dtype=float)[robot]
+    # slack[m]: how long before the previous holder's arrival move m may start (same direction only)
+    slack = np.zeros(m)
+    if centres is not None and radii is not None:
+        has = after_cell != NIL
+        p = after_cell[has]
+        mine = np.nonzero(has)[0]
+        d_in = centres[dst[mine]] - centres[src[mine]]
+        d_out = centres[dst[p]] - centres[src[p]]
+        same_way = np.all(np.abs(d_in - d_out) < 1e-9, axis=1)
+        rad = np.asarray(radii, dtype=float)
+        reach = rad[robot[mine]] + rad[robot[p]]
+        slack[mine] = np.where(same_way, np.maximum(2 * step_m - reach, 0.0) * dur[mine] / step_m, 0.0)
+    start = np.zeros(m)
+    end = np.zeros(m)
+    level = step * (int(depth.max(initial=0)) + 1) + depth
+    by_level = np.argsort(level, kind="stable")
+    bounds = np.flatnonzero(np.diff(level[by_level])) + 1
+    for group in np.split(by_level, bounds):
+        own, cell = after_own[group], after_cell[group]
+        t = np.zeros(len(group))
+        t = np.where(own != NIL, np.maximum(t, end[np.maximum(own, 0)]), t)
+        c = np.maximum(cell, 0)
+        t = np.where(cell != NIL, np.maximum(t, np.maximum(start[c], end[c] - slack[group])), t)
+        start[group] = t
+        end[group] = t + dur[group]
+    return Timing(robot, step, src, dst, start, end, after_cell, first, visits)
+
+
+def timed_paths(timing: Timing, centres: np.ndarray, starts: Sequence[int], ids: Sequence[str],
+                radii: Sequence[float]) -> list[TimedPath]:
+    """One timed path per robot: holds where a precedence makes it wait, collinear moves driven
+    without a stop merged into one segment. ``centres`` is (cells, 2)."""
+    out = []
+    start, end = timing.start.tolist(), timing.end.tolist()
+    src, dst = centres[timing.src].tolist(), centres[timing.dst].tolist()
+    first = timing.first.tolist()
+    xy = centres[np.asarray(starts)].tolist()
+    for i, rid in enumerate(ids):
+        lo, hi = first[i], first[i + 1]
+        wp: list[list[float]] = [[xy[i][0], xy[i][1], 0.0]]
+        last_dir: tuple[float, float] | None = None
+        for k in range(lo, hi):
+            s, e = start[k], end[k]
+            p, q = src[k], dst[k]
+            direction = (q[0] - p[0], q[1] - p[1])
+            if s > wp[-1][2]:
+                wp.append([float(p[0]), float(p[1]), s])
+                last_dir = None
+            elif last_dir == direction and len(wp) > 1:
+                wp.pop()   # a straight run without a stop: one segment
+            wp.append([float(q[0]), float(q[1]), e])
+            last_dir = direction
+        out.append(TimedPath(rid, float(radii[i]), np.asarray(wp)))
+    return out
+
+
+def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
+    """The (M,D) network of the chosen order: per pair of consecutive visits of a cell by two
+    robots, a link from the earlier visitor i (higher) to the later j (lower); region k is the
+    k-th such cell along j's path. T1 = i starts to move into the cell (0 for its start cell),
+    T4 = i has arrived in its next cell, T2 = j starts to move in, T3 = j has arrived in its next
+    cell (inf when the cell is j's goal)."""
+    first, robot = timing.first.tolist(), timing.robot.tolist()
+    start, end = timing.start.tolist(), timing.end.tolist()
+    links = []
+    count: dict[int, int] = {}
+    for out_move, in_move in sorted(timing.visits, key=lambda p: p[1]):
+        hi, lo = robot[out_move], robot[in_move]
+        k = count[lo] = count.get(lo, 0) + 1
+        entry_hi = out_move - 1 if out_move > first[hi] else NIL
+        t1 = start[entry_hi] if entry_hi != NIL else 0.0
+        t4 = end[out_move]
+        t2 = start[in_move]
+        t3 = end[in_move + 1] if in_move + 1 < first[lo + 1] else math.inf
+        ls = (in_move - first[lo]) * step_m
+        le = ls + (2 if math.isfinite(t3) else 1) * step_m
+        links.append(Link(ids[hi], ids[lo], k, t3 - t1, t4 - t2, t1, t4, float(ls), float(le)))
+    n = len(ids)
+    delay, travel = {}, {}
+    for i in range(n):
+        lo, hi_ = first[i], first[i + 1]
+        delay[ids[i]] = start[lo] if hi_ > lo else 0.0
+        travel[ids[i]] = end[hi_ - 1] - delay[ids[i]] if hi_ > lo else 0.0
+    return Network(list(ids), delay, travel, links, None)

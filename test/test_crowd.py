@@ -1,0 +1,172 @@
+"""The crowd planner (issue 11): LaCAM/PIBT over configurations, timed by precedence for discs.
+
+The independent checker is the oracle of every case."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fleet_planner.checker import check_plan, min_separation
+from fleet_planner.grid import GridMap
+from fleet_planner.model import Plan, PlanningError, RobotSpec, TimedPath
+from fleet_planner.planners import get_planner
+from fleet_planner.planners.crowd import CrowdPlanner
+from fleet_planner.planners.crowd_pibt import CellGraph, ConfigSearch, _valid_step, remove_loops
+from fleet_planner.planners.crowd_timing import time_moves
+
+# a 1-cell aisle with one side pocket; two robots each way must pass each other
+POCKET = ["@@@.@@@", "......."]
+POCKET_ROBOTS = [RobotSpec("a", 0.40, 1.0, (0.5, 1.5), (6.5, 1.5)), RobotSpec("b", 0.45, 0.7, (6.5, 1.5), (0.5, 1.5)),
+                 RobotSpec("c", 0.35, 0.8, (1.5, 1.5), (5.5, 1.5)), RobotSpec("d", 0.35, 0.9, (5.5, 1.5), (1.5, 1.5))]
+
+
+def test_a_dense_aisle_that_prioritized_planning_refuses_is_solved():
+    grid = GridMap.from_rows(POCKET)
+    with pytest.raises(PlanningError):
+        get_planner("md").plan(grid, POCKET_ROBOTS)
+    plan = get_planner("crowd").plan(grid, POCKET_ROBOTS)
+    assert plan.planner == "crowd"
+    assert check_plan(grid, POCKET_ROBOTS, plan) == []
+    # somebody stepped aside into the pocket
+    assert any(np.any(np.isclose(p.waypoints[:, 1], 0.5)) for p in plan.paths)
+    # the plan's network: every link keeps the order of the discrete plan - the later robot enters
+    # no earlier than the earlier one starts to leave (D <= the leader's move time; D > 0 only for a
+    # robot following in the same direction)
+    assert plan.network is not None and plan.network.links
+    speed = {r.id: r.max_speed for r in POCKET_ROBOTS}
+    assert all(link.D <= 1.0 / speed[link.i] + 1e-9 for link in plan.network.links)
+
+
+def test_the_corner_case_point_agents_collide_our_discs_do_not():
+    """j turns out of the cell B that i enters in the same step: driven in lock-step (what a
+    point-agent MAPF plan means) the centres come 0.707 m close against r_i + r_j = 0.8 m; the
+    precedence pass lets i start only once j has arrived."""
+    grid = GridMap.from_rows(["..", ".."])
+    a, b, c = (0.5, 1.5), (1.5, 1.5), (1.5, 0.5)     # i: A -> B, j: B -> C (a right-angle turn)
+    robots = [RobotSpec("i", 0.4, 1.0, a, b), RobotSpec("j", 0.4, 1.0, b, c)]
+    graph = CellGraph(grid, 0.4)
+    starts, goals = [graph.cell(*a), graph.cell(*b)], [graph.cell(*b), graph.cell(*c)]
+    configs = ConfigSearch(graph, starts, goals).solve(float("inf"))
+    assert configs == [tuple(starts), tuple(goals)]   # one step: i follows j round the corner
+    lockstep = Plan("points", [TimedPath("i", 0.4, [[*a, 0.0], [*b, 1.0]]),
+                               TimedPath("j", 0.4, [[*b, 0.0], [*c, 1.0]])])
+    assert [v.kind for v in check_plan(grid, robots, lockstep)] == ["collision"]
+    assert min_separation(lockstep.paths)[0] == pytest.approx(np.sqrt(0.5) - 0.8)
+    plan = CrowdPlanner().plan(grid, robots)
+    assert check_plan(grid, robots, plan) == []
+    i, j = plan.by_id()["i"], plan.by_id()["j"]
+    assert j.arrival_time == pytest.approx(1.0)
+    assert i.start_time == pytest.approx(j.arrival_time) and i.arrival_time == pytest.approx(2.0)
+    assert min_separation(plan.paths)[0] >= -1e-9
+
+
+def test_trains_follow_and_collinear_moves_are_merged():
+    grid = GridMap.from_rows(["." * 8])
+    robots = [RobotSpec(f"r{k}", 0.45, 1.0, (k + 0.5, 0.5), (k + 4.5, 0.5)) for k in range(3)]
+    plan = CrowdPlanner().plan(grid, robots)
+    assert check_plan(grid, robots, plan) == []
+    lead = plan.by_id()["r2"]
+    assert lead.waypoints.tolist() == [[2.5, 0.5, 0.0], [6.5, 0.5, 4.0]]   # one straight segment
+    assert all(p.arrival_time <= 6.0 + 1e-9 for p in plan.paths)
+
+
+def test_timing_keeps_each_cell_order_and_own_speed():
+    # two robots, one cell 0 -> 1 -> 2 in a row: r0 from 1 to 2, r1 from 0 to 1 (follows)
+    configs = np.array([[1, 0], [2, 1]])
+    timing = time_moves(configs, [2.0, 1.0])
+    assert timing.start.tolist() == [0.0, 2.0] and timing.end.tolist() == [2.0, 3.0]
+    assert timing.visits == [(0, 1)]
+    # following in the same direction: the follower (1 m/s) may start once the slow leader (0.5 m/s)
+    # starts 2 - 0.8 m before the leader arrives
+    centres = np.array([[0.5, 0.5], [1.5, 0.5], [2.5, 0.5]])
+    close = time_moves(configs, [2.0, 1.0], centres, [0.4, 0.4], 1.0)
+    assert close.start.tolist() == pytest.approx([0.0, 0.8])
+    grid = GridMap.from_rows(["..."])
+    robots = [RobotSpec("r0", 0.4, 0.5, (1.5, 0.5), (2.5, 0.5)), RobotSpec("r1", 0.4, 1.0, (0.5, 0.5), (1.5, 0.5))]
+    paths = [TimedPath("r0", 0.4, [[1.5, 0.5, 0.0], [2.5, 0.5, 2.0]]),
+             TimedPath("r1", 0.4, [[0.5, 0.5, 0.8], [1.5, 0.5, 1.8]])]
+    assert check_plan(grid, robots, Plan("by-hand", paths)) == []
+    assert 0.0 <= min_separation(paths)[0] < 0.2   # close behind, never touching
+
+
+def test_detours_are_cut_where_nobody_else_needs_the_cell():
+    # r0 goes 5 -> 6 -> 5 -> 4; r1 passes through 6 meanwhile, nobody through 5
+    configs = np.array([[5, 7], [6, 8], [5, 9], [4, 9]])
+    assert remove_loops(configs)[:, 0].tolist() == [5, 5, 5, 4]
+    # r1 uses 5 while r0 is away: r0's detour stays (r1's own 4 -> 5 -> 4 is cut: 4 stays free)
+    busy = np.array([[5, 4], [6, 5], [5, 4], [4, 3]])
+    assert remove_loops(busy).tolist() == [[5, 4], [6, 4], [5, 4], [4, 3]]
+
+
+def test_no_rings_of_followers():
+    # four robots round a 2x2 block, each into the next one's cell: a rotation
+    assert not _valid_step([0, 1, 3, 2], [1, 3, 2, 0], _occ([0, 1, 3, 2], 4))
+    assert _valid_step([0, 1], [1, 3], _occ([0, 1], 4))   # a chain is fine
+
+
+def _occ(config, n):
+    occ = [-1] * n
+    for i, v in enumerate(config):
+        occ[v] = i
+    return occ
+
+
+def test_refusals_name_the_robots():
+    grid = GridMap.from_rows(["....", "...."])
+    with pytest.raises(PlanningError, match="r_i \\+ r_j <= the cell step"):
+        CrowdPlanner().plan(grid, [RobotSpec("a", 0.6, 1.0, (0.5, 0.5), (3.5, 0.5)),
+                                   RobotSpec("b", 0.45, 1.0, (0.5, 1.5), (3.5, 1.5))])
+    with pytest.raises(PlanningError, match="not the centre of a free cell") as err:
+        CrowdPlanner().plan(grid, [RobotSpec("a", 0.4, 1.0, (0.7, 0.5), (3.5, 0.5))])
+    assert set(err.value.failures) == {"a"}
+    walled = GridMap.from_rows([".@.."])
+    with pytest.raises(PlanningError, match="cannot be reached"):
+        CrowdPlanner().plan(walled, [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), (3.5, 0.5))])
+    swap = GridMap.from_rows(["...."])
+    with pytest.raises(PlanningError, match="no plan exists"):
+        CrowdPlanner().plan(swap, [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), (3.5, 0.5)),
+                                   RobotSpec("b", 0.4, 1.0, (3.5, 0.5), (0.5, 0.5))])
+
+
+def test_a_leg_around_a_driven_trajectory():
+    grid = GridMap.from_rows(["." * 8] * 3)
+    planner = get_planner("crowd")
+    first = planner.plan(grid, [RobotSpec("a", 0.4, 1.0, (0.5, 1.5), (7.5, 1.5))])
+    leg = planner.plan_incremental(grid, [RobotSpec("b", 0.4, 1.0, (7.5, 0.5), (0.5, 0.5))], first.paths, 1.0)
+    assert tuple(leg[0].waypoints[0]) == (7.5, 0.5, 1.0)
+    assert min_separation(first.paths + leg)[0] >= -1e-6
+
+
+@st.composite
+def crowds(draw):
+    w, h = draw(st.integers(4, 8)), draw(st.integers(3, 7))
+    density = draw(st.sampled_from([0.0, 0.15, 0.3]))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    blocked = rng.random((h, w)) < density
+    free = [(c, r) for r in range(h) for c in range(w) if not blocked[r, c]]
+    crowd = draw(st.floats(0.25, 0.5))   # a quarter to half of the free cells hold a robot
+    n = max(2, min(12, int(crowd * len(free))))
+    grid = GridMap(blocked, 1.0, "crowd")
+    if len(free) < n:
+        return grid, []
+    starts, goals = rng.permutation(len(free))[:n], rng.permutation(len(free))[:n]
+    robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(0.7, 1.0)),
+                        grid.centre(*free[starts[k]]), grid.centre(*free[goals[k]])) for k in range(n)]
+    return grid, robots
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=crowds())
+def test_every_crowd_plan_is_valid(case):
+    """Dense random crowds (2-12 discs of mixed radii on a quarter to half of the free cells, goals
+    a random permutation, so robots must pass each other): a plan is valid by the checker, or a
+    refusal names robots."""
+    grid, robots = case
+    try:
+        plan = CrowdPlanner(time_limit_s=2.0).plan(grid, robots)
+    except PlanningError as err:
+        assert err.failures and set(err.failures) <= {r.id for r in robots}
+        return
+    assert check_plan(grid, robots, plan) == []
