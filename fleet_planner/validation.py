@@ -60,15 +60,30 @@ class ValidationError(ValueError):
         return type(self)(f"{prefix}: {self}", self.path, self.reason)
 
 
+def printable(text: str, limit: int | None = None) -> str:
+    """``text`` safe to log and to encode: every character that is not printable (control
+    characters, lone UTF-16 surrogates, ...) written as its Python escape (``\\ud800``), and,
+    with ``limit``, cut to at most ``limit`` characters (ending in ``...`` where it was cut)."""
+    if not text.isprintable():
+        text = "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text)
+    if limit is not None and len(text) > limit:
+        text = text[:max(0, limit - 3)] + "..."
+    return text
+
+
 def show_json(value: object) -> str:
     """A value as a JSON sender wrote it (``NaN``, ``true``, ``null``, ``'text'``; containers by
-    type name), short enough for an error message."""
+    type name), short enough for an error message and always printable (see :func:`printable`)."""
     if isinstance(value, float) and not math.isfinite(value):
         return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
     if value is None or isinstance(value, bool):
         return json.dumps(value)
-    text = repr(value) if isinstance(value, (str, int, float)) else type(value).__name__
-    return text if len(text) <= 60 else text[:57] + "..."
+    if isinstance(value, int) and abs(value) >= 10 ** 60:
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    if isinstance(value, str):
+        return printable(repr(value[:80]), 60)
+    text = repr(value) if isinstance(value, (int, float)) else type(value).__name__
+    return printable(text, 60)
 
 
 def robot_id_problem(robot_id: object) -> str | None:
@@ -77,7 +92,7 @@ def robot_id_problem(robot_id: object) -> str | None:
         return f"must be a string (got {show_json(robot_id)})"
     if not _ROS_TOKEN.fullmatch(robot_id):
         return ("must be letters, digits and '_' only, not starting with a digit, so that it can be "
-                f"part of a ROS topic name (got {robot_id!r})")
+                f"part of a ROS topic name (got {show_json(robot_id)})")
     return None
 
 
@@ -186,6 +201,8 @@ class Vocabulary:
             bounds = f"in [{lo:g}, {hi:g}]"
 
         def check(value: Any, path: str) -> float:
+            if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 2 ** 1023:
+                self.fail(path, f"must be a finite number (got {show_json(value)})")  # float() overflows
             if (isinstance(value, bool) or not isinstance(value, (int, float))
                     or not (math.isfinite(value) or (infinite and not math.isnan(value)))):
                 self.fail(path, f"must be a finite number (got {self.show(value)})")
@@ -194,20 +211,24 @@ class Vocabulary:
             return float(value)
         return check
 
-    def integer(self, lo: int | None = None) -> Check[int]:
-        """An int (not a bool), ``>= lo`` if given."""
+    def integer(self, lo: int | None = None, hi: int | None = None) -> Check[int]:
+        """An int (not a bool), ``>= lo`` and ``<= hi`` if given."""
         def check(value: Any, path: str) -> int:
             if isinstance(value, bool) or not isinstance(value, int):
                 self.fail(path, f"must be an integer (got {self.show(value)})")
             if lo is not None and value < lo:
-                self.fail(path, f"must be >= {lo} (got {value})")
+                self.fail(path, f"must be >= {lo} (got {show_json(value)})")
+            if hi is not None and value > hi:
+                self.fail(path, f"must be <= {hi} (got {show_json(value)})")
             return value
         return check
 
     def string(self, *, min_len: int = 0, max_len: int | None = None, strip: bool = False,
-               pattern: re.Pattern[str] | None = None) -> Check[str]:
+               pattern: re.Pattern[str] | None = None, printable_only: bool = False) -> Check[str]:
         """A string of ``min_len`` to ``max_len`` characters (not counting the blanks around it if
-        ``strip``: ``string(min_len=1, strip=True)`` refuses ``"  "``), matching ``pattern`` whole."""
+        ``strip``: ``string(min_len=1, strip=True)`` refuses ``"  "``), matching ``pattern`` whole;
+        with ``printable_only``, without control characters or lone surrogates (text that any log
+        can take)."""
         what = ("a string" if min_len == 0 else "a non-empty string" if min_len == 1
                 else f"a string of at least {min_len} characters")
 
@@ -218,6 +239,8 @@ class Vocabulary:
                 self.fail(path, f"must be at most {max_len} characters long (got {self.show(value)})")
             if pattern is not None and not pattern.fullmatch(value):
                 self.fail(path, f"must match {pattern.pattern!r} (got {self.show(value)})")
+            if printable_only and not value.isprintable():
+                self.fail(path, f"must be printable text, no control characters (got {show_json(value)})")
             return value
         return check
 
@@ -249,10 +272,10 @@ class Vocabulary:
         return self._finite(value[0], f"{path}[0]"), self._finite(value[1], f"{path}[1]")
 
     # -- containers --------------------------------------------------------------------------------
-    def list_of(self, item: Check[T], *, unique: bool = False, min_len: int = 0,
+    def list_of(self, item: Check[T], *, unique: bool = False, min_len: int = 0, max_len: int | None = None,
                 types: tuple[type, ...] | None = None) -> Check[tuple[T, ...]]:
-        """A list (of the vocabulary's list types, or ``types``) of at least ``min_len`` items, each
-        checked by ``item`` at ``<path>[i]``; with ``unique``, no item twice. Returns a tuple."""
+        """A list (of the vocabulary's list types, or ``types``) of ``min_len`` to ``max_len`` items,
+        each checked by ``item`` at ``<path>[i]``; with ``unique``, no item twice. Returns a tuple."""
         kinds = types or self.lists
         what = "a non-empty list" if min_len == 1 else f"a list of at least {min_len} items"
 
@@ -262,6 +285,8 @@ class Vocabulary:
             items = cast(Sequence[Any], value)
             if len(items) < min_len:
                 self.fail(path, f"must be {what} (got {self.show(value)})")
+            if max_len is not None and len(items) > max_len:
+                self.fail(path, f"must have at most {max_len} items (got {len(items)})")
             out = tuple(item(v, f"{path}[{i}]") for i, v in enumerate(items))
             if unique and len(set(out)) != len(out):
                 dup = next(v for i, v in enumerate(out) if v in out[:i])
@@ -269,13 +294,20 @@ class Vocabulary:
             return out
         return check
 
-    def dict_of(self, item: Check[T]) -> Check[dict[str, T]]:
-        """A mapping with non-empty string keys, each value checked by ``item`` at ``<path>['key']``."""
+    def dict_of(self, item: Check[T], *, key: Check[str] | None = None,
+                max_len: int | None = None) -> Check[dict[str, T]]:
+        """A mapping with non-empty string keys (each checked by ``key`` if given) and at most
+        ``max_len`` entries, each value checked by ``item`` at ``<path>['key']``."""
+        key_check = key or self._nonempty
+
         def check(value: Any, path: str) -> dict[str, T]:
             out = {}
-            for k, v in self.as_mapping(value, path).items():
-                self._nonempty(k, f"{path} key")
-                out[k] = item(v, f"{path}[{k!r}]")
+            data = self.as_mapping(value, path)
+            if max_len is not None and len(data) > max_len:
+                self.fail(path, f"must have at most {max_len} entries (got {len(data)})")
+            for k, v in data.items():
+                key_check(k, f"{path} key")
+                out[k] = item(v, f"{path}[{show_json(k)}]")
             return out
         return check
 
@@ -295,9 +327,10 @@ class Vocabulary:
         if unknown:
             if self.unknown_sorted:
                 unknown = sorted(unknown)
-            where = path if self.unknown_in == "mapping" else join(path, unknown[0])
-            every = ", ".join(unknown) if "{keys}" in self.unknown else ""
-            self.fail(where, self.unknown.format(key=unknown[0], keys=every, known=", ".join(known)))
+            first = printable(str(unknown[0]), 60)  # a key is input too: shown safe and short
+            where = path if self.unknown_in == "mapping" else join(path, first)
+            every = printable(", ".join(map(str, unknown)), 200) if "{keys}" in self.unknown else ""
+            self.fail(where, self.unknown.format(key=first, keys=every, known=", ".join(known)))
         for name in required:
             if name not in data:
                 where = path if self.missing_in == "mapping" else join(path, name)
@@ -372,4 +405,4 @@ def in_file(path: object, error: type[ValidationError]) -> Iterator[None]:
 
 
 __all__ = ["Check", "ValidationError", "Vocabulary", "all_of", "anything", "check_fields", "in_file", "join",
-           "optional", "read_yaml", "robot_id_problem", "show_json", "spec"]
+           "optional", "printable", "read_yaml", "robot_id_problem", "show_json", "spec"]

@@ -10,6 +10,15 @@ with the path of the offending field, e.g. ``task.deadline: unknown field`` or
 fields, NaN and infinities, and wrong types (``true`` is not a number) are all rejected. Optional
 fields may be absent or ``null`` and are left out of the JSON when unset.
 
+Parsing is total: whatever the input (any bytes, any text, any object handed to ``from_dict``),
+``from_json`` / ``from_dict`` return a record or raise :class:`RecordError`, nothing else, and the
+error's message is bounded (:data:`MAX_REASON_CHARS`) and printable (control characters and lone
+surrogates escaped), so that it can always be logged and sent back. The limits that keep absurd
+input out (docs/ARCHITECTURE.md, "Wire records": strings bounded): :data:`MAX_RECORD_BYTES` of raw
+message, :data:`MAX_DEPTH` levels of nesting, :data:`MAX_NAME_CHARS` per id or name,
+:data:`MAX_TEXT_CHARS` per free text, :data:`MAX_ITEMS` per list or object, integers of at most 64
+bits (:data:`MAX_INT_DIGITS` digits in the JSON). Ids and names must be printable.
+
 Only the schema is checked here; whether a station or robot exists is the planner's business. The
 fields are declared with the vocabulary of :mod:`fleet_planner.validation` (values shown as JSON
 spells them); the contract is in docs/ARCHITECTURE.md, "Wire records".
@@ -21,6 +30,7 @@ Bin Packing System in an Automatic Warehouse".
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields
 from typing import Any, ClassVar
@@ -30,8 +40,10 @@ from fleet_planner.validation import (
     Check,
     ValidationError,
     Vocabulary,
+    all_of,
     check_fields,
     optional,
+    printable,
     robot_id_problem,
     show_json,
     spec,
@@ -42,8 +54,32 @@ TASK_EVENTS = ("accepted", "rejected", "assigned", "picked", "placed", "done", "
 EVENTS_NEEDING_REASON = ("rejected", "failed")
 
 
+#: the largest raw message taken (bytes of UTF-8; a status is about 400, a 1000-robot schedule 60k)
+MAX_RECORD_BYTES = 256 * 1024
+#: the deepest nesting of JSON arrays and objects taken (the records need 3: schedule.links[i].M)
+MAX_DEPTH = 16
+#: the longest id or name (task ids, stations, address tags, robot ids)
+MAX_NAME_CHARS = 128
+#: the longest free text (a task event's reason)
+MAX_TEXT_CHARS = 1000
+#: the most items in one list or object
+MAX_ITEMS = 10_000
+#: the most digits of an integer in the JSON (an int64 has 19)
+MAX_INT_DIGITS = 20
+#: integers are int64 (stamps in nanoseconds fit)
+INT_MIN, INT_MAX = -(2 ** 63), 2 ** 63 - 1
+#: the longest error message (a reason never echoes more than a short prefix of the input)
+MAX_REASON_CHARS = 300
+
+
 class RecordError(ValidationError):
-    """A record that does not fit its schema; the message starts with the field's path."""
+    """A record that does not fit its schema; the message starts with the field's path. The
+    message (and path and reason) are printable and at most :data:`MAX_REASON_CHARS` long."""
+
+    def __init__(self, message: str, path: str | None = None, reason: str | None = None) -> None:
+        super().__init__(printable(str(message), MAX_REASON_CHARS),
+                         None if path is None else printable(str(path), MAX_REASON_CHARS),
+                         None if reason is None else printable(str(reason), MAX_REASON_CHARS))
 
 
 # -- the records' words for the field vocabulary (fleet_planner.validation) ---------------------
@@ -54,14 +90,27 @@ _V = Vocabulary(RecordError, show=show_json, mappings=(Mapping,), lists=(list, t
                 missing="required field missing")
 
 number = _V.number            # number(lo, hi): a finite float in [lo, hi]
-integer = _V.integer          # integer(lo)
-nonempty = _V.string(min_len=1, strip=True)
-ros_id = _V.ros_id            # fits in a ROS topic name
+nonempty = _V.string(min_len=1, max_len=MAX_NAME_CHARS, strip=True, printable_only=True)  # an id or name
+text = _V.string(min_len=1, max_len=MAX_TEXT_CHARS, strip=True, printable_only=True)      # free text
+ros_id = all_of(_V.ros_id, _V.string(max_len=MAX_NAME_CHARS))  # fits in a ROS topic name
 choice = _V.choice            # choice(options)
 boolean = _V.boolean
 point = _V.point              # [x, y]
-list_of = _V.list_of          # list_of(item, unique=False)
-dict_of = _V.dict_of          # dict_of(item): non-empty string keys
+
+
+def integer(lo: int | None = None) -> Check[int]:
+    """An int64 ``>= lo`` (if given)."""
+    return _V.integer(INT_MIN if lo is None else lo, INT_MAX)
+
+
+def list_of(item: Check[Any], unique: bool = False) -> Check[tuple[Any, ...]]:
+    """A list of at most :data:`MAX_ITEMS` items, each checked by ``item``; ``unique``: none twice."""
+    return _V.list_of(item, unique=unique, max_len=MAX_ITEMS)
+
+
+def dict_of(item: Check[Any]) -> Check[dict[str, Any]]:
+    """An object of at most :data:`MAX_ITEMS` entries with id-like keys, each value checked by ``item``."""
+    return _V.dict_of(item, key=nonempty, max_len=MAX_ITEMS)
 
 
 def obj(members: dict[str, Check[Any]]) -> Check[dict[str, Any]]:
@@ -73,9 +122,58 @@ def _reject_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out = {}
     for k, v in pairs:
         if k in out:
-            raise RecordError(f"duplicate key {k!r} in a JSON object")
+            raise RecordError(f"duplicate key {show_json(k)} in a JSON object")
         out[k] = v
     return out
+
+
+def _parse_int(digits: str) -> int:
+    if len(digits.lstrip("-")) > MAX_INT_DIGITS:
+        raise RecordError(f"an integer of {len(digits.lstrip('-'))} digits (at most {MAX_INT_DIGITS})")
+    return int(digits)
+
+
+_STRINGS = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
+_BRACKETS = re.compile(r"[\[\]{}]")
+
+
+def _too_deep(text: str) -> bool:
+    """Whether ``text`` nests arrays and objects more than :data:`MAX_DEPTH` deep (outside its
+    strings), found before parsing, so the parser never recurses that far."""
+    if text.count("[") + text.count("{") <= MAX_DEPTH:
+        return False
+    depth = 0
+    for m in _BRACKETS.finditer(_STRINGS.sub('""', text)):
+        depth += 1 if m.group() in "[{" else -1
+        if depth > MAX_DEPTH:
+            return True
+    return False
+
+
+def load_json(raw: Any, name: str = "record") -> Any:
+    """The JSON value in ``raw`` (text or UTF-8 bytes) within the limits above, or
+    ``RecordError("<name>: ...")``; never any other exception."""
+    if isinstance(raw, (bytes, bytearray, memoryview)):
+        if len(raw) > MAX_RECORD_BYTES:
+            raise RecordError(f"{name}: message too long ({len(raw)} bytes, at most {MAX_RECORD_BYTES})")
+        try:
+            raw = bytes(raw).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise RecordError(f"{name}: not valid JSON (not UTF-8: {exc.reason} at byte {exc.start})") from None
+    if not isinstance(raw, str):
+        raise RecordError(f"{name}: must be JSON text (got {type(raw).__name__})")
+    if len(raw) > MAX_RECORD_BYTES:  # characters: at least as many bytes
+        raise RecordError(f"{name}: message too long ({len(raw)} characters, at most {MAX_RECORD_BYTES})")
+    if _too_deep(raw):
+        raise RecordError(f"{name}: not valid JSON (nested more than {MAX_DEPTH} levels deep)")
+    try:
+        return json.loads(raw, object_pairs_hook=_reject_duplicates, parse_int=_parse_int)
+    except RecordError as exc:
+        raise RecordError(f"{name}: {exc}") from None
+    except RecursionError:
+        raise RecordError(f"{name}: not valid JSON (nested too deeply)") from None
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise RecordError(f"{name}: not valid JSON ({exc})") from None
 
 
 # -- the record base -----------------------------------------------------------------------------
@@ -106,6 +204,18 @@ class Record:
 
     @classmethod
     def from_dict(cls, data: Any) -> Record:
+        """The record in ``data`` (a mapping as JSON decodes it); RecordError and nothing else."""
+        try:
+            return cls._from_dict(data)
+        except RecordError:
+            raise
+        except (RecursionError, MemoryError):
+            raise RecordError(f"{cls.NAME}: too large or nested too deeply") from None
+        except Exception as exc:  # noqa: BLE001 - totality: any input is a record or a RecordError
+            raise RecordError(f"{cls.NAME}: cannot be read ({type(exc).__name__}: {exc})") from None
+
+    @classmethod
+    def _from_dict(cls, data: Any) -> Record:
         data = _V.as_mapping(data, cls.NAME)
         schema = data.get("schema", MISSING)
         if schema is MISSING:
@@ -119,13 +229,8 @@ class Record:
 
     @classmethod
     def from_json(cls, text: str | bytes) -> Record:
-        try:
-            data = json.loads(text, object_pairs_hook=_reject_duplicates)
-        except RecordError as exc:
-            raise RecordError(f"{cls.NAME}: {exc}") from None
-        except (ValueError, TypeError) as exc:
-            raise RecordError(f"{cls.NAME}: not valid JSON ({exc})") from None
-        return cls.from_dict(data)
+        """The record in JSON ``text`` (str or UTF-8 bytes); RecordError and nothing else."""
+        return cls.from_dict(load_json(text, cls.NAME))
 
 
 def _plain(value: Any) -> Any:
@@ -164,7 +269,7 @@ class TaskEvent(Record):
     event: str = spec(choice(TASK_EVENTS))
     stamp: float = spec(number())
     robot_id: str | None = spec(optional(ros_id), default=None)
-    reason: str | None = spec(optional(nonempty), default=None)
+    reason: str | None = spec(optional(text), default=None)
 
     def _check_together(self) -> None:
         if self.event in EVENTS_NEEDING_REASON and self.reason is None:
@@ -274,7 +379,8 @@ class WaitMessageRecord(Record):
 
 RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord)
 
-__all__ = ["BEHAVIORS", "BEHAVIOR_STATE", "EVENTS_NEEDING_REASON", "RECORDS", "TASK_EVENTS", "Check", "Record",
-           "RecordError", "RobotStatus", "Schedule", "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice",
-           "dict_of", "integer", "list_of", "nonempty", "number", "obj", "optional", "point", "robot_id_problem",
-           "ros_id", "spec"]
+__all__ = ["BEHAVIORS", "BEHAVIOR_STATE", "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH",
+           "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS",
+           "RECORDS", "TASK_EVENTS", "Check", "Record", "RecordError", "RobotStatus", "Schedule", "Task", "TaskEvent",
+           "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json", "nonempty",
+           "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text"]

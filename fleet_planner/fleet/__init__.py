@@ -4,6 +4,8 @@ Where each concept lives:
 
 * :mod:`.legs` - what the manager hands out and the numbers that shape it: :class:`Leg`,
   :class:`Decisions`, :class:`DispatchParams`, :func:`lag_allowance`, the leg purposes;
+* :mod:`.jobstore` - the durable job store, :class:`JobStore` (SQLite): every accepted job and its
+  state changes, so a restarted manager takes up the open jobs;
 * :mod:`.state` - what the manager knows: its robots, jobs and targets, and :func:`can_do`;
 * :mod:`.manager` - the planner's end, :class:`FleetManager`: tasks and statuses in, legs and task
   events out;
@@ -42,12 +44,14 @@ from .coordination import (
     get_coordination,
 )
 from .fleet_file import FleetError, FleetMember, load_fleet
+from .jobstore import DuplicateJob, JobStore
 from .legs import ACTING, PURPOSES, Decisions, DispatchParams, Leg, lag_allowance
 from .manager import FleetManager
 from .state import can_do
 from .wire import behavior_state, samples_to_path, view_of_status
 
 __all__ = ["ACTING", "AGENT_BEHAVIOR", "COORDINATION", "PURPOSES", "BehaviorCoordination", "CentralCoordination",
-           "Coordination", "Decisions", "DispatchParams", "Driver", "FleetError", "FleetManager", "FleetMember", "Leg",
-           "LegNotPlanned", "RobotAgent", "behavior_state", "can_do", "coordination_names",
-           "get_coordination", "lag_allowance", "load_fleet", "samples_to_path", "view_of_status"]
+           "Coordination", "Decisions", "DispatchParams", "Driver", "DuplicateJob", "FleetError", "FleetManager",
+           "FleetMember", "JobStore", "Leg", "LegNotPlanned", "RobotAgent", "behavior_state", "can_do",
+           "coordination_names", "get_coordination", "lag_allowance", "load_fleet", "samples_to_path",
+           "view_of_status"]

@@ -14,7 +14,7 @@ from ..model import TimedPath
 from ..robots import RobotModel
 from ..warehouse import Warehouse
 from .coordination import AGENT_BEHAVIOR, Coordination, get_coordination
-from .legs import station_at
+from .legs import MAX_CLOCK_SKEW_S, station_at
 
 
 class RobotAgent:
@@ -23,7 +23,11 @@ class RobotAgent:
     address tag, once it carries the goods) or charges (at a charger, with nothing to do).
 
     It learns its job from the ``assigned`` task event naming it and the job's stations from the
-    task itself (:meth:`on_task`); if it never saw the task, any chute or storing site will do.
+    task itself (:meth:`on_task`; the first task heard with an id is kept, as the planner keeps
+    it: a duplicate it rejects never replaces it); if it never saw the task, any chute or storing
+    site will do. It acts only on the planner's word about its own job: an event about another
+    job, or a ``failed`` / ``cancelled`` that does not name this robot, is ignored, and with
+    ``planner`` set (the planner's node name) so is every event whose ``sender`` is another node.
     It hears the other robots' statuses (:meth:`on_status`).
 
     ``coordination`` (a name of :data:`~.coordination.COORDINATION` or a
@@ -39,7 +43,7 @@ class RobotAgent:
     KEEP_TASKS = 10_000  # task details remembered
 
     def __init__(self, model: RobotModel, warehouse: Warehouse, coordination: str | Coordination = "central",
-                 params: BehaviorParams = AGENT_BEHAVIOR):
+                 params: BehaviorParams = AGENT_BEHAVIOR, planner: str | None = None):
         self.strategy = get_coordination(coordination)
         self.model = model
         self.warehouse = warehouse
@@ -49,6 +53,7 @@ class RobotAgent:
         self.driver = self.strategy.driver(model, warehouse, params)
         self._acting: str | None = None
         self._last: float | None = None
+        self.planner = planner
 
     @property
     def coordination(self) -> str:
@@ -70,21 +75,41 @@ class RobotAgent:
         return self.model.task_id
 
     def on_task(self, task: Task) -> None:
+        """A task on the wire: remembered unless its id is known (the first one is what the
+        planner accepted; a later one with the same id is a duplicate it rejects)."""
+        if task.id in self.tasks:
+            return
         if len(self.tasks) >= self.KEEP_TASKS:
             self.tasks.pop(next(iter(self.tasks)))
         self.tasks[task.id] = task
 
-    def on_event(self, event: TaskEvent) -> None:
-        """Take a job assigned to this robot; drop one given to another robot, failed or cancelled."""
+    def on_event(self, event: TaskEvent, sender: str | None = None) -> bool:
+        """Take a job assigned to this robot; drop its job when the planner gives it to another
+        robot, or says it failed or is cancelled for this robot. ``sender``: the node that published
+        the event, where the wire tells (checked against ``planner`` if that is set). True if the
+        event changed the robot's job."""
+        if self.planner is not None and sender != self.planner:
+            return False
         me = self.model.id
         if event.event == "assigned" and event.robot_id == me:
-            self.model.task_id, self.loaded = event.task_id, False
-        elif event.task_id == self.job and (event.event in ("failed", "cancelled")
-                                            or event.event == "assigned" and event.robot_id != me):
+            if self.job != event.task_id:
+                self.model.task_id, self.loaded = event.task_id, False
+                return True
+            return False
+        if event.task_id != self.job or self.job is None:
+            return False
+        if (event.event in ("failed", "cancelled") and event.robot_id == me
+                or event.event == "assigned" and event.robot_id != me):
             self.model.task_id, self.loaded = None, False
+            return True
+        return False
 
-    def on_status(self, status: RobotStatus) -> None:
-        """Another robot's status (its own and older ones than the last heard are ignored)."""
+    def on_status(self, status: RobotStatus, now: float | None = None) -> None:
+        """Another robot's status (its own and older ones than the last heard are ignored, and so
+        is one stamped more than ``MAX_CLOCK_SKEW_S`` ahead of ``now``, by default the last tick)."""
+        clock = now if now is not None else self._last
+        if clock is not None and status.stamp > clock + MAX_CLOCK_SKEW_S:
+            return
         last = self.heard.get(status.id)
         if status.id != self.model.id and (last is None or status.stamp >= last.stamp):
             self.heard[status.id] = status

@@ -22,6 +22,9 @@ ACTING = {"pick": "picking", "place": "placing"}
 AT_STATION_M = 0.05
 #: seconds between two steps of a robot's controller (the agent steps its model at its status rate)
 CONTROL_PERIOD_S = 0.1
+#: a status stamped further ahead of the receiver's clock than this is refused (a robot's clock
+#: that runs ahead, or a forged stamp, must not make its later statuses look old for good)
+MAX_CLOCK_SKEW_S = 2.0
 
 
 @dataclass(frozen=True)

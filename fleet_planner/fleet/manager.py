@@ -29,26 +29,34 @@ Times are seconds on one clock (the planner's ROS time): ``now`` is always passe
 """
 from __future__ import annotations
 
-import json
 import math
 import re
-from collections.abc import Mapping, Sequence
+import sqlite3
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, cast
 
 import numpy as np
 
-from msg_schemas.records import RecordError, RobotStatus, Schedule, Task, TaskEvent
+from msg_schemas.records import (
+    MAX_NAME_CHARS,
+    MAX_RECORD_BYTES,
+    RecordError,
+    RobotStatus,
+    Schedule,
+    Task,
+    TaskEvent,
+    load_json,
+    nonempty,
+)
 
 from ..model import Point, TimedPath
 from ..planners import Planner, get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
-from .legs import ACTING, AT_STATION_M, Decisions, DispatchParams, Leg, lag_allowance
+from .jobstore import DuplicateJob, JobStore
+from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .state import FleetRobot, Job, Target, can_do
-
-#: an action not seen in any status counts as finished this long after its nominal end
-ACTION_SLACK_S = 2.0
 
 
 class FleetManager:
@@ -65,7 +73,9 @@ class FleetManager:
 
     def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
                  params: DispatchParams | None = None, parking: Sequence[Point] = (),
-                 coordination: str | Coordination = "central", planner: Planner | None = None):
+                 coordination: str | Coordination = "central", planner: Planner | None = None,
+                 store: JobStore | None = None, roster: Iterable[str] | None = None,
+                 max_clock_skew_s: float = MAX_CLOCK_SKEW_S):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
         self.strategy = get_coordination(coordination)
@@ -88,6 +98,40 @@ class FleetManager:
         self.jobs: dict[str, Job] = {}
         self._notes: list[str] = []
         self._plan_id = 0
+        self.store = store
+        if not 0.0 <= max_clock_skew_s <= 3600.0:
+            raise ValueError(f"max_clock_skew_s: must be a number in [0, 3600] (got {max_clock_skew_s!r})")
+        self.max_clock_skew_s = float(max_clock_skew_s)
+        self.roster = None if roster is None else frozenset(roster)
+        self._strangers: set[str] = set()   # ids off the roster already warned about
+        self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
+        self._seq = 0
+        if store is not None:
+            self._reload(store)
+
+    def _reload(self, store: JobStore) -> None:
+        """Take up the open jobs of ``store`` (a restart): one not yet picked is queued again; one
+        whose goods were picked waits for its robot to report it carries them (then it goes on to
+        place them) and fails, with the reason, if that robot does not report within
+        ``offline_timeout_s`` of the first step; it is never picked again."""
+        self._seq = store.next_seq()
+        for stored in store.open_jobs():
+            task = stored.task
+            pick = self.warehouse.stations.get(task.pick)
+            place = self._storing_site(task.place)
+            job = Job(task, pick, place, stored.seq) if pick is not None and place is not None else None
+            if job is None:
+                store.update(task.id, "failed", "failed", stored.robot, stored.picked, 0.0,
+                             "the warehouse no longer has its stations")
+                self._notes.append(f"job {task.id}: failed on reload, its stations are gone")
+                continue
+            self.jobs[task.id] = job
+            if stored.picked and stored.robot is not None:
+                job.state, job.robot, job.picked = "active", stored.robot, True
+                self._notes.append(f"job {task.id}: reloaded, picked by {stored.robot}; waiting for it")
+            else:
+                store.update(task.id, "reloaded", "queued", None, False, 0.0)
+                self._notes.append(f"job {task.id}: reloaded and queued")
 
     @property
     def coordination(self) -> str:
@@ -119,12 +163,32 @@ class FleetManager:
         pick = self.warehouse.stations[task.pick]
         place = self._storing_site(task.place)
         assert place is not None  # _problem found it
-        self.jobs[task.id] = Job(task, pick, place, len(self.jobs))
+        seq = self._seq
+        if self.store is not None:  # committed before it is acknowledged
+            try:
+                self.store.add(task, seq, now)
+            except DuplicateJob as exc:
+                return [_event(task.id, "rejected", now, reason=str(exc))]
+            except sqlite3.Error as exc:
+                return [_event(task.id, "rejected", now, reason=f"job store: cannot record it ({exc})")]
+        self._seq += 1
+        self.jobs[task.id] = Job(task, pick, place, seq)
         return [_event(task.id, "accepted", now)]
+
+    def _record(self, job: Job, event: str, now: float, reason: str | None = None) -> None:
+        """Commit a change of ``job`` to the store (if any) before it is announced."""
+        if self.store is not None:
+            self.store.update(job.task.id, event, job.state, job.robot, job.picked, now, reason)
 
     def _problem(self, task: Task) -> str | None:
         if task.id in self.jobs:
             return f"task.id: duplicate task id {task.id!r} (already {self.jobs[task.id].state})"
+        try:
+            stored = self.store.get(task.id) if self.store is not None else None
+        except sqlite3.Error as exc:
+            return f"job store: cannot check the id ({exc})"
+        if stored is not None:
+            return f"task.id: duplicate task id {task.id!r} (already {stored.state})"
         station = self.warehouse.stations.get(task.pick)
         if station is None:
             chutes = ", ".join(s.name for s in self.warehouse.stations_of("chute"))
@@ -151,15 +215,28 @@ class FleetManager:
 
     def on_status(self, status: RobotStatus, now: float) -> None:
         """Take in a robot's status (``now``: when it arrived). Raises ValueError for a status that
-        cannot be from a robot of this fleet (unknown kind, a kind that changed)."""
+        cannot be from a robot of this fleet (unknown kind, a kind that changed, an id not on the
+        ``roster``: once per id, later ones are dropped silently) or that is stamped more than
+        ``max_clock_skew_s`` ahead of ``now`` (kept, it would make every later status look old and
+        the robot offline for good)."""
+        if status.stamp > now + self.max_clock_skew_s:
+            raise ValueError(f"robot {status.id!r}: status stamped {status.stamp - now:.3g} s ahead of the "
+                             f"planner's clock (at most {self.max_clock_skew_s:g} s)")
+        if self.roster is not None and status.id not in self.roster:
+            first = status.id not in self._strangers
+            self._strangers.add(status.id)
+            if first:  # one warning per unknown id; its statuses never make it part of the fleet
+                raise ValueError(f"robot {status.id!r}: not on the fleet's roster; its statuses are ignored")
+            return
         kind = self.kinds.get(status.kind)
         if kind is None:
             raise ValueError(f"robot {status.id!r}: kind {status.kind!r} is not one of the known kinds "
                              f"({', '.join(self.kinds)})")
         r = self.robots.get(status.id)
         if r is None:
-            self.robots[status.id] = FleetRobot(kind, status, now, now)
+            r = self.robots[status.id] = FleetRobot(kind, status, now, now)
             self._notes.append(f"robot {status.id} ({status.kind}) joined at ({status.x:.2f}, {status.y:.2f})")
+            self._adopt(r)
             return
         if kind is not r.kind:
             raise ValueError(f"robot {status.id!r}: reports kind {status.kind!r}, earlier {r.kind.name!r}")
@@ -172,6 +249,33 @@ class FleetManager:
             self._notes.append(f"robot {r.id} is back online at ({status.x:.2f}, {status.y:.2f})")
             return
         self._note_arrival(r, now)
+
+    def _adopt(self, r: FleetRobot) -> None:
+        """After a restart: a robot whose status names a reloaded job it picked the goods of takes
+        it up again and heads for the storing site (the goods are not picked again)."""
+        job = self.jobs.get(r.status.task_id) if r.status.task_id is not None else None
+        if (job is None or r.job is not None or job.robot != r.id or not job.picked
+                or job.state != "active" or any(o.job == job.task.id for o in self.robots.values())):
+            return
+        r.job = job.task.id
+        r.target, r.replan = Target("place", job.place.name, job.place.pose), True
+        self._notes.append(f"robot {r.id} carries the goods of job {job.task.id} again: on to {job.place.name}")
+
+    def _orphans(self, now: float, d: Decisions) -> None:
+        """Reloaded jobs whose goods were picked by a robot that has not reported carrying them
+        within ``offline_timeout_s`` of the first step fail (with the reason), never picked again."""
+        if self._started is None:
+            self._started = now
+        if now - self._started <= self.params.offline_timeout_s:
+            return
+        held = {r.job for r in self.robots.values()}
+        for job in self.jobs.values():
+            if job.state == "active" and job.picked and job.task.id not in held:
+                job.state = "failed"
+                reason = (f"robot {job.robot} held the goods when the planner restarted and has not "
+                          "reported carrying them")
+                self._record(job, "failed", now, reason)
+                d.events.append(_event(job.task.id, "failed", now, job.robot, reason))
 
     def _note_arrival(self, r: FleetRobot, now: float) -> None:
         """Note when ``r``'s status first shows it at the end of the leg to its target, and whether
@@ -191,6 +295,10 @@ class FleetManager:
         d = Decisions(notes=self._notes)
         self._notes = []
         self._find_immobile(now, d)
+        if self.store is not None:
+            for r in self.robots.values():
+                self._adopt(r)
+            self._orphans(now, d)
         for r in self.robots.values():
             if r.stop and r.online:
                 self._hold(r, now, d)
@@ -221,27 +329,28 @@ class FleetManager:
         if r.job is not None:
             job = self.jobs[r.job]
             r.job = None
-            if job.picked and r.online:
+            if job.picked:  # never picked twice: the goods are on the robot that stopped
                 job.state = "failed"
-                d.events.append(_event(job.task.id, "failed", now, r.id, f"robot {r.id} is {why} with the goods"))
+                reason = f"robot {r.id} is {why} with the goods"
+                self._record(job, "failed", now, reason)
+                d.events.append(_event(job.task.id, "failed", now, r.id, reason))
             else:
                 job.state, job.robot, job.picked = "queued", None, False
+                self._record(job, "requeued", now)
                 d.notes.append(f"job {job.task.id} is queued again for another robot")
         for o in self._replan_around(r, r.pos, now):
             d.notes.append(f"robot {o.id} re-plans around {r.id}")
 
     def _arrivals(self, now: float, d: Decisions) -> None:
-        """Robots at the end of their legs: a pick or place done (seen done, or its nominal time
-        gone by) moves the job on; any other target is simply reached."""
+        """Robots at the end of their legs: a pick or place done moves the job on, and done means
+        the robot reported it: a status showed it picking / placing there and a later one shows it
+        no longer at it (the clock alone never finishes one); any other target is simply reached."""
         for r in self.robots.values():
             if r.arrived_at is None or r.target is None or not r.online:
                 continue
             target = r.target
             if target.purpose in ACTING:
-                if r.status.mode == ACTING[target.purpose]:
-                    continue
-                nominal = r.kind.action_s(target.purpose) + ACTION_SLACK_S
-                if not (r.saw_action or now - r.arrived_at >= nominal):
+                if r.status.mode == ACTING[target.purpose] or not r.saw_action:
                     continue
                 self._action_done(r, target, now, d)
             else:
@@ -254,11 +363,13 @@ class FleetManager:
         job = self.jobs[r.job]
         if target.purpose == "pick":
             job.picked = True
+            self._record(job, "picked", now)
             d.events.append(_event(job.task.id, "picked", now, r.id))
             r.target = Target("place", job.place.name, job.place.pose)
             r.replan = True
         else:
             job.state = "done"
+            self._record(job, "done", now)
             d.events.append(_event(job.task.id, "placed", now, r.id))
             d.events.append(_event(job.task.id, "done", now, r.id))
             r.job, r.target, r.idle_since = None, None, now
@@ -327,6 +438,7 @@ class FleetManager:
                 continue
             r.job = job.task.id
             job.state, job.robot = "active", r.id
+            self._record(job, "assigned", now)
             d.events.append(_event(job.task.id, "assigned", now, r.id))
 
     def _housekeeping(self, now: float, d: Decisions) -> None:
@@ -449,16 +561,21 @@ def _event(task_id: str, event: str, now: float, robot_id: str | None = None, re
 
 
 def _guess_id(raw: Any) -> str:
-    """The ``id`` of a task that failed validation, when one can be made out (else "?")."""
+    """The ``id`` of a task that failed validation, when one can be made out and is itself a valid
+    id (else "?": a rejection never echoes an oversized or unprintable id)."""
+    value: Any = None
     if isinstance(raw, Mapping):
         value = raw.get("id")
-        return value if isinstance(value, str) and value.strip() else "?"
-    if isinstance(raw, bytes):
-        raw = raw.decode("utf-8", "replace")
-    if isinstance(raw, str):
+    elif isinstance(raw, (str, bytes)):
         try:
-            return _guess_id(json.loads(raw))
-        except (ValueError, AttributeError):
-            m = re.search(r'"id"\s*:\s*"([^"\\]+)"', raw)
-            return m.group(1) if m and m.group(1).strip() else "?"
-    return "?"
+            data = load_json(raw, "task")
+            value = data.get("id") if isinstance(data, Mapping) else None
+        except RecordError:
+            if isinstance(raw, bytes):
+                raw = raw[:MAX_RECORD_BYTES].decode("utf-8", "replace")
+            m = re.search(r'"id"\s*:\s*"([^"\\]{1,' + str(MAX_NAME_CHARS) + '})"', raw[:MAX_RECORD_BYTES])
+            value = m.group(1) if m else None
+    try:
+        return nonempty(value, "task.id")
+    except RecordError:
+        return "?"

@@ -1,0 +1,166 @@
+"""The durable job store: every job the fleet manager accepted and every change of its state, in an
+embedded SQLite database (stdlib :mod:`sqlite3`, write-ahead log), so that a planner killed at any
+moment and started again on the same file knows every accepted job and how far it had got
+(docs/ARCHITECTURE.md, "Where each concept lives": job store under ``fleet/``).
+
+Each change is one transaction, committed before the call returns (``synchronous=FULL``: on disk,
+not only in the operating system's cache), and the manager announces a change only after the call
+returned: an event seen on the wire is in the store. Tables:
+
+* ``jobs`` - one row per accepted task: its JSON (``fleet/task@1``), its submission order, its
+  state (queued | active | done | failed), the robot on it, whether its goods were picked;
+* ``transitions`` - one row per change: the job, the event (accepted, assigned, picked, placed,
+  done, failed, requeued, reloaded), state, robot, picked, stamp and reason.
+"""
+from __future__ import annotations
+
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+from typing import cast
+
+from msg_schemas.records import Task
+
+#: the states a job is finished in (never reloaded)
+CLOSED = ("done", "failed")
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS jobs (
+    id TEXT PRIMARY KEY,
+    task TEXT NOT NULL,
+    seq INTEGER NOT NULL,
+    state TEXT NOT NULL,
+    robot TEXT,
+    picked INTEGER NOT NULL DEFAULT 0,
+    updated REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS jobs_open ON jobs (state);
+CREATE TABLE IF NOT EXISTS transitions (
+    n INTEGER PRIMARY KEY AUTOINCREMENT,
+    job TEXT NOT NULL REFERENCES jobs (id),
+    event TEXT NOT NULL,
+    state TEXT NOT NULL,
+    robot TEXT,
+    picked INTEGER NOT NULL,
+    stamp REAL NOT NULL,
+    reason TEXT
+);
+"""
+
+
+class DuplicateJob(ValueError):
+    """A job id the store already holds."""
+
+
+@dataclass(frozen=True)
+class StoredJob:
+    """A job as the store holds it."""
+
+    task: Task
+    seq: int
+    state: str
+    robot: str | None
+    picked: bool
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One change of a job's state."""
+
+    event: str
+    state: str
+    robot: str | None
+    picked: bool
+    stamp: float
+    reason: str | None
+
+
+class JobStore:
+    """Accepted jobs and their state changes in the SQLite file ``path`` (created, with its
+    folders, if missing). Not closing it is safe: every change is committed when its call returns."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._db = sqlite3.connect(str(self.path), isolation_level=None, check_same_thread=False)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=FULL")
+        self._db.execute("PRAGMA foreign_keys=ON")
+        self._db.executescript(_SCHEMA)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def __enter__(self) -> JobStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- writes: one transaction each ----------------------------------------------------------
+    def add(self, task: Task, seq: int, stamp: float) -> None:
+        """Record a newly accepted job (state queued). DuplicateJob if its id is known."""
+        db = self._db
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            db.execute("INSERT INTO jobs (id, task, seq, state, robot, picked, updated) "
+                       "VALUES (?, ?, ?, 'queued', NULL, 0, ?)", (task.id, task.to_json(), seq, stamp))
+            db.execute("INSERT INTO transitions (job, event, state, robot, picked, stamp, reason) "
+                       "VALUES (?, 'accepted', 'queued', NULL, 0, ?, NULL)", (task.id, stamp))
+        except sqlite3.IntegrityError:
+            db.execute("ROLLBACK")
+            raise DuplicateJob(f"task.id: duplicate task id {task.id!r}") from None
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
+        db.execute("COMMIT")
+
+    def update(self, job_id: str, event: str, state: str, robot: str | None, picked: bool, stamp: float,
+               reason: str | None = None) -> None:
+        """Record a change of the job ``job_id``: its new state, robot and picked flag."""
+        db = self._db
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            cur = db.execute("UPDATE jobs SET state = ?, robot = ?, picked = ?, updated = ? WHERE id = ?",
+                             (state, robot, int(picked), stamp, job_id))
+            if cur.rowcount != 1:
+                raise KeyError(f"job {job_id!r} is not in the store")
+            db.execute("INSERT INTO transitions (job, event, state, robot, picked, stamp, reason) "
+                       "VALUES (?, ?, ?, ?, ?, ?, ?)", (job_id, event, state, robot, int(picked), stamp, reason))
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
+        db.execute("COMMIT")
+
+    # -- reads ---------------------------------------------------------------------------------
+    def get(self, job_id: str) -> StoredJob | None:
+        row = self._db.execute("SELECT task, seq, state, robot, picked FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return None if row is None else _job(row)
+
+    def open_jobs(self) -> list[StoredJob]:
+        """The jobs not done or failed, in submission order."""
+        rows = self._db.execute("SELECT task, seq, state, robot, picked FROM jobs "
+                                "WHERE state NOT IN ('done', 'failed') ORDER BY seq").fetchall()
+        return [_job(row) for row in rows]
+
+    def next_seq(self) -> int:
+        """One more than the largest submission order stored (0 for an empty store)."""
+        row = self._db.execute("SELECT COALESCE(MAX(seq) + 1, 0) FROM jobs").fetchone()
+        return int(row[0])
+
+    def history(self, job_id: str) -> list[Transition]:
+        rows = self._db.execute("SELECT event, state, robot, picked, stamp, reason FROM transitions "
+                                "WHERE job = ? ORDER BY n", (job_id,)).fetchall()
+        return [Transition(e, s, r, bool(p), float(t), why) for e, s, r, p, t, why in rows]
+
+    def counts(self) -> dict[str, int]:
+        """How many jobs are in each state."""
+        return {state: int(n) for state, n in self._db.execute("SELECT state, COUNT(*) FROM jobs GROUP BY state")}
+
+
+def _job(row: tuple[str, int, str, str | None, int]) -> StoredJob:
+    text, seq, state, robot, picked = row
+    return StoredJob(cast(Task, Task.from_json(text)), int(seq), state, robot, bool(picked))
+
+
+__all__ = ["CLOSED", "DuplicateJob", "JobStore", "StoredJob", "Transition"]
