@@ -130,3 +130,26 @@ def test_a_robot_whose_agent_dies_is_marked_offline_and_another_robot_does_its_j
     assert owners[0] == first and owners[-1] != first
     assert all(e.robot_id == owners[-1] for e in mon.events_of("O1") if e.event in ("picked", "placed", "done"))
     no_contact(fleet)  # the dead robot's reports end where it stopped: the others kept clear of it
+
+
+def test_a_restarted_planner_node_with_the_same_job_store_keeps_its_open_jobs(ros_context, tmp_path):
+    """kill -9 in spirit: the first node is dropped without a word to its store; the second, on the
+    same file, has every accepted job open and refuses a re-sent id."""
+    from fleet_planner.ros.planner_node import PlannerNode
+
+    store = [Parameter("job_store", value=str(tmp_path / "jobs.db"))]
+    first = PlannerNode("planner_store_a", context=ros_context, warehouse=WH, kinds=KINDS, parameter_overrides=store)
+    tasks = [Task(id=f"S{k}", pick=WH.stations_of("chute")[0].name, place=WH.stations_of("storage")[k].name)
+             for k in range(3)]
+    try:
+        events = [ev for t in tasks for ev in first.fleet.submit(t, 0.0)]
+        assert [ev.event for ev in events] == ["accepted"] * 3
+    finally:
+        first.destroy_node()
+    second = PlannerNode("planner_store_b", context=ros_context, warehouse=WH, kinds=KINDS, parameter_overrides=store)
+    try:
+        assert {t.id for t in tasks} <= set(second.fleet.jobs)
+        [again] = second.fleet.submit(tasks[0], 1.0)
+        assert again.event == "rejected" and "duplicate" in (again.reason or "")
+    finally:
+        second.destroy_node()

@@ -24,6 +24,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
+from fleet_planner.fleet.jobstore import JobStore
+from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
@@ -79,6 +81,11 @@ class PlannerNode(Node):
         coordination = self.declare_parameter("coordination", "central", ParameterDescriptor(
             description="how the robots avoid each other: 'central' (timed paths with (M,D) delays) or "
                         "'behavior' (legs bind only their goals; the robots use BBMRCA)", read_only=True)).value
+        store_file = self.declare_parameter("job_store", "", ParameterDescriptor(
+            description="SQLite file keeping every accepted job across restarts (empty: jobs live in memory "
+                        "only); restart with the same file and open jobs carry on", read_only=True)).value
+        skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
+            "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
         defaults = DispatchParams()
         values = {}
         for f in fields(DispatchParams):
@@ -93,7 +100,8 @@ class PlannerNode(Node):
         if coordination not in COORDINATION:
             raise ValueError(f"parameter coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
-                                  [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination)
+                                  [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
+                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
