@@ -41,7 +41,6 @@ from .areas import (
 from .controller import BehaviorController
 from .deadlock import WaitMessage, on_wait_message, virtual_wall_cells
 from .docking import Docking, DockingArbiter, HeardDocking
-from .simulation import BehaviorFleet, FleetStats
 from .params import DEFAULT_PARAMS, BehaviorParams
 from .rules import (
     cooperate,
@@ -58,6 +57,7 @@ from .rules import (
     solve_wait_keep_distance_collision,
 )
 from .safety import safety_stop
+from .simulation import BehaviorFleet, FleetStats
 from .views import RobotView
 
 __all__ = [
