@@ -57,11 +57,11 @@ def main() -> None:
         for i in ids:
             ci = fleet.controller(i)
             v = ci.view()
+            nxt = f"->({v.next_waypoint[0]:.1f},{v.next_waypoint[1]:.1f})" if v.next_waypoint else " nopath"
             desc.append(f"{i}:{ci.behavior.value}{'*' if ci.no_space else ''}"
                         f"{'(hold ' + ci.holds[0] + ')' if ci.holds else ''}"
                         f"{'(st ' + str(ci.station) + ')' if ci.station else ''}"
-                        f"@({v.position[0]:.1f},{v.position[1]:.1f})"
-                        (f"->({v.next_waypoint[0]:.1f},{v.next_waypoint[1]:.1f})" if v.next_waypoint else " nopath"))
+                        f"@({v.position[0]:.1f},{v.position[1]:.1f}){nxt}")
         if end is None:
             last = fleet.controller(ids[-1])
             tail = f"ends at {ids[-1]} ({last.behavior.value}, {'no path' if last.path is None else 'has path'})"

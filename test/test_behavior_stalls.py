@@ -46,3 +46,51 @@ def test_a_docking_robot_pushed_behind_a_wall_corner_replans():
     _drive(fleet, limit_s=20.0)
     assert fleet.arrived("r0")
     assert np.allclose(fleet.positions()[0], (2.5, 0.5))
+
+
+def _aisle_chains(n: int, params: BehaviorParams | None = None) -> BehaviorFleet:
+    """A one-cell aisle (row 1) between two halls: n robots queued eastwards in it face n queued
+    westwards, each bound for the hall behind the other queue (the first ones of each queue park
+    in the halls, some of them in the way of the later ones)."""
+    grid = GridMap.from_rows(["......@@@@@@@@@@......",
+                              "......................",
+                              "......@@@@@@@@@@......",
+                              "......@@@@@@@@@@......",
+                              "......................"])
+    robots = []
+    for k in range(n):
+        robots.append(RobotSpec(f"e{k}", 0.354, 0.8, (10.5 - k, 1.5), (17.5 + 2 * (k % 3), 0.5 + 3 * (k // 3))))
+        robots.append(RobotSpec(f"w{k}", 0.354, 0.8, (11.5 + k, 1.5), (4.5 - 2 * (k % 3), 0.5 + 3 * (k // 3))))
+    fleet = BehaviorFleet(grid, robots, params or BehaviorParams())
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    return fleet
+
+
+def test_a_robot_behind_a_parked_robot_finds_a_detour():
+    """The virtual wall of a re-plan (IV.C) ends a front length ahead: it used to run to the next
+    waypoint of the straightened path, right across the hall, and the robot queued behind a
+    parked one found no detour for ever (three robots left waiting)."""
+    fleet = _aisle_chains(5)
+    smallest = _drive(fleet, limit_s=120.0)
+    assert all(fleet.arrived(i) for i in fleet.ids), fleet.behaviors()
+    assert smallest >= 0.0
+
+
+def test_head_on_chains_in_a_one_cell_aisle_back_out_in_a_retreat_wave():
+    """Five robots facing five in a one-cell aisle: the robot that re-plans backs out and the robots
+    queued behind it give way in turn (retreat waves, ours), so no wait cycle is left for the
+    WaitMessages to find; without the waves (control) the chain re-plans back and forth through
+    wait cycles and finishes later."""
+    fleet = _aisle_chains(5)
+    assert _drive(fleet, limit_s=120.0) >= 0.0
+    assert all(fleet.arrived(i) for i in fleet.ids), fleet.behaviors()
+    waves = fleet.stats()
+    assert waves.deadlocks == 0
+    assert sum(fleet.controller(i).yields for i in fleet.ids) >= 2   # the wave went down the queue
+
+    control = _aisle_chains(5, BehaviorParams(retreat_timeout=0.0))
+    assert _drive(control, limit_s=120.0) >= 0.0
+    assert control.stats().deadlocks > 0
+    assert sum(control.controller(i).yields for i in control.ids) == 0
+    assert control.time > waves.time + 5.0

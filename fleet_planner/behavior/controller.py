@@ -406,12 +406,12 @@ class BehaviorController:
 
     def _end_retreat(self, in_front: list[RobotView]) -> None:
         """A retreat ends when the robot's front area is free of robots coming at it, or after
-        ``go_through_timeout`` (a wave does not give right of way for ever)."""
+        ``retreat_timeout`` (a wave does not give right of way for ever)."""
         if self.retreat is None:
             return
         me = self.view()
         facing = any(o.travelling and collision_type(me, o, self.params) is Collision.HEAD_ON for o in in_front)
-        if not facing or self.time - self.retreat_at > self.params.go_through_timeout:
+        if not facing or self.time - self.retreat_at > self.params.retreat_timeout:
             self.retreat = None
 
     def _yield_to_retreat(self, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> bool:
@@ -664,19 +664,24 @@ class BehaviorController:
         self._set_path(path)
         self._set(B.FOLLOW_WAYPOINT, None)
         # ours: the robot now backs away from what it could not pass (see _yield_to_retreat)
-        self.retreat = join if join is not None else (self.time, self.id)
-        self.retreat_at = self.time
+        if self.params.retreat_timeout > 0:
+            self.retreat = join if join is not None else (self.time, self.id)
+            self.retreat_at = self.time
 
     def _ahead(self) -> list[Point]:
-        """Where the virtual wall goes: from the robot to its next waypoint and, when that is
-        closer than a front length, on along the path for a front length (interpretation: our
+        """Where the virtual wall goes: a front length along the path from the robot: to its
+        next waypoint and, when that is closer, on along the path (interpretation: our
         straightened paths have few waypoints, and a wall shorter than the robot's front area
-        leaves the blocked way open)."""
+        leaves the blocked way open). Interpretation (ours, issue 13): the wall also ends after a
+        front length when the next waypoint is farther: the paper's A* paths have a waypoint per
+        cell, ours may run straight across a whole hall, and a wall that long cut the hall in
+        two, so that no detour was found (measured: a robot behind a parked one, 7 failed
+        re-plans in a row)."""
         assert self.path is not None
         points, left = [self.position], self.params.front_length
         for q in self.path[self.wp:]:
             step = math.dist(points[-1], q)
-            if step >= left and len(points) > 1:
+            if step >= left:
                 (x, y), t = points[-1], left / step
                 points.append((x + (q[0] - x) * t, y + (q[1] - y) * t))
                 break
