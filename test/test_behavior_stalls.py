@@ -68,9 +68,10 @@ def _aisle_chains(n: int, params: BehaviorParams | None = None) -> BehaviorFleet
 
 
 def test_a_robot_behind_a_parked_robot_finds_a_detour():
-    """The virtual wall of a re-plan (IV.C) ends a front length ahead: it used to run to the next
-    waypoint of the straightened path, right across the hall, and the robot queued behind a
-    parked one found no detour for ever (three robots left waiting)."""
+    """When no detour is found behind the virtual wall of a re-plan (IV.C), the wall is cut a front
+    length ahead (ours): running to the next waypoint of the straightened path, right across the
+    hall, it left the robot queued behind a parked one without a detour for ever (three robots
+    left waiting)."""
     fleet = _aisle_chains(5)
     smallest = _drive(fleet, limit_s=120.0)
     assert all(fleet.arrived(i) for i in fleet.ids), fleet.behaviors()

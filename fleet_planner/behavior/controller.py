@@ -668,20 +668,17 @@ class BehaviorController:
             self.retreat = join if join is not None else (self.time, self.id)
             self.retreat_at = self.time
 
-    def _ahead(self) -> list[Point]:
-        """Where the virtual wall goes: a front length along the path from the robot: to its
-        next waypoint and, when that is closer, on along the path (interpretation: our
+    def _ahead(self, cut: bool = False) -> list[Point]:
+        """Where the virtual wall goes: from the robot to its next waypoint and, when that is
+        closer than a front length, on along the path for a front length (interpretation: our
         straightened paths have few waypoints, and a wall shorter than the robot's front area
-        leaves the blocked way open). Interpretation (ours, issue 13): the wall also ends after a
-        front length when the next waypoint is farther: the paper's A* paths have a waypoint per
-        cell, ours may run straight across a whole hall, and a wall that long cut the hall in
-        two, so that no detour was found (measured: a robot behind a parked one, 7 failed
-        re-plans in a row)."""
+        leaves the blocked way open). ``cut``: the wall ends after a front length even when the
+        next waypoint is farther (see :meth:`_find_detour`)."""
         assert self.path is not None
         points, left = [self.position], self.params.front_length
         for q in self.path[self.wp:]:
             step = math.dist(points[-1], q)
-            if step >= left:
+            if step >= left and (cut or len(points) > 1):
                 (x, y), t = points[-1], left / step
                 points.append((x + (q[0] - x) * t, y + (q[1] - y) * t))
                 break
@@ -709,6 +706,14 @@ class BehaviorController:
         path = self.finder.find(self.position, self.goal, avoid=keep_out(True), blocked_cells=wall)
         if path is None:
             path = self.finder.find(self.position, self.goal, avoid=keep_out(False), blocked_cells=wall)
+        if path is None:
+            # Interpretation (ours, issue 13): the paper's A* paths have a waypoint per cell, ours
+            # may run straight across a whole hall to the next waypoint, and a wall that long can
+            # cut the hall in two (measured: a robot queued behind a parked one failed every
+            # re-plan for ever). Then the wall ends a front length ahead.
+            short = virtual_wall_cells(self.grid, self._ahead(cut=True), self.goal, self.radius)
+            if short != wall:
+                path = self.finder.find(self.position, self.goal, avoid=keep_out(False), blocked_cells=short)
         if path is None:
             self.replan_failures += 1
         return path
