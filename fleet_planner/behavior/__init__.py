@@ -17,7 +17,9 @@ controller, and many robots make a steppable fleet. By concern, innermost first:
 * :mod:`.deadlock`   - wait cycles found by :class:`WaitMessage` s, left by re-planning behind a
   virtual wall (:func:`virtual_wall_cells`);
 * :mod:`.controller` - :class:`BehaviorController`, one robot (the agent node in
-  ``coordination:=behavior`` calls its ``step``);
+  ``coordination:=behavior`` calls its ``step``); also our *retreat waves* (issue 13), which let
+  chains of robots facing each other in a one-cell aisle back out robot by robot, where the
+  paper's WaitMessages and re-planning leave them re-planning back and forth;
 * :mod:`.simulation` - :class:`BehaviorFleet`, the decentralised fleet as one simulation;
 * :mod:`.safety`     - :func:`safety_stop`, the critical area as the safety net of a robot that
   follows a central plan.

@@ -17,7 +17,7 @@ import numpy as np
 from ..grid import GridMap
 from ..model import Behavior, PlanningError, Point
 from ..paths import PathFinder
-from .areas import front_area_check, front_coords, in_critical_area, robots_in_front
+from .areas import Collision, collision_type, front_area_check, front_coords, in_critical_area, robots_in_front
 from .deadlock import WaitMessage, on_wait_message, virtual_wall_cells
 from .docking import Docking, HeardDocking
 from .params import DEFAULT_PARAMS, EPS, BehaviorParams
@@ -101,7 +101,10 @@ class BehaviorController:
         self.blocked_since: float | None = None  # since when the wanted motion is refused
         self.off_path = False                 # pushed off its path: the way to the next waypoint hits a wall
         self.clear_at = (0.0, 0.0, -math.inf)  # (x, y, clearance there), a cache
-        self.deadlocks = self.replans = self.replan_failures = 0
+        self.retreat: tuple[float, str] | None = None  # the retreat wave it belongs to (see RobotView.retreat)
+        self.retreat_at = -math.inf           # when it joined that wave
+        self.yield_after = -math.inf          # no new attempt to give way to a retreat before this time
+        self.deadlocks = self.replans = self.replan_failures = self.yields = 0
 
     # -- public ---------------------------------------------------------------------------
     @property
@@ -142,7 +145,7 @@ class BehaviorController:
             remaining, straight = ahead + float(self.tail[self.wp]), ahead + float(self.run[self.wp])
         return RobotView(self.id, self.position, self.radius, self.behavior, nxt, remaining, straight,
                          self.station, self.partner, self.no_space,
-                         self.holds[0] if self.holds else None, self.dock_since)
+                         self.holds[0] if self.holds else None, self.dock_since, self.retreat)
 
     def step(self, now: float, dt: float, heard: Sequence[RobotView], inbox: Sequence[WaitMessage] = (), *,
              reach: Mapping[str, float] | None = None, speed: float | None = None,
@@ -190,7 +193,8 @@ class BehaviorController:
         deadlock, forward = on_wait_message(self.view(), msg)
         if deadlock:
             self.deadlocks += 1
-            self._replan(sensed)
+            if self.retreat is None:   # a retreating robot is given way to (see _yield_to_retreat)
+                self._replan(sensed)
         if forward is None:
             return None
         assert self.partner is not None   # only a robot waiting for a partner forwards
@@ -328,33 +332,114 @@ class BehaviorController:
         if self._skip_covered_waypoints(sensed) or self.path is not path:
             me = self.view()
         in_front = robots_in_front(me, sensed, self.params)
+        self._end_retreat(in_front)
+        if self._yield_to_retreat(me, sensed, in_front):
+            return
         self._complete(me, sensed, in_front)
-        me = self._apply_rules(me, in_front)
+        me = self._apply_rules(me, in_front, sensed)
         if self._failed(me, sensed, in_front):
             self._replan(sensed)
 
     def _select_holding(self, me: RobotView, sensed: list[RobotView]) -> None:
         """A robot holding its station docks (IV.B.5), unless it leaves the station and must give
         way to a rival (:meth:`_dock_rival`)."""
+        if self.off_path:
+            # Interpretation (ours, issue 13): the paper re-plans "whenever the next waypoint in
+            # the path is fully blocked by obstacles" (section I); a docking robot pushed off its
+            # path (WaitForDocking backs off) whose straight approach grazes a wall corner is that
+            # case too, so Dock re-plans from where it is instead of pressing against the corner.
+            self._repair()
+            if self.path is None:
+                self._set(B.DOCK, None)
+                return
+            me = self.view()
         rival = self._dock_rival(me, sensed)
         self._set(B.DOCK if rival is None else B.WAIT_KEEP_DISTANCE, None if rival is None else rival.id)
         if rival is None and self._leaving() and self._stalled() and any(
                 not o.travelling and in_critical_area(me, o, self.params) for o in sensed):
             self._replan(sensed)            # a standing robot in the way does not give way (IV.C.1)
 
-    def _apply_rules(self, me: RobotView, in_front: list[RobotView]) -> RobotView:
+    def _apply_rules(self, me: RobotView, in_front: list[RobotView], sensed: list[RobotView]) -> RobotView:
         """The traffic rules (IV.B) against the robot the front area check selects; returns my view
-        as the rules saw it (with the behaviour left by :meth:`_complete`)."""
+        as the rules saw it (with the behaviour left by :meth:`_complete`). A retreating robot
+        facing a robot it cannot pass waits for it to give way (:meth:`_yield_to_retreat`) instead
+        of starting an Exchange that would turn it round again."""
         other = front_area_check(me, in_front, self.params)
         if other is None:
             return me
         me = replace(me, behavior=self.behavior, partner=self.partner)
+        if self.retreat is not None and self._cannot_pass(me, other, sensed):
+            self._set(B.WAIT_KEEP_DISTANCE, other.id)
+            return me
         new = select_behavior(me, other, in_front, self.params)
         if new is not None:
             self._set(new, other.id)
         elif self.behavior is B.WAIT_KEEP_DISTANCE:
             self.partner = other.id   # I wait for whoever blocks my front area now (WaitMessages go there)
         return me
+
+    # -- retreats: chains facing each other without room to pass (ours) -----------------------
+    # Interpretation (ours, issue 13): the paper breaks a two-robot deadlock by the traffic rules
+    # (Algorithm 4) and longer wait cycles by WaitMessages and a re-plan with a virtual wall
+    # (IV.C); the re-planning robot is assumed to find a free way. In a one-cell aisle it does not:
+    # the way back is taken by the robots queued behind it, which wait for it, so it faces them
+    # head-on, fails its Exchange again, re-plans back towards its first partner, and so on for
+    # ever (measured: the e/w chains of test_behavior_chains.py). We add a *retreat wave*: a robot
+    # that re-planned (it now drives back, behind a virtual wall) says so in its view
+    # (``RobotView.retreat``); a robot that meets it head-on in its critical area with no room to
+    # pass re-plans behind a virtual wall too (it backs out of the way) and joins the wave, and the
+    # retreating robot waits for it rather than turning round. Two waves meeting: the younger
+    # gives way to the older (then the smaller id of their founders). So a chain of any length
+    # facing another in an aisle backs out robot by robot; the order is total, so no two robots
+    # make each other back out in turn.
+
+    def _cannot_pass(self, me: RobotView, other: RobotView, sensed: list[RobotView]) -> bool:
+        """The other robot comes at me head-on in my critical area and neither side leaves room
+        to pass it."""
+        if not in_critical_area(me, other, self.params):
+            return False
+        if collision_type(me, other, self.params) is not Collision.HEAD_ON:
+            return False
+        if self._frame() is None:
+            return False
+        return not any(self._side_is_free(other, side, sensed) for side in (-1, 1))
+
+    def _end_retreat(self, in_front: list[RobotView]) -> None:
+        """A retreat ends when the robot's front area is free of robots coming at it, or after
+        ``retreat_timeout`` (a wave does not give right of way for ever)."""
+        if self.retreat is None:
+            return
+        me = self.view()
+        facing = any(o.travelling and collision_type(me, o, self.params) is Collision.HEAD_ON for o in in_front)
+        if not facing or self.time - self.retreat_at > self.params.retreat_timeout:
+            self.retreat = None
+
+    def _yield_to_retreat(self, me: RobotView, sensed: list[RobotView], in_front: list[RobotView]) -> bool:
+        """Give way to a retreating robot I cannot pass (it comes at me head-on, no side is free):
+        re-plan behind a virtual wall towards it and join its wave. True when I did (or must wait,
+        the re-plan having found no way: then I wait for it and try again a second later)."""
+        wave = None
+        for o in in_front:
+            if o.retreat is None or (self.retreat is not None and self.retreat <= o.retreat):
+                continue
+            if self._cannot_pass(me, o, sensed):
+                wave = o
+                break
+        if wave is None:
+            return False
+        if self.time < self.yield_after:
+            self._set(B.WAIT_KEEP_DISTANCE, wave.id)
+            return True
+        assert wave.retreat is not None
+        self.replan_after = -math.inf          # a yield is not limited by the re-plan cooldown
+        n = self.replans
+        self._replan(sensed, join=wave.retreat)
+        if self.replans == n:
+            self.yield_after = self.time + 1.0
+            self._set(B.WAIT_KEEP_DISTANCE, wave.id)
+        else:
+            self.yields += 1
+        return True
 
     def _leaving(self) -> bool:
         """Driving away from the station it still holds (until it is out of the docking region)."""
@@ -553,7 +638,7 @@ class BehaviorController:
             self._set(B.WAIT_KEEP_DISTANCE, partner.id)
         return False
 
-    def _replan(self, sensed: Sequence[RobotView]) -> None:
+    def _replan(self, sensed: Sequence[RobotView], join: tuple[float, str] | None = None) -> None:
         """IV.C: a new path to the goal with a virtual wall between the robot and its next waypoint.
 
         Interpretation: the new path also keeps out of the robots standing in range (parked robots
@@ -578,17 +663,22 @@ class BehaviorController:
         self.replans += 1
         self._set_path(path)
         self._set(B.FOLLOW_WAYPOINT, None)
+        # ours: the robot now backs away from what it could not pass (see _yield_to_retreat)
+        if self.params.retreat_timeout > 0:
+            self.retreat = join if join is not None else (self.time, self.id)
+            self.retreat_at = self.time
 
-    def _ahead(self) -> list[Point]:
+    def _ahead(self, cut: bool = False) -> list[Point]:
         """Where the virtual wall goes: from the robot to its next waypoint and, when that is
         closer than a front length, on along the path for a front length (interpretation: our
         straightened paths have few waypoints, and a wall shorter than the robot's front area
-        leaves the blocked way open)."""
+        leaves the blocked way open). ``cut``: the wall ends after a front length even when the
+        next waypoint is farther (see :meth:`_find_detour`)."""
         assert self.path is not None
         points, left = [self.position], self.params.front_length
         for q in self.path[self.wp:]:
             step = math.dist(points[-1], q)
-            if step >= left and len(points) > 1:
+            if step >= left and (cut or len(points) > 1):
                 (x, y), t = points[-1], left / step
                 points.append((x + (q[0] - x) * t, y + (q[1] - y) * t))
                 break
@@ -604,14 +694,26 @@ class BehaviorController:
         wall = virtual_wall_cells(self.grid, self._ahead(), self.goal, self.radius)
         reach = self.params.front_length + 2 * self.radius
 
+        # Interpretation (ours, issue 13): the first try also keeps out of the partner the
+        # behaviour failed on, whatever it does: on maps finer than a robot (0.5 m cells) a
+        # one-cell virtual wall leaves a parallel way past the same partner, and the robot
+        # re-planned into the same Exchange over and over (measured: 125 re-plans of one robot).
         def keep_out(with_waiting: bool) -> list[tuple[Point, float]]:
             return [(o.position, self.radius + o.radius + self.params.critical_margin) for o in sensed
-                    if not o.travelling or (with_waiting and o.behavior.is_wait
+                    if not o.travelling or (with_waiting and (o.behavior.is_wait or o.id == self.partner)
                                             and math.dist(o.position, self.pos) <= reach + o.radius)]
 
         path = self.finder.find(self.position, self.goal, avoid=keep_out(True), blocked_cells=wall)
         if path is None:
             path = self.finder.find(self.position, self.goal, avoid=keep_out(False), blocked_cells=wall)
+        if path is None:
+            # Interpretation (ours, issue 13): the paper's A* paths have a waypoint per cell, ours
+            # may run straight across a whole hall to the next waypoint, and a wall that long can
+            # cut the hall in two (measured: a robot queued behind a parked one failed every
+            # re-plan for ever). Then the wall ends a front length ahead.
+            short = virtual_wall_cells(self.grid, self._ahead(cut=True), self.goal, self.radius)
+            if short != wall:
+                path = self.finder.find(self.position, self.goal, avoid=keep_out(False), blocked_cells=short)
         if path is None:
             self.replan_failures += 1
         return path

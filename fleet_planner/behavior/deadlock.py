@@ -6,6 +6,11 @@ Collision Avoidance", ICRA 2014).
   is in a wait cycle;
 * left: a robot in a wait cycle, or whose behaviour failed, re-plans to its goal with a *virtual
   wall* (:func:`virtual_wall_cells`) between it and its next waypoint.
+
+Ours (issue 13, see :class:`~.controller.BehaviorController`): the wall runs a front length
+ahead, not to a far waypoint of a straightened path; the re-plan also keeps out of the partner
+the behaviour failed on; and a robot that re-planned away starts a retreat wave the robots it
+meets head-on in a one-cell aisle join (``RobotView.retreat``).
 """
 from __future__ import annotations
 

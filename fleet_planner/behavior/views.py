@@ -25,6 +25,10 @@ class RobotView:
     avoids, exchanges with...); ``no_space`` says its Avoid / Exchange finds no free space.
     ``docked_at`` is the station it docks at (it may be leaving it for its next goal already),
     ``dock_since`` when it first asked to dock at its station (for :class:`~.docking.HeardDocking`).
+    ``retreat`` is set while the robot backs out of a place where it could not pass (it re-planned
+    away from a partner): ``(when the retreat wave began, the id that began it)``; robots it meets
+    head-on without room to pass give way to the oldest wave (ours, see
+    :meth:`~.controller.BehaviorController._yield_to_retreat`).
     """
 
     id: str
@@ -39,6 +43,7 @@ class RobotView:
     no_space: bool = False
     docked_at: str | None = None
     dock_since: float | None = None
+    retreat: tuple[float, str] | None = None
 
     @property
     def direction(self) -> tuple[float, float] | None:

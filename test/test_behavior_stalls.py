@@ -1,0 +1,97 @@
+"""The ways the BBMRCA fleet stalled in the delivery benchmark (issue 13), each on a constructed
+scene that stays stuck without its fix and completes with it (paper 002, Sun, Kleiner & Nebel,
+"Behavior-based Multi-Robot Collision Avoidance", sections IV.A-IV.C; the fixes are ours where
+the paper leaves the case open, see the "Interpretation" notes in fleet_planner/behavior)."""
+from __future__ import annotations
+
+import numpy as np
+
+from fleet_planner.behavior import Behavior, BehaviorFleet, BehaviorParams
+from fleet_planner.grid import GridMap
+from fleet_planner.model import RobotSpec
+
+
+def _drive(fleet: BehaviorFleet, limit_s: float, dt: float = 0.1) -> float:
+    """Step until every robot arrived or ``limit_s``; the smallest gap between discs seen."""
+    radii = np.array([fleet.view(i).radius for i in fleet.ids])
+    need = radii[:, None] + radii[None, :]
+    np.fill_diagonal(need, -np.inf)
+    smallest = np.inf
+    while fleet.time < limit_s and not all(fleet.arrived(i) for i in fleet.ids):
+        fleet.step(dt)
+        p = fleet.positions()
+        gap = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1]) - need
+        np.fill_diagonal(gap, np.inf)
+        smallest = min(smallest, float(gap.min()))
+        assert all(fleet.grid.disc_is_free(x, y, r) for (x, y), r in zip(p, radii)), f"t={fleet.time}"
+    return smallest
+
+
+def test_a_docking_robot_pushed_behind_a_wall_corner_replans():
+    """Dock keeps moving (IV.B.5) but its straight way to the next waypoint may graze a wall
+    corner once it was pushed off its path (WaitForDocking backs off): it must re-plan from where
+    it is, not press against the corner for ever."""
+    grid = GridMap.from_rows([".....",
+                              ".@@..",
+                              "....."])
+    params = BehaviorParams(dock_region=3.0, dock_give_up=3.0)
+    fleet = BehaviorFleet(grid, [RobotSpec("r0", 0.35, 1.0, (0.5, 2.5), (0.5, 2.5))], params)
+    fleet.assign("r0", (2.5, 0.5), station="S")
+    fleet.step(0.1)
+    robot = fleet.controller("r0")
+    assert robot.behavior is Behavior.DOCK and robot.holds is not None
+    assert robot.path is not None and np.allclose(robot.path[robot.wp], (0.5, 0.5))
+    robot.pos = np.array([2.5, 2.5])   # pushed off its path: the way to (0.5, 0.5) crosses the wall
+    assert not grid.disc_is_free(1.5, 1.5, 0.35)
+    _drive(fleet, limit_s=20.0)
+    assert fleet.arrived("r0")
+    assert np.allclose(fleet.positions()[0], (2.5, 0.5))
+
+
+def _aisle_chains(n: int, params: BehaviorParams | None = None) -> BehaviorFleet:
+    """A one-cell aisle (row 1) between two halls: n robots queued eastwards in it face n queued
+    westwards, each bound for the hall behind the other queue (the first ones of each queue park
+    in the halls, some of them in the way of the later ones)."""
+    grid = GridMap.from_rows(["......@@@@@@@@@@......",
+                              "......................",
+                              "......@@@@@@@@@@......",
+                              "......@@@@@@@@@@......",
+                              "......................"])
+    robots = []
+    for k in range(n):
+        robots.append(RobotSpec(f"e{k}", 0.354, 0.8, (10.5 - k, 1.5), (17.5 + 2 * (k % 3), 0.5 + 3 * (k // 3))))
+        robots.append(RobotSpec(f"w{k}", 0.354, 0.8, (11.5 + k, 1.5), (4.5 - 2 * (k % 3), 0.5 + 3 * (k // 3))))
+    fleet = BehaviorFleet(grid, robots, params or BehaviorParams())
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    return fleet
+
+
+def test_a_robot_behind_a_parked_robot_finds_a_detour():
+    """When no detour is found behind the virtual wall of a re-plan (IV.C), the wall is cut a front
+    length ahead (ours): running to the next waypoint of the straightened path, right across the
+    hall, it left the robot queued behind a parked one without a detour for ever (three robots
+    left waiting)."""
+    fleet = _aisle_chains(5)
+    smallest = _drive(fleet, limit_s=120.0)
+    assert all(fleet.arrived(i) for i in fleet.ids), fleet.behaviors()
+    assert smallest >= 0.0
+
+
+def test_head_on_chains_in_a_one_cell_aisle_back_out_in_a_retreat_wave():
+    """Five robots facing five in a one-cell aisle: the robot that re-plans backs out and the robots
+    queued behind it give way in turn (retreat waves, ours), so no wait cycle is left for the
+    WaitMessages to find; without the waves (control) the chain re-plans back and forth through
+    wait cycles and finishes later."""
+    fleet = _aisle_chains(5)
+    assert _drive(fleet, limit_s=120.0) >= 0.0
+    assert all(fleet.arrived(i) for i in fleet.ids), fleet.behaviors()
+    waves = fleet.stats()
+    assert waves.deadlocks == 0
+    assert sum(fleet.controller(i).yields for i in fleet.ids) >= 2   # the wave went down the queue
+
+    control = _aisle_chains(5, BehaviorParams(retreat_timeout=0.0))
+    assert _drive(control, limit_s=120.0) >= 0.0
+    assert control.stats().deadlocks > 0
+    assert sum(control.controller(i).yields for i in control.ids) == 0
+    assert control.time > waves.time + 5.0
