@@ -94,4 +94,4 @@ def test_head_on_chains_in_a_one_cell_aisle_back_out_in_a_retreat_wave():
     assert _drive(control, limit_s=120.0) >= 0.0
     assert control.stats().deadlocks > 0
     assert sum(control.controller(i).yields for i in control.ids) == 0
-    assert control.time > waves.time + 5.0
+    assert control.time > waves.time   # and the waves finish sooner
