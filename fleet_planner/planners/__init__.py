@@ -43,11 +43,15 @@ def register(name: str, target: str, summary: str = "", **options: Any) -> None:
 
 
 register("md", "fleet_planner.planners.md:MDPlanner",
-         "the (M,D) network of You & Ji with exact collision regions (robots may follow each other)")
+         "the (M,D) network of You & Ji with exact collision regions (robots may follow each other) "
+         "and holds anywhere along the path")
 register("md-box", "fleet_planner.planners.md:MDPlanner",
-         "the (M,D) network of You & Ji with the paper's collision boxes", mode="box")
+         "the (M,D) network of You & Ji with the paper's collision boxes", mode="box", holds="none")
 register("prior", "fleet_planner.planners.prior:PriorPlanner",
          "prioritized planning in space-time (van den Berg & Overmars)")
+register("md-departure", "fleet_planner.planners.md:MDPlanner",
+         "the (M,D) network of You & Ji with exact collision regions, departure delays only (md before holds)",
+         mode="exact", holds="none")
 
 
 def planner_names() -> list[str]:
