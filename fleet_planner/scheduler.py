@@ -22,12 +22,27 @@ region itself: for each convex piece of a region, the set of delays of j at whic
 meets it is an open interval (the range of t_i(a) - t_j(b) over the piece, shifted by i's delay),
 and parked phases add half-lines. j gets the smallest delay outside the union of those intervals:
 never larger than the box answer, and exact for constant-speed robots.
+
+Holds anywhere (``holds="anywhere"``, exact regions only; issue 8): instead of one delay at the
+start, j may wait at any vertex of its path (robots in ``start_only``, those with acceleration
+ramps, only at the start). Each trajectory is moves along segments at the drive profile's speed
+and holds at vertices (parked on the start until departure, on the goal for ever after). From the
+same exact pieces, the higher robots' trajectories *as timed, holds included* give per segment of
+j an open interval of forbidden entry times for every part within reach (moving: the piece's phi
+range shifted by i's entry time; i holding: the zero-speed piece, j's range near i's point) and
+per vertex of j open intervals in which j must not stand there (i's segment passing within reach,
+or i holding within reach). j's timing is then the earliest arrival over (vertex, safe interval)
+pairs, as in safe-interval path planning (Phillips & Likhachev, "SIPP: Safe Interval Path Planning
+for Dynamic Environments"), along the fixed path; the earliest arrival per safe interval dominates
+because waiting inside it is free. Every pair of parts is covered and each test is exact, so the
+timing is safe against every higher robot; lower robots see j's holds. The network is computed
+from the final times (T1, T2 when a robot first reaches a region, T3, T4 when it last leaves it).
 """
 from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,6 +98,8 @@ class DelayScheduler:
         for x in range(len(model.paths)):
             self.set_timing(x, 0.0)
         self._done: set[int] = set()   # robots whose delay is up to date
+        #: called after robot x is scheduled (holds); True if it changed x's path (route choice)
+        self.after: Callable[[int], bool] | None = None
 
     def travel(self, x: int) -> float:
         return float(self.model.travel[x])
@@ -221,7 +238,9 @@ class DelayScheduler:
                     self._done.difference_update(order[n + 1:])
                     return blocked
                 self._done.add(x)
-                if self.delays[x] != before or (before_dep is not None and (
+                if self.after is not None and self.after(x):
+                    changed.add(x)
+                elif self.delays[x] != before or (before_dep is not None and (
                         len(before_dep) != len(self.dep[x]) or not np.array_equal(before_dep, self.dep[x]))):
                     changed.add(x)
         return None

@@ -93,7 +93,7 @@ def _from(path: TimedPath, t0: float) -> TimedPath:
     return TimedPath(path.robot_id, path.radius, np.vstack([[*path.position(t0), t0], wp[wp[:, 2] > t0]]))
 
 
-@pytest.mark.parametrize("name", ["md", "md-departure"])
+@pytest.mark.parametrize("name", ["md", "md-departure", "md-routes"])
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=scenarios(), t0=st.sampled_from([0.0, 0.7, 2.0, 4.5]))
 def test_every_incremental_leg_is_valid(name, case, t0):
@@ -140,3 +140,25 @@ def test_the_cli_takes_holds_and_names_the_option_when_it_is_bad(tmp_path, capsy
     assert "--holds" in capsys.readouterr().err
     assert cli.main([str(scen), "--out", str(out), "--planner", "md-box", "--holds", "anywhere"]) == cli.EXIT_INPUT
     assert "holds" in capsys.readouterr().err
+
+
+def test_route_choice_takes_the_detour_when_waiting_costs_more():
+    """A higher robot comes head-on down the direct corridor (row 2) and leaves by a side stub
+    next to the lower robot's start; without route choice the lower one waits at its start until
+    the corridor is clear, with it it drives the northern corridor (16 m instead of 12, but it
+    arrives earlier)."""
+    grid = GridMap.from_rows([".............",
+                              ".@@@@@@@@@@@.",
+                              ".............",
+                              "@." + "@" * 9 + ".@",
+                              "@." + "@" * 9 + ".@"])
+    robots = [RobotSpec("h", 0.4, 1.0, (11.5, 4.5), (1.5, 4.5)),
+              RobotSpec("j", 0.4, 1.0, (0.5, 2.5), (12.5, 2.5))]
+    plans = {name: get_planner(name, order="given").plan(grid, robots) for name in ("md", "md-routes")}
+    for plan in plans.values():
+        assert check_plan(grid, robots, plan) == []
+    held, routed = plans["md"].by_id()["j"], plans["md-routes"].by_id()["j"]
+    assert held.arrival_time > 20.0                     # waited for h to clear the corridor
+    assert routed.arrival_time == pytest.approx(16.0)   # 16 m at 1 m/s, no wait
+    assert plans["md-routes"].info["detours"] >= 1
+    assert np.any(routed.waypoints[:, 1] < 1.0)         # it took the northern corridor

@@ -52,6 +52,9 @@ register("prior", "fleet_planner.planners.prior:PriorPlanner",
 register("md-departure", "fleet_planner.planners.md:MDPlanner",
          "the (M,D) network of You & Ji with exact collision regions, departure delays only (md before holds)",
          mode="exact", holds="none")
+register("md-routes", "fleet_planner.planners.md:MDPlanner",
+         "md with route choice in time: robots that wait long try detours, the earliest arrival wins",
+         mode="exact", holds="anywhere", detours=2)
 
 
 def planner_names() -> list[str]:

@@ -5,7 +5,11 @@ Automatic Warehouse", with what we measured it needs (docs/ARCHITECTURE.md, meas
    of higher-priority robots where the map allows (falling back to goals only, then to nothing).
    Robots with ``max_accel`` drive it with speed ramps (:func:`~fleet_planner.model.drive_profile`).
 2. The (M,D) network over those paths and priority-ordered departure delays (Eq. 3), with the
-   paper's collision boxes (``mode="box"``) or the exact regions (``mode="exact"``, default).
+   paper's collision boxes (``mode="box"``) or the exact regions (``mode="exact"``, default);
+   with exact regions, by default, waits at any vertex of the path instead of at the start only
+   (``holds="anywhere"``: an earliest-arrival search against the higher robots' timed
+   trajectories, see :mod:`fleet_planner.scheduler`; paths get a vertex about every grid cell so
+   that there is somewhere to wait). ``holds="none"`` is the departure-only method.
 3. Where a delay cannot help (a higher robot parks on its goal in the way, or passes a lower
    robot's start while it is still parked), the robot that moves is first re-routed around the
    disc in the way, else the blocked robot is moved just ahead of its blocker; only the paths
@@ -92,12 +96,16 @@ class MDPlanner(Planner):
     before it departs: the paper's departure delays; the only choice with boxes). Robots with
     ``max_accel`` wait only before they depart in either case (a stop en route would need braking
     and accelerating ramps their drive profile does not have). ``hold_step`` (m, default one grid
-    cell): with holds, paths get a vertex at least this often, so that there is somewhere to wait."""
+    cell): with holds, paths get a vertex at least this often, so that there is somewhere to wait.
+    ``detours`` (default 0, off): route choice in time (issue 8, a first step): a robot that waits
+    more than ``detour_min`` s in all is re-planned up to this many times around the stretch after
+    its longest wait and takes the candidate with the earliest arrival under holds."""
 
     name = "md"
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
-                 mode: str = "exact", holds: str | None = None, hold_step: float | None = None):
+                 mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
+                 detours: int = 0, detour_min: float = 2.0):
         if mode not in COLLISION_TESTS:
             raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.mode = mode
@@ -111,6 +119,13 @@ class MDPlanner(Planner):
         if hold_step is not None and not (math.isfinite(hold_step) and hold_step > 0):
             raise ValueError(f"hold_step: must be a finite number > 0 (got {hold_step!r})")
         self.hold_step = hold_step
+        if isinstance(detours, bool) or not isinstance(detours, int) or detours < 0:
+            raise ValueError(f"detours: must be an integer >= 0 (got {detours!r})")
+        if detours and holds != "anywhere":
+            raise ValueError("detours: route choice needs holds 'anywhere'")
+        if not (math.isfinite(detour_min) and detour_min >= 0):
+            raise ValueError(f"detour_min: must be a finite number >= 0 (got {detour_min!r})")
+        self.detours, self.detour_min = detours, float(detour_min)
         if order not in ORDERS:
             raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
         if not margin >= 0:
@@ -133,6 +148,8 @@ class MDPlanner(Planner):
         network = session.sched.network(session.order, [r.id for r in robots])
         info: dict[str, Any] = {"reorders": session.reorders, "reroutes": session.reroutes,
                                 "regions": session.model.region_count}
+        if self.detours:
+            info["detours"] = session.detoured
         return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
@@ -231,7 +248,7 @@ class _Session:
         #: per robot, discs it was found to block and must keep off, by the robot whose start or
         #: goal they are
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {}
-        self.reorders = self.reroutes = 0
+        self.reorders = self.reroutes = self.detoured = 0
         #: shortest paths already known (robot -> path): kept when they avoid what they must
         self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
@@ -254,6 +271,8 @@ class _Session:
                                     times=[t for _, t in routes], fast_merge=self.planner.holds == "anywhere")
         self.sched = DelayScheduler(self.model, self.planner.mode, self.planner.holds,
                                     start_only=[x for x, r in enumerate(self.robots) if r.max_accel is not None])
+        if self.planner.detours:
+            self.sched.after = self._detour
 
     def _set_route(self, x: int, path: np.ndarray | None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Give robot x this path, driven from standstill to standstill with its acceleration."""
@@ -354,6 +373,51 @@ class _Session:
             blocked = self.sched.schedule(self.order, start_at=pos_i, dirty=_apply(self.model, changed, j))
             if progress:
                 progress(self.reorders, limit, "re-ordering")
+
+    def _detour(self, x: int) -> bool:
+        """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
+        the stretch after its longest wait (keeping what x must avoid) and keep the one with the
+        earliest arrival; True if x's path changed."""
+        if x < self.fixed:
+            return False
+        me, sched = self.robots[x], self.sched
+        changed = False
+        for _ in range(self.planner.detours):
+            arr, dep = sched.arr[x], sched.dep[x]
+            if len(arr) < 3:
+                return changed
+            wait = dep[:-1] - arr[:-1]
+            if float(wait.sum()) <= self.planner.detour_min:
+                return changed
+            v = int(np.argmax(wait))
+            old_path, old_times = self.route_of(x)
+            reach = me.radius + 0.05
+            ends = np.array([me.start, me.goal], dtype=float)
+            ahead = [p for p in old_path[v + 1:v + 4] if np.hypot(*(ends - p).T).min() > reach + me.radius]
+            if not ahead:
+                return changed
+            rank = self.rank
+            avoid = ([(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
+                      if y != x and rank[y] > rank[x]]
+                     + [(self.robots[y].goal, self.keep_out(x, y)) for y in range(len(self.robots))
+                        if y != x and rank[y] < rank[x]]
+                     + [d for discs in self.must.get(x, {}).values() for d in discs]
+                     + [((float(p[0]), float(p[1])), reach) for p in ahead])
+            path = self.finder.get(me.radius).find(me.start, me.goal, avoid=avoid)
+            if path is None:
+                return changed
+            before = float(arr[-1])
+            old_arr, old_dep = arr.copy(), dep.copy()
+            self.model.set_paths(self._set_route(x, path))
+            if sched.schedule_robot(x, self.rank) is None and float(sched.arr[x][-1]) < before - 1e-6:
+                self.detoured += 1
+                changed = True
+                continue
+            self.paths[x], self.times[x] = old_path, old_times
+            self.model.set_paths({x: (old_path, old_times)})
+            sched.set_timing(x, 0.0, old_arr, old_dep)
+            return changed
+        return changed
 
     def _reroute(self, x: int, owner: int, disc: tuple[tuple[float, float], float]) -> bool:
         """Re-plan x to keep off ``disc`` (the start or goal of ``owner``); True if x's path changed."""
