@@ -37,8 +37,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mode", choices=sorted(COLLISION_TESTS, reverse=True),   # exact first: md's default
                    help="md: collision test, exact regions (default) or the paper's boxes (as md-box)")
     p.add_argument("--holds", type=_holds,
-                   help="md: where a robot may wait on its path: anywhere (md's default with exact regions) "
-                        "or none (departure delays only, the paper's method; as md-departure)")
+                   help="md: where a robot may wait on its path: none (md's default: departure delays only, "
+                        "the paper's method) or anywhere (at any vertex, exact regions only; as md-holds)")
     p.add_argument("--order", choices=["parking", "given", "shortest", "longest"],
                    help="initial priority order (default: the planner's own; md: shortest, prior: given; "
                         "parking is md only)")

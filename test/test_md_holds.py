@@ -66,18 +66,19 @@ def test_a_hold_en_route_beats_a_departure_delay(holds):
 
 
 def test_the_md_planner_holds_where_a_delay_costs_more():
-    """The same case through the planner (given order, no margin): md holds, md-departure delays."""
+    """The same case through the planner (given order, no margin): md-holds holds, md-departure delays."""
     arrivals = {}
-    for name in ("md", "md-departure"):
+    for name in ("md-holds", "md-departure"):
         plan = get_planner(name, order="given", margin=0.0).plan(GRID, SPECS)
         assert check_plan(GRID, SPECS, plan) == []
         arrivals[name] = plan.by_id()["j"].arrival_time
-    assert arrivals["md"] == pytest.approx(15 + S2)
+    assert arrivals["md-holds"] == pytest.approx(15 + S2)
     assert arrivals["md-departure"] == pytest.approx(17 + S2)
 
 
 def test_holds_options():
-    assert MDPlanner().holds == "anywhere"
+    assert MDPlanner().holds == "none" and get_planner("md").holds == "none"
+    assert get_planner("md-holds").holds == get_planner("md-routes").holds == "anywhere"
     assert MDPlanner(mode="box").holds == "none"
     assert get_planner("md-departure").holds == "none"
     assert get_planner("md-box").holds == "none"
@@ -93,7 +94,7 @@ def _from(path: TimedPath, t0: float) -> TimedPath:
     return TimedPath(path.robot_id, path.radius, np.vstack([[*path.position(t0), t0], wp[wp[:, 2] > t0]]))
 
 
-@pytest.mark.parametrize("name", ["md", "md-departure", "md-routes"])
+@pytest.mark.parametrize("name", ["md-holds", "md-departure", "md-routes"])
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=scenarios(), t0=st.sampled_from([0.0, 0.7, 2.0, 4.5]))
 def test_every_incremental_leg_is_valid(name, case, t0):
@@ -154,10 +155,10 @@ def test_route_choice_takes_the_detour_when_waiting_costs_more():
                               "@." + "@" * 9 + ".@"])
     robots = [RobotSpec("h", 0.4, 1.0, (11.5, 4.5), (1.5, 4.5)),
               RobotSpec("j", 0.4, 1.0, (0.5, 2.5), (12.5, 2.5))]
-    plans = {name: get_planner(name, order="given").plan(grid, robots) for name in ("md", "md-routes")}
+    plans = {name: get_planner(name, order="given").plan(grid, robots) for name in ("md-holds", "md-routes")}
     for plan in plans.values():
         assert check_plan(grid, robots, plan) == []
-    held, routed = plans["md"].by_id()["j"], plans["md-routes"].by_id()["j"]
+    held, routed = plans["md-holds"].by_id()["j"], plans["md-routes"].by_id()["j"]
     assert held.arrival_time > 20.0                     # waited for h to clear the corridor
     assert routed.arrival_time == pytest.approx(16.0)   # 16 m at 1 m/s, no wait
     assert plans["md-routes"].info["detours"] >= 1

@@ -6,7 +6,7 @@ Automatic Warehouse", with what we measured it needs (docs/ARCHITECTURE.md, meas
    Robots with ``max_accel`` drive it with speed ramps (:func:`~fleet_planner.model.drive_profile`).
 2. The (M,D) network over those paths and priority-ordered departure delays (Eq. 3), with the
    paper's collision boxes (``mode="box"``) or the exact regions (``mode="exact"``, default);
-   with exact regions, by default, waits at any vertex of the path instead of at the start only
+   with exact regions and ``holds="anywhere"``, waits at any vertex of the path instead of at the start only
    (``holds="anywhere"``: an earliest-arrival search against the higher robots' timed
    trajectories, see :mod:`fleet_planner.scheduler`; paths get a vertex about every grid cell so
    that there is somewhere to wait). ``holds="none"`` is the departure-only method.
@@ -91,9 +91,11 @@ class MDPlanner(Planner):
     many others' shortest paths and last those whose goal does (fewest re-orderings in crowds);
     ``max_reorders`` bounds the re-ordering attempts (default 4 N); ``mode`` picks the collision
     test: "exact" (default; robots may follow each other) or "box" (You & Ji as written); ``holds``
-    where a robot may wait on its path: "anywhere" (default with exact regions: at any vertex,
-    an earliest-arrival search against the higher robots' timed trajectories) or "none" (only
-    before it departs: the paper's departure delays; the only choice with boxes). Robots with
+    where a robot may wait on its path: "none" (default: only before it departs, the paper's
+    departure delays; the only choice with boxes) or "anywhere" (exact regions: at any vertex, an
+    earliest-arrival search against the higher robots' timed trajectories; not the default yet:
+    better sums of arrivals on 4 of 6 benchmark instances, worse on 2 and in the delivery
+    benchmark, where robots holding in aisles hold up the robots behind them, measured fact 5). Robots with
     ``max_accel`` wait only before they depart in either case (a stop en route would need braking
     and accelerating ramps their drive profile does not have). ``hold_step`` (m, default one grid
     cell): with holds, paths get a vertex at least this often, so that there is somewhere to wait.
@@ -104,13 +106,11 @@ class MDPlanner(Planner):
     name = "md"
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
-                 mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
+                 mode: str = "exact", holds: str = "none", hold_step: float | None = None,
                  detours: int = 0, detour_min: float = 2.0):
         if mode not in COLLISION_TESTS:
             raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.mode = mode
-        if holds is None:
-            holds = "anywhere" if mode == "exact" else "none"
         if holds not in HOLDS:
             raise ValueError(f"holds: must be one of {', '.join(HOLDS)} (got {holds!r})")
         if holds == "anywhere" and mode != "exact":
