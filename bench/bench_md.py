@@ -12,7 +12,7 @@ longest no-interference arrival time; re-orderings; collision regions (md); and 
 ``ok``, ``FAIL (k)`` (the plan breaks the contract: k violations, printed), ``no plan`` (the planner
 refused, with a PlanningError), ``timeout`` or ``error``. Exit status 1 when any plan was invalid.
 
-    .venv/bin/python bench/bench_md.py [--sizes 10,50,100,200,500] [--planners md,md-box,prior]
+    .venv/bin/python bench/bench_md.py [--sizes 10,50,100,200,500] [--planners md,md-departure,md-box,prior]
         [--maps warehouse-10-20-10-2-1,...] [--maps-dir DIR] [--seed 0] [--timeout 600]
         [--csv out/bench_md.csv] [--plot out/bench_md.png]
 
@@ -218,11 +218,12 @@ def _fmt(value, spec: str) -> str:
 
 def table(rows: list[Row]) -> str:
     w = max([3] + [len(r.map) for r in rows])
-    head = f"{'map':<{w}} {'N':>4} {'planner':<7} {'time s':>8} {'SoC/free':>8} {'mkspan/free':>11} " \
+    pw = max([7] + [len(r.planner) for r in rows])
+    head = f"{'map':<{w}} {'N':>4} {'planner':<{pw}} {'time s':>8} {'SoC/free':>8} {'mkspan/free':>11} " \
            f"{'reorders':>8} {'regions':>8}  valid"
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r.map:<{w}} {r.n:>4} {r.planner:<7} {_fmt(r.time_s, '8.2f')} {_fmt(r.soc_ratio, '8.3f')} "
+        lines.append(f"{r.map:<{w}} {r.n:>4} {r.planner:<{pw}} {_fmt(r.time_s, '8.2f')} {_fmt(r.soc_ratio, '8.3f')} "
                      f"{_fmt(r.makespan_ratio, '11.3f')} {_fmt(r.reorders, '8d')} {_fmt(r.regions, '8d')}  "
                      f"{r.verdict}")
     return "\n".join(lines)

@@ -1,6 +1,7 @@
 """``fleet-plan``: plan a scenario file offline and write the plan file.
 
-    fleet-plan SCENARIO.yaml --out PLAN.json [--planner md|md-box|prior] [--plot PLAN.png] [--check] [--quiet]
+    fleet-plan SCENARIO.yaml --out PLAN.json [--planner md|md-box|prior|md-departure] [--holds none|anywhere]
+        [--plot PLAN.png] [--check] [--quiet]
 
 The planners are the registered variants (:func:`fleet_planner.planners.planner_names`).
 
@@ -21,6 +22,7 @@ from .grid import MapError
 from .model import COLLISION_TESTS, Plan, PlanningError, RobotSpec
 from .planners import get_planner, planner_names, planner_summary
 from .scenario import ScenarioError, load_scenario, write_plan
+from .scheduler import HOLDS
 
 EXIT_OK, EXIT_INPUT, EXIT_INVALID_PLAN = 0, 2, 3
 
@@ -34,6 +36,9 @@ def _parser() -> argparse.ArgumentParser:
                        f"{name}: {planner_summary(name)}" for name in planner_names()))
     p.add_argument("--mode", choices=sorted(COLLISION_TESTS, reverse=True),   # exact first: md's default
                    help="md: collision test, exact regions (default) or the paper's boxes (as md-box)")
+    p.add_argument("--holds", type=_holds,
+                   help="md: where a robot may wait on its path: none (md's default: departure delays only, "
+                        "the paper's method) or anywhere (at any vertex, exact regions only; as md-holds)")
     p.add_argument("--order", choices=["parking", "given", "shortest", "longest"],
                    help="initial priority order (default: the planner's own; md: shortest, prior: given; "
                         "parking is md only)")
@@ -44,6 +49,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="also report the checker's verdict and the smallest clearance between robots")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
+
+
+def _holds(value: str) -> str:
+    if value not in HOLDS:
+        raise argparse.ArgumentTypeError(f"must be one of {', '.join(HOLDS)} (got {value!r})")
+    return value
 
 
 def schedule_table(robots: Sequence[RobotSpec], plan: Plan) -> str:
@@ -91,8 +102,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INPUT
     grid, robots = scenario.grid, scenario.robots
     # only what was asked for: each planner has its own defaults
-    options = {k: v for k, v in (("margin", args.margin), ("order", args.order), ("mode", args.mode))
-               if v is not None}
+    options = {k: v for k, v in (("margin", args.margin), ("order", args.order), ("mode", args.mode),
+                                 ("holds", args.holds)) if v is not None}
     try:
         planner = get_planner(args.planner, **options)
     except TypeError as exc:   # an option this planner does not have

@@ -47,7 +47,7 @@ def _segments(paths: Sequence[np.ndarray], times: Sequence[np.ndarray]):
     """Flatten polylines into segment arrays (with each segment's start time and speed). A path
     of one point (a robot that does not move) is a zero-length segment, so a parked robot still
     has regions with everyone passing by."""
-    starts, dirs, lens, owner, offset, t0, speed = [], [], [], [], [], [], []
+    starts, dirs, lens, owner, offset, t0, speed, index = [], [], [], [], [], [], [], []
     for idx, (pts, tt) in enumerate(zip(paths, times)):
         pts = np.asarray(pts, dtype=float).reshape(-1, 2)
         if len(pts) == 1:
@@ -62,10 +62,11 @@ def _segments(paths: Sequence[np.ndarray], times: Sequence[np.ndarray]):
         offset.append(np.concatenate([[0.0], np.cumsum(seg_len)[:-1]]))
         t0.append(tt[:-1])
         speed.append(np.where(seg_len > 0, seg_len / np.maximum(np.diff(tt), 1e-12), 1.0))
+        index.append(np.arange(len(d)))
     first = np.concatenate([np.arange(len(o)) == 0 for o in owner])
     last = np.concatenate([np.arange(len(o)) == len(o) - 1 for o in owner])
     return (np.vstack(starts), np.vstack(dirs), np.concatenate(lens), np.concatenate(owner),
-            np.concatenate(offset), first, last, np.concatenate(t0), np.concatenate(speed))
+            np.concatenate(offset), first, last, np.concatenate(t0), np.concatenate(speed), np.concatenate(index))
 
 
 def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -128,7 +129,11 @@ class CollisionModel:
     """
 
     def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0,
-                 speeds: Sequence[float] | None = None, times: Sequence[np.ndarray] | None = None):
+                 speeds: Sequence[float] | None = None, times: Sequence[np.ndarray] | None = None,
+                 fast_merge: bool = False):
+        #: merge a pair's pieces into regions with numpy (the same regions; ties in ``a_lo`` may be
+        #: numbered differently): for paths with many short segments (holds, docs/ARCHITECTURE.md)
+        self.fast_merge = fast_merge
         self.radii = np.asarray(radii, dtype=float)
         self.margin = float(margin)
         self.paths = [np.asarray(p, dtype=float).reshape(-1, 2) for p in paths]
@@ -192,7 +197,7 @@ class CollisionModel:
         robots = list(robots)
         if not robots or len(self.paths) < 2:
             return
-        p0, u, seg_len, owner, offset, first, last, seg_t0, seg_v = _segments(self.paths, self.times)
+        p0, u, seg_len, owner, offset, first, last, seg_t0, seg_v, seg_index = _segments(self.paths, self.times)
         p1 = p0 + u * seg_len[:, None]
         lines = shapely.linestrings(np.stack([p0, p1], axis=1))
         reach = 2 * float(self.radii.max()) + self.margin
@@ -229,6 +234,7 @@ class CollisionModel:
         pieces[:, P_B_LO], pieces[:, P_B_HI] = offset[ti] + b_lo[hit], offset[ti] + b_hi[hit]
         pieces[:, P_X_FIRST], pieces[:, P_X_LAST] = first[qi], last[qi]
         pieces[:, P_Y_FIRST], pieces[:, P_Y_LAST] = first[ti], last[ti]
+        pieces[:, P_X_SEG], pieces[:, P_Y_SEG] = seg_index[qi], seg_index[ti]
         pieces = pieces[np.lexsort((pieces[:, P_B_LO], pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
         cuts = np.nonzero(np.diff(pair_key))[0] + 1
@@ -237,7 +243,8 @@ class CollisionModel:
             self._pieces[(x, y)] = chunk
             self._adj.setdefault(x, set()).add(y)
             self._adj.setdefault(y, set()).add(x)
-            self._regions[(x, y)] = [Region(x, y, *b) for b in _merge_boxes(chunk[:, P_A_LO:P_B_HI + 1])]
+            merge = _merge_boxes_np if self.fast_merge and len(chunk) > 8 else _merge_boxes
+            self._regions[(x, y)] = [Region(x, y, *b) for b in merge(chunk[:, P_A_LO:P_B_HI + 1])]
 
 
 # Columns of a piece table: one row per pair of segments (one of robot x, one of robot y, x < y)
@@ -246,12 +253,13 @@ class CollisionModel:
 # d_y - d_x lies strictly inside (PHI_LO, PHI_HI). E_*: the piece's extent on the edges of the
 # segment pair where a robot may be parked (x at the start / end of its segment, y likewise), as
 # the other robot's travelled length (lo > hi when empty). OFF/T0/V: where each segment starts
-# (travelled length, undelayed time) and its speed, so t(s) = T0 + (s - OFF) / V on it.
+# (travelled length, undelayed time) and its speed, so t(s) = T0 + (s - OFF) / V on it. SEG: the
+# index of each robot's segment along its path (a one-point path has one segment of length 0).
 (P_X, P_Y, P_A_LO, P_A_HI, P_B_LO, P_B_HI, P_PHI_LO, P_PHI_HI,
  P_XS_LO, P_XS_HI, P_XE_LO, P_XE_HI, P_YS_LO, P_YS_HI, P_YE_LO, P_YE_HI,
  P_X_FIRST, P_X_LAST, P_Y_FIRST, P_Y_LAST,
- P_X_OFF, P_X_T0, P_X_V, P_Y_OFF, P_Y_T0, P_Y_V) = range(26)
-_NO_PIECES = np.zeros((0, 26))
+ P_X_OFF, P_X_T0, P_X_V, P_Y_OFF, P_Y_T0, P_Y_V, P_X_SEG, P_Y_SEG) = range(28)
+_NO_PIECES = np.zeros((0, 28))
 
 
 def _piece_table(p0, u, lp, offp, tp, vx, q0, v, lq, offq, tq, vy, R) -> np.ndarray:
@@ -261,7 +269,7 @@ def _piece_table(p0, u, lp, offp, tp, vx, q0, v, lq, offq, tq, vy, R) -> np.ndar
     A linear function's extremes over a convex set lie on its boundary: on the square's edges (the
     ends of the four edge intervals) or where the ellipse boundary is tangent to phi's level lines."""
     n = len(p0)
-    out = np.zeros((n, 26))
+    out = np.zeros((n, _NO_PIECES.shape[1]))
 
     def clip(lo, hi, length):
         lo, hi = np.maximum(lo, 0.0), np.minimum(hi, length)
@@ -335,6 +343,38 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
                     break
     comps.sort(key=lambda c: c[0])
     return [(c[0], c[1], c[2], c[3]) for c in comps]
+
+
+def _merge_boxes_np(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
+    """What :func:`_merge_boxes` computes (boxes that overlap or touch, and the bounding boxes of
+    what they form, merged until none touch another), by label propagation over all pairs."""
+    while True:
+        a_lo, a_hi, b_lo, b_hi = boxes.T
+        touch = ((a_lo[:, None] <= a_hi[None, :] + EPS) & (a_lo[None, :] <= a_hi[:, None] + EPS)
+                 & (b_lo[:, None] <= b_hi[None, :] + EPS) & (b_lo[None, :] <= b_hi[:, None] + EPS))
+        n = len(boxes)
+        label = np.arange(n)
+        while True:
+            new = np.where(touch, label[None, :], n).min(1)
+            new = new[new]
+            if np.array_equal(new, label):
+                break
+            label = new
+        roots, comp = np.unique(label, return_inverse=True)
+        merged = np.empty((len(roots), 4))
+        merged[:, 0] = np.full(len(roots), np.inf)
+        np.minimum.at(merged[:, 0], comp, a_lo)
+        merged[:, 1] = -np.inf
+        np.maximum.at(merged[:, 1], comp, a_hi)
+        merged[:, 2] = np.inf
+        np.minimum.at(merged[:, 2], comp, b_lo)
+        merged[:, 3] = -np.inf
+        np.maximum.at(merged[:, 3], comp, b_hi)
+        if len(merged) == n:
+            break
+        boxes = merged
+    boxes = boxes[np.lexsort((boxes[:, 2], boxes[:, 0]))]
+    return [(float(a), float(b), float(c), float(d)) for a, b, c, d in boxes]
 
 
 def _cumlen(path: np.ndarray) -> np.ndarray:

@@ -22,11 +22,27 @@ region itself: for each convex piece of a region, the set of delays of j at whic
 meets it is an open interval (the range of t_i(a) - t_j(b) over the piece, shifted by i's delay),
 and parked phases add half-lines. j gets the smallest delay outside the union of those intervals:
 never larger than the box answer, and exact for constant-speed robots.
+
+Holds anywhere (``holds="anywhere"``, exact regions only; issue 8): instead of one delay at the
+start, j may wait at any vertex of its path (robots in ``start_only``, those with acceleration
+ramps, only at the start). Each trajectory is moves along segments at the drive profile's speed
+and holds at vertices (parked on the start until departure, on the goal for ever after). From the
+same exact pieces, the higher robots' trajectories *as timed, holds included* give per segment of
+j an open interval of forbidden entry times for every part within reach (moving: the piece's phi
+range shifted by i's entry time; i holding: the zero-speed piece, j's range near i's point) and
+per vertex of j open intervals in which j must not stand there (i's segment passing within reach,
+or i holding within reach). j's timing is then the earliest arrival over (vertex, safe interval)
+pairs, as in safe-interval path planning (Phillips & Likhachev, "SIPP: Safe Interval Path Planning
+for Dynamic Environments"), along the fixed path; the earliest arrival per safe interval dominates
+because waiting inside it is free. Every pair of parts is covered and each test is exact, so the
+timing is safe against every higher robot; lower robots see j's holds. The network is computed
+from the final times (T1, T2 when a robot first reaches a region, T3, T4 when it last leaves it).
 """
 from __future__ import annotations
 
+import bisect
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +52,9 @@ from .collision import CollisionModel
 from .model import COLLISION_TESTS, EPS, Link, Network
 
 INF = math.inf
+#: where a robot may wait on its fixed path: only before it departs (the paper's departure delays)
+#: or at any vertex of its path (docs/ARCHITECTURE.md, "The (M,D) vocabulary of paper 001")
+HOLDS = ("none", "anywhere")
 
 
 @dataclass
@@ -57,13 +76,30 @@ class DelayScheduler:
     lower robots) and recomputes the rest, so a re-ordering recomputes only what changed.
     """
 
-    def __init__(self, model: CollisionModel, mode: str = "box"):
+    def __init__(self, model: CollisionModel, mode: str = "box", holds: str = "none",
+                 start_only: Iterable[int] = ()):
         if mode not in COLLISION_TESTS:
             raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
+        if holds not in HOLDS:
+            raise ValueError(f"holds: must be one of {', '.join(HOLDS)} (got {holds!r})")
+        if holds == "anywhere" and mode != "exact":
+            raise ValueError(f"holds: 'anywhere' needs the exact collision regions (mode='exact', got {mode!r})")
         self.model = model
         self.delays = np.zeros(len(model.paths))
         self.mode = mode
+        self.holds = holds
+        #: robots that may hold only before they depart (their drive profile has speed ramps: a
+        #: stop en route would need a braking and an accelerating ramp the profile does not have)
+        self.start_only = set(start_only)
+        #: with holds: per robot, when it reaches (``arr``) and leaves (``dep``) each vertex of its
+        #: driven path; arr[0] = 0 (it is there from the start), dep[-1] = inf (it parks on its goal)
+        self.arr: list[np.ndarray] = []
+        self.dep: list[np.ndarray] = []
+        for x in range(len(model.paths)):
+            self.set_timing(x, 0.0)
         self._done: set[int] = set()   # robots whose delay is up to date
+        #: called after robot x is scheduled (holds); True if it changed x's path (route choice)
+        self.after: Callable[[int], bool] | None = None
 
     def travel(self, x: int) -> float:
         return float(self.model.travel[x])
@@ -90,6 +126,8 @@ class DelayScheduler:
 
     def schedule_robot(self, j: int, rank: dict[int, int]) -> Blocked | None:
         """Eq. 3 for one robot: delay it until no inlet link is dangerous."""
+        if self.holds == "anywhere":
+            return self._schedule_holds(j, rank)
         if self.mode == "exact":
             return self._schedule_exact(j, rank)
         rows = self._inlet(j, rank)
@@ -193,18 +231,24 @@ class DelayScheduler:
             if (dirty is None or x in dirty or x not in self._done
                     or any(h in changed for h in self.model.neighbours(x) if rank[h] < n)):
                 before = self.delays[x]
+                before_dep = self.dep[x].copy() if self.holds == "anywhere" else None
                 blocked = self.schedule_robot(x, rank)
                 if blocked:
                     self._done.discard(x)
                     self._done.difference_update(order[n + 1:])
                     return blocked
                 self._done.add(x)
-                if self.delays[x] != before:
+                if self.after is not None and self.after(x):
+                    changed.add(x)
+                elif self.delays[x] != before or (before_dep is not None and (
+                        len(before_dep) != len(self.dep[x]) or not np.array_equal(before_dep, self.dep[x]))):
                     changed.add(x)
         return None
 
     def network(self, order: Sequence[int], ids: Sequence[str]) -> Network:
         """The network under the current delays (links listed by lower robot, then k)."""
+        if self.holds == "anywhere":
+            return self._network_holds(order, ids)
         rank = {x: n for n, x in enumerate(order)}
         net = Network([ids[x] for x in order], {ids[x]: float(self.delays[x]) for x in order},
                       {ids[x]: self.travel(x) for x in order}, mode=self.mode)
@@ -220,3 +264,293 @@ class DelayScheduler:
                     M, D = float(t3[0] - t1), float(t4 - t2[0])
                 net.links.append(Link(ids[i], ids[j], per_pair[i], M, D, t1, t4, b_lo, b_hi))
         return net
+
+    # -- holds anywhere along the path ----------------------------------------------------------
+    def set_timing(self, x: int, departure: float, arr: np.ndarray | None = None,
+                   dep: np.ndarray | None = None) -> None:
+        """Robot x's vertex times: given (``arr``, ``dep``, from t = 0), or no hold but the
+        departure delay ``departure``."""
+        if arr is None or dep is None:
+            times = np.asarray(self.model.times[x], dtype=float)
+            arr, dep = departure + times, departure + times
+            arr[0] = 0.0
+            dep[-1] = INF
+        arr, dep = np.asarray(arr, dtype=float), np.asarray(dep, dtype=float)
+        if x < len(self.arr):
+            self.arr[x], self.dep[x] = arr, dep
+        else:
+            self.arr.append(arr)
+            self.dep.append(dep)
+        self.delays[x] = float(self.dep[x][0]) if len(self.dep[x]) > 1 else 0.0
+
+    def _hold_constraints(self, j: int, higher: list[int]):
+        """What the higher robots' timed trajectories forbid robot j on its path, from the exact
+        pieces of the collision regions (one per pair of segments): ``G`` rows (segment of j, lo,
+        hi, owner): j must not enter that segment at a time in the open interval (lo, hi); ``F``
+        rows (vertex of j, lo, hi, owner): j must not stand on that vertex during (lo, hi).
+
+        Every trajectory is a sequence of moves along segments at the drive profile's speed and
+        holds at vertices (parked at the start before departure, on the goal for ever after). For
+        each pair of parts within reach: j moving / i moving is the piece's range of
+        t_i(a) - t_j(b) shifted by i's entry time (what the departure-only test uses); j moving /
+        i holding at a segment end is j's range near that point (a zero-speed piece); j standing /
+        i moving is the window in which i's segment passes within reach of j's vertex; j standing
+        / i holding is i's hold interval when the two points are within reach."""
+        m = self.model
+        tables = [m.pieces(i, j) for i in higher]
+        sizes = [len(t) for t in tables]
+        P = np.vstack(tables)
+        n = len(P)
+        who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
+        sw = who > j
+
+        def col(x_col: int, y_col: int) -> np.ndarray:
+            return np.where(sw, P[:, y_col], P[:, x_col])
+
+        i_seg = col(C.P_X_SEG, C.P_Y_SEG).astype(np.int64)
+        j_seg = col(C.P_Y_SEG, C.P_X_SEG).astype(np.int64)
+        a0, d0, a1, d1 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        pos = 0
+        for i, k in zip(higher, sizes):
+            sl = slice(pos, pos + k)
+            pos += k
+            last = len(self.arr[i]) - 1
+            s0 = np.minimum(i_seg[sl], last)
+            s1 = np.minimum(s0 + 1, last)
+            a0[sl], d0[sl] = self.arr[i][s0], self.dep[i][s0]
+            a1[sl], d1[sl] = self.arr[i][s1], self.dep[i][s1]
+        phi_lo = np.where(sw, -P[:, C.P_PHI_HI], P[:, C.P_PHI_LO])
+        phi_hi = np.where(sw, -P[:, C.P_PHI_LO], P[:, C.P_PHI_HI])
+        is_lo, is_hi = col(C.P_XS_LO, C.P_YS_LO), col(C.P_XS_HI, C.P_YS_HI)   # j's range, i at its segment start
+        ie_lo, ie_hi = col(C.P_XE_LO, C.P_YE_LO), col(C.P_XE_HI, C.P_YE_HI)   # j's range, i at its segment end
+        js_lo, js_hi = col(C.P_YS_LO, C.P_XS_LO), col(C.P_YS_HI, C.P_XS_HI)   # i's range, j at its segment start
+        je_lo, je_hi = col(C.P_YE_LO, C.P_XE_LO), col(C.P_YE_HI, C.P_XE_HI)   # i's range, j at its segment end
+        i_off, i_t0, i_v = col(C.P_X_OFF, C.P_Y_OFF), col(C.P_X_T0, C.P_Y_T0), col(C.P_X_V, C.P_Y_V)
+        j_off, j_t0, j_v = col(C.P_Y_OFF, C.P_X_OFF), col(C.P_Y_T0, C.P_X_T0), col(C.P_Y_V, C.P_X_V)
+        cum_j = m.cumlen[j]
+        nv = len(cum_j)
+        j_end = cum_j[np.minimum(j_seg + 1, nv - 1)]   # travelled length of j at its segment's end
+        with np.errstate(invalid="ignore", over="ignore"):
+            sh_i = d0 - i_t0   # how much later than its drive profile i enters this segment
+
+            def rel_i(a: np.ndarray) -> np.ndarray:
+                return (a - i_off) / i_v
+
+            def rel_j(b: np.ndarray) -> np.ndarray:
+                return (b - j_off) / j_v
+
+            held0, held1 = d0 > a0, d1 > a1
+            g = [  # open intervals of times at which j must not enter its segment
+                (np.isfinite(phi_lo) & np.isfinite(sh_i), sh_i + phi_lo + j_t0, sh_i + phi_hi + j_t0),
+                (held0 & (is_lo <= is_hi), a0 - rel_j(is_hi), d0 - rel_j(is_lo)),
+                (held1 & (ie_lo <= ie_hi), a1 - rel_j(ie_hi), d1 - rel_j(ie_lo)),
+            ]
+            f = [  # (vertex of j, open interval of times at which j must not stand there)
+                (j_seg, np.isfinite(d0) & (js_lo <= js_hi), d0 + rel_i(js_lo), d0 + rel_i(js_hi)),
+                (j_seg, held0 & (is_lo <= j_off) & (j_off <= is_hi), a0, d0),
+                (j_seg, held1 & (ie_lo <= j_off) & (j_off <= ie_hi), a1, d1),
+                (j_seg + 1, np.isfinite(d0) & (je_lo <= je_hi), d0 + rel_i(je_lo), d0 + rel_i(je_hi)),
+                (j_seg + 1, held0 & (is_lo <= j_end) & (j_end <= is_hi), a0, d0),
+                (j_seg + 1, held1 & (ie_lo <= j_end) & (j_end <= ie_hi), a1, d1),
+            ]
+
+        def stack(parts):
+            key = np.concatenate([p[0][p[1]] for p in parts])
+            lo = np.concatenate([p[2][p[1]] for p in parts])
+            hi = np.concatenate([p[3][p[1]] for p in parts])
+            own = np.concatenate([who[p[1]] for p in parts])
+            keep = (lo < hi) & (hi > 0)
+            return key[keep], lo[keep], hi[keep], own[keep]
+
+        G = stack([(j_seg, *c) for c in g])
+        F = stack([(np.minimum(v, nv - 1), mask, lo, hi) for v, mask, lo, hi in f])
+        return G, F
+
+    def _schedule_holds(self, j: int, rank: dict[int, int]) -> Blocked | None:
+        """Earliest arrival of j along its fixed path with waits at its vertices (safe-interval
+        search over (vertex, safe interval), as in SIPP, against the higher robots' trajectories as
+        timed, holds included); robots in ``start_only`` wait only before they depart."""
+        m = self.model
+        higher = [i for i in m.neighbours(j) if rank.get(i, INF) < rank[j]]
+        if not higher:
+            self.set_timing(j, 0.0)
+            return None
+        (g_key, g_lo, g_hi, g_own), (f_key, f_lo, f_hi, f_own) = self._hold_constraints(j, higher)
+        nv = len(m.paths[j])
+        if nv == 1:   # j never moves: nobody may come near it, ever
+            self.set_timing(j, 0.0)
+            if len(f_lo) == 0:
+                return None
+            n = int(np.argmax(np.isinf(f_hi))) if np.isinf(f_hi).any() else int(np.argmin(f_lo))
+            return self._blocked(j, int(f_own[n]), goal=bool(np.isinf(f_hi[n])))
+        T0 = np.asarray(m.times[j], dtype=float)
+        hold_at = np.array([0, nv - 1]) if j in self.start_only else np.arange(nv)
+        edge = np.searchsorted(hold_at, g_key, side="right") - 1   # macro edge of each segment
+        g_lo = g_lo - (T0[g_key] - T0[hold_at[edge]])              # as times of leaving its hold vertex
+        g_hi = g_hi - (T0[g_key] - T0[hold_at[edge]])
+        is_hold = np.zeros(nv, dtype=bool)
+        is_hold[hold_at] = True
+        f_keep = is_hold[f_key]
+        vert_of = np.full(nv, -1)
+        vert_of[hold_at] = np.arange(len(hold_at))
+        F_groups = _groups(vert_of[f_key[f_keep]], f_lo[f_keep], f_hi[f_keep], len(hold_at))
+        G_groups = _groups(edge, g_lo, g_hi, len(hold_at) - 1)
+        safes = [_safe(*grp) for grp in F_groups]
+        durations = np.diff(T0[hold_at])
+        found = _earliest(safes, G_groups, durations)
+        if found is None:
+            relaxed = _earliest([[(0.0, INF)]] + safes[1:], G_groups, durations)
+            self.set_timing(j, 0.0)
+            if relaxed is not None:   # waiting at its start would do, but a higher robot comes by first
+                first = safes[0][0][1] if safes[0] and safes[0][0][0] <= 0 else 0.0
+                at0 = f_key == 0
+                cand = np.nonzero(at0 & (f_hi > first))[0]
+                n = int(cand[np.argmin(f_lo[cand])]) if len(cand) else int(np.argmin(np.where(at0, f_lo, INF)))
+                return self._blocked(j, int(f_own[n]), goal=False)
+            lo_all = np.concatenate([g_lo, f_lo])
+            hi_all = np.concatenate([g_hi, f_hi])
+            own_all = np.concatenate([g_own, f_own])
+            unbounded = np.nonzero(np.isinf(hi_all))[0]
+            n = int(unbounded[np.argmin(lo_all[unbounded])]) if len(unbounded) else int(np.argmax(hi_all))
+            return self._blocked(j, int(own_all[n]), goal=True)
+        arrive, leave = found
+        arr, dep = np.empty(nv), np.empty(nv)
+        for k in range(len(hold_at) - 1):
+            h, h2 = hold_at[k], hold_at[k + 1]
+            arr[h], dep[h] = arrive[k], leave[k]
+            inner = np.arange(h + 1, h2)
+            arr[inner] = dep[inner] = leave[k] + T0[inner] - T0[h]
+        arr[0], arr[-1], dep[-1] = 0.0, arrive[-1], INF
+        self.set_timing(j, 0.0, arr, dep)
+        return None
+
+    def _blocked(self, j: int, blocker: int, goal: bool) -> Blocked:
+        if goal:
+            return Blocked(j, blocker, "parks on its goal in the way", "goal")
+        return Blocked(j, blocker, "drives through its start disc before it can leave", "start")
+
+    def _time_at(self, x: int, s: float, last: bool) -> float:
+        """When robot x (as timed) first reaches / last leaves travelled length ``s``."""
+        cum = self.model.cumlen[x]
+        if not last and s <= EPS:
+            return 0.0
+        if last and s >= cum[-1] - EPS:
+            return INF
+        k = int(np.searchsorted(cum, s, side="left"))
+        if k < len(cum) and abs(cum[k] - s) <= EPS:
+            return float(self.dep[x][k] if last else self.arr[x][k])
+        seg = max(k - 1, 0)
+        return float(self.dep[x][seg] + self.model.tau(x, s) - self.model.times[x][seg])
+
+    def _network_holds(self, order: Sequence[int], ids: Sequence[str]) -> Network:
+        """The network under the final timing with holds: a robot's node has its departure and its
+        time from departure to arrival (holds included); a link's T1 / T2 are when the robot first
+        reaches the region, T4 / T3 when it last leaves it."""
+        rank = {x: n for n, x in enumerate(order)}
+
+        def arrival(x: int) -> float:
+            return float(self.arr[x][-1]) if len(self.arr[x]) > 1 else 0.0
+
+        net = Network([ids[x] for x in order], {ids[x]: float(self.delays[x]) for x in order},
+                      {ids[x]: arrival(x) - float(self.delays[x]) for x in order}, mode=self.mode)
+        for j in order:
+            rows = []
+            for i in self.model.neighbours(j):
+                if rank.get(i, INF) >= rank[j]:
+                    continue
+                for reg in self.model.regions(i, j):
+                    a_lo, a_hi, b_lo, b_hi = reg.oriented(i)
+                    rows.append((i, self._time_at(i, a_lo, False), self._time_at(i, a_hi, True), b_lo, b_hi))
+            rows.sort(key=lambda r: (r[3], r[0]))
+            per_pair: dict[int, int] = {}
+            for i, t1, t4, b_lo, b_hi in rows:
+                t2, t3 = self._time_at(j, b_lo, False), self._time_at(j, b_hi, True)
+                per_pair[i] = per_pair.get(i, 0) + 1
+                with np.errstate(invalid="ignore"):
+                    M, D = t3 - t1, t4 - t2
+                net.links.append(Link(ids[i], ids[j], per_pair[i], M, D, t1, t4, b_lo, b_hi))
+        return net
+
+
+def _groups(key: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int) -> list[tuple[list[float], list[float]]]:
+    """Open intervals (lo, hi) grouped by ``key`` in 0..n-1, each group sorted by ``lo``."""
+    order = np.lexsort((lo, key))
+    bounds = np.searchsorted(key[order], np.arange(n + 1)).tolist()
+    los, his = lo[order].tolist(), hi[order].tolist()
+    return [(los[a:b], his[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def _safe(lo: list[float], hi: list[float]) -> list[tuple[float, float]]:
+    """The closed safe intervals in [0, inf) outside open forbidden intervals sorted by lo (two
+    that only touch leave the instant between them free)."""
+    out: list[tuple[float, float]] = []
+    cur = 0.0
+    for a, b in zip(lo, hi):
+        if b <= cur:
+            continue
+        if a >= cur:
+            out.append((cur, a))
+        cur = b
+    if cur < INF:
+        out.append((cur, INF))
+    return out
+
+
+def _allowed(lo: list[float], hi: list[float], a: float, e: float):
+    """The closed pieces of [a, e] outside the open intervals (lo, hi) (sorted by lo), in order."""
+    cur = a
+    for x, y in zip(lo, hi):
+        if y <= cur:
+            continue
+        if x >= e:
+            break
+        if x >= cur:
+            yield cur, x
+        cur = y
+        if cur > e:
+            return
+    if cur <= e and cur < INF:
+        yield cur, e
+
+
+def _earliest(safes: list[list[tuple[float, float]]], edges: list[tuple[list[float], list[float]]],
+              durations: np.ndarray) -> tuple[list[float], list[float]] | None:
+    """Earliest arrival along a chain of hold vertices: ``safes[k]`` the safe intervals of vertex k,
+    ``edges[k]`` the forbidden departure times from vertex k to k + 1 (sorted by lo), which takes
+    ``durations[k]``. The robot is on vertex 0 at t = 0 and must stay on the last one for ever.
+    Per (vertex, safe interval) only the earliest arrival is kept (waiting there is free, so it
+    dominates). Returns (arrival, departure) per vertex, or None."""
+    if not safes[0] or safes[0][0][0] > 0:
+        return None
+    best: list[dict[int, tuple[float, int, float]]] = [{0: (0.0, -1, 0.0)}]
+    for k, dur in enumerate(durations.tolist()):
+        lo, hi = edges[k]
+        nxt = safes[k + 1]
+        ends = [e for _, e in nxt]
+        last_start = nxt[-1][0] if nxt else INF
+        out: dict[int, tuple[float, int, float]] = {}
+        for si, (t, _, _) in sorted(best[k].items(), key=lambda kv: kv[1][0]):
+            e = safes[k][si][1]
+            for al, be in _allowed(lo, hi, t, e):
+                t_lo, t_hi = al + dur, be + dur
+                n = bisect.bisect_left(ends, t_lo)
+                while n < len(nxt) and nxt[n][0] <= t_hi:
+                    t_arr = max(t_lo, nxt[n][0])
+                    if n not in out or t_arr < out[n][0]:
+                        out[n] = (t_arr, si, t_arr - dur)
+                    n += 1
+                if math.isinf(nxt[-1][1]) and (len(nxt) - 1) in out and t_lo >= last_start:
+                    break
+        if not out:
+            return None
+        best.append(out)
+    final = len(safes[-1]) - 1
+    if not safes[-1] or not math.isinf(safes[-1][final][1]) or final not in best[-1]:
+        return None
+    arrive, leave = [0.0] * len(safes), [INF] * len(safes)
+    si = final
+    for k in range(len(safes) - 1, 0, -1):
+        t, parent, depart = best[k][si]
+        arrive[k], leave[k - 1] = t, depart
+        si = parent
+    return arrive, leave

@@ -47,7 +47,7 @@ robots:
 """
 
 SCENARIOS = ("corridor", "crossing", "default")
-PLANNERS = ("md", "md-box", "prior")
+PLANNERS = ("md", "md-box", "prior", "md-departure")   # md-departure: md before holds, same bytes
 
 
 def scenario(name: str) -> Scenario:

@@ -12,7 +12,7 @@ from fleet_planner.planners.prior import PriorPlanner
 
 
 def test_the_registered_variants():
-    assert planner_names() == ["md", "md-box", "prior", "crowd"]
+    assert planner_names() == ["md", "md-box", "prior", "md-departure", "md-holds", "md-routes", "crowd"]
     assert all(planner_summary(name) for name in planner_names())
 
 

@@ -45,9 +45,18 @@ def register(name: str, target: str, summary: str = "", **options: Any) -> None:
 register("md", "fleet_planner.planners.md:MDPlanner",
          "the (M,D) network of You & Ji with exact collision regions (robots may follow each other)")
 register("md-box", "fleet_planner.planners.md:MDPlanner",
-         "the (M,D) network of You & Ji with the paper's collision boxes", mode="box")
+         "the (M,D) network of You & Ji with the paper's collision boxes", mode="box", holds="none")
 register("prior", "fleet_planner.planners.prior:PriorPlanner",
          "prioritized planning in space-time (van den Berg & Overmars)")
+register("md-departure", "fleet_planner.planners.md:MDPlanner",
+         "md by its method: exact collision regions, departure delays only (what md is today)",
+         mode="exact", holds="none")
+register("md-holds", "fleet_planner.planners.md:MDPlanner",
+         "md with holds anywhere along the path (earliest arrival against the higher robots' timed trajectories)",
+         mode="exact", holds="anywhere")
+register("md-routes", "fleet_planner.planners.md:MDPlanner",
+         "md with route choice in time: robots that wait long try detours, the earliest arrival wins",
+         mode="exact", holds="anywhere", detours=2)
 register("crowd", "fleet_planner.planners.crowd:CrowdPlanner", "LaCAM/PIBT for dense crowds, timed by precedence")
 
 

@@ -5,7 +5,11 @@ Automatic Warehouse", with what we measured it needs (docs/ARCHITECTURE.md, meas
    of higher-priority robots where the map allows (falling back to goals only, then to nothing).
    Robots with ``max_accel`` drive it with speed ramps (:func:`~fleet_planner.model.drive_profile`).
 2. The (M,D) network over those paths and priority-ordered departure delays (Eq. 3), with the
-   paper's collision boxes (``mode="box"``) or the exact regions (``mode="exact"``, default).
+   paper's collision boxes (``mode="box"``) or the exact regions (``mode="exact"``, default);
+   with exact regions and ``holds="anywhere"``, waits at any vertex of the path instead of at the start only
+   (``holds="anywhere"``: an earliest-arrival search against the higher robots' timed
+   trajectories, see :mod:`fleet_planner.scheduler`; paths get a vertex about every grid cell so
+   that there is somewhere to wait). ``holds="none"`` is the departure-only method.
 3. Where a delay cannot help (a higher robot parks on its goal in the way, or passes a lower
    robot's start while it is still parked), the robot that moves is first re-routed around the
    disc in the way, else the blocked robot is moved just ahead of its blocker; only the paths
@@ -17,8 +21,8 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,7 +39,7 @@ from ..model import (
     drive_profile,
     timed_path_from_profile,
 )
-from ..scheduler import Blocked, DelayScheduler
+from ..scheduler import HOLDS, Blocked, DelayScheduler
 from .base import Planner, Progress
 
 if TYPE_CHECKING:
@@ -53,20 +57,28 @@ class DepartureSchedule:
     delays: np.ndarray
     network: Network
     blocked: Blocked | None
+    #: the timed paths (ids in the given order), holds included
+    paths: list[TimedPath] = field(default_factory=list)
 
 
 def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Sequence[float],
                    speeds: Sequence[float], order: Sequence[int] | None = None,
-                   margin: float = 0.0, mode: str = "box") -> DepartureSchedule:
+                   margin: float = 0.0, mode: str = "box", holds: str = "none") -> DepartureSchedule:
     """Departure delays for robots on the given paths (no re-planning): the bare method of the paper.
 
     ``order`` lists robot indices from highest to lowest priority (default: as given); ``mode`` is
-    "box" (the paper's collision boxes) or "exact" (the regions themselves, see the scheduler)."""
+    "box" (the paper's collision boxes) or "exact" (the regions themselves, see the scheduler);
+    ``holds`` "none" (departure delays only, the paper) or "anywhere" (waits at any vertex)."""
     order = list(range(len(ids))) if order is None else list(order)
     model = CollisionModel(paths, radii, margin, speeds)
-    sched = DelayScheduler(model, mode)
+    sched = DelayScheduler(model, mode, holds)
     blocked = sched.schedule(order)
-    return DepartureSchedule(order, sched.delays.copy(), sched.network(order, ids), blocked)
+    if holds == "anywhere":
+        timed = [_held_path(ids[x], radii[x], model.paths[x], sched.arr[x], sched.dep[x]) for x in range(len(ids))]
+    else:
+        timed = [timed_path_from_profile(ids[x], radii[x], model.paths[x], model.times[x], float(sched.delays[x]))
+                 for x in range(len(ids))]
+    return DepartureSchedule(order, sched.delays.copy(), sched.network(order, ids), blocked, timed)
 
 
 class MDPlanner(Planner):
@@ -78,15 +90,42 @@ class MDPlanner(Planner):
     makespan), "given" keeps the list order, "parking" puts first the robots whose start lies on
     many others' shortest paths and last those whose goal does (fewest re-orderings in crowds);
     ``max_reorders`` bounds the re-ordering attempts (default 4 N); ``mode`` picks the collision
-    test: "exact" (default; robots may follow each other) or "box" (You & Ji as written)."""
+    test: "exact" (default; robots may follow each other) or "box" (You & Ji as written); ``holds``
+    where a robot may wait on its path: "none" (default: only before it departs, the paper's
+    departure delays; the only choice with boxes) or "anywhere" (exact regions: at any vertex, an
+    earliest-arrival search against the higher robots' timed trajectories; not the default yet:
+    better sums of arrivals on 4 of 6 benchmark instances, worse on 2 and in the delivery
+    benchmark, where robots holding in aisles hold up the robots behind them, measured fact 5). Robots with
+    ``max_accel`` wait only before they depart in either case (a stop en route would need braking
+    and accelerating ramps their drive profile does not have). ``hold_step`` (m, default one grid
+    cell): with holds, paths get a vertex at least this often, so that there is somewhere to wait.
+    ``detours`` (default 0, off): route choice in time (issue 8, a first step): a robot that waits
+    more than ``detour_min`` s in all is re-planned up to this many times around the stretch after
+    its longest wait and takes the candidate with the earliest arrival under holds."""
 
     name = "md"
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
-                 mode: str = "exact"):
+                 mode: str = "exact", holds: str = "none", hold_step: float | None = None,
+                 detours: int = 0, detour_min: float = 2.0):
         if mode not in COLLISION_TESTS:
             raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.mode = mode
+        if holds not in HOLDS:
+            raise ValueError(f"holds: must be one of {', '.join(HOLDS)} (got {holds!r})")
+        if holds == "anywhere" and mode != "exact":
+            raise ValueError(f"holds: 'anywhere' needs mode 'exact' (got mode {mode!r})")
+        self.holds = holds
+        if hold_step is not None and not (math.isfinite(hold_step) and hold_step > 0):
+            raise ValueError(f"hold_step: must be a finite number > 0 (got {hold_step!r})")
+        self.hold_step = hold_step
+        if isinstance(detours, bool) or not isinstance(detours, int) or detours < 0:
+            raise ValueError(f"detours: must be an integer >= 0 (got {detours!r})")
+        if detours and holds != "anywhere":
+            raise ValueError("detours: route choice needs holds 'anywhere'")
+        if not (math.isfinite(detour_min) and detour_min >= 0):
+            raise ValueError(f"detour_min: must be a finite number >= 0 (got {detour_min!r})")
+        self.detours, self.detour_min = detours, float(detour_min)
         if order not in ORDERS:
             raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
         if not margin >= 0:
@@ -107,9 +146,11 @@ class MDPlanner(Planner):
         session.route(progress)
         session.resolve(progress)
         network = session.sched.network(session.order, [r.id for r in robots])
-        return Plan("md", session.timed_paths(), time.perf_counter() - t_start,
-                    {"reorders": session.reorders, "reroutes": session.reroutes,
-                     "regions": session.model.region_count}, network)
+        info: dict[str, Any] = {"reorders": session.reorders, "reroutes": session.reroutes,
+                                "regions": session.model.region_count}
+        if self.detours:
+            info["detours"] = session.detoured
+        return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
                          t0: float) -> list[TimedPath]:
@@ -119,7 +160,9 @@ class MDPlanner(Planner):
         ones are delayed, re-routed or re-ordered among themselves. Returns timed paths in absolute
         time, or raises PlanningError (with ``blockers``) naming who is in the way."""
         robots = list(robots)
-        kept = [_remaining(tp, t0) for tp in fixed]
+        held = [_remaining_held(tp, t0) for tp in fixed] if self.holds == "anywhere" else []
+        kept = [(poly, times, float(dep[0]) if len(dep) > 1 else 0.0) for poly, times, _, dep in held] \
+            if self.holds == "anywhere" else [_remaining(tp, t0) for tp in fixed]
         nf = len(kept)
         specs = [RobotSpec(tp.robot_id, tp.radius, _top_speed(poly, times), tuple(poly[0]), tuple(poly[-1]))
                  for tp, (poly, times, _) in zip(fixed, kept)] + robots
@@ -130,6 +173,8 @@ class MDPlanner(Planner):
                            hints={nf + x: path for x, path in shortest.items()})
         session.route()
         session.sched.delays[:nf] = [delay for _, _, delay in kept]
+        for x, (_, _, arr, dep) in enumerate(held):
+            session.sched.set_timing(x, 0.0, arr, dep)
         session.resolve()
         out = session.timed_paths()[nf:]
         for tp in out:
@@ -195,13 +240,15 @@ class _Session:
         self.margin = planner.margin
         self.rank = {x: k for k, x in enumerate(order)}
         self.finder = planner._finders.of(grid)
+        #: with holds: longest stretch of a path without a vertex to wait at (m)
+        self.hold_step = grid.resolution if planner.hold_step is None else planner.hold_step
         #: per robot its path and the times (from its departure) at which it passes the vertices
         self.paths: list[np.ndarray | None] = [p for p, _ in fixed_paths] + [None] * (len(robots) - fixed)
         self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
         #: per robot, discs it was found to block and must keep off, by the robot whose start or
         #: goal they are
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {}
-        self.reorders = self.reroutes = 0
+        self.reorders = self.reroutes = self.detoured = 0
         #: shortest paths already known (robot -> path): kept when they avoid what they must
         self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
@@ -221,8 +268,11 @@ class _Session:
             raise PlanningError(missing)
         routes = [self.route_of(x) for x in range(len(self.robots))]
         self.model = CollisionModel([p for p, _ in routes], [r.radius for r in self.robots], self.margin,
-                                    times=[t for _, t in routes])
-        self.sched = DelayScheduler(self.model, self.planner.mode)
+                                    times=[t for _, t in routes], fast_merge=self.planner.holds == "anywhere")
+        self.sched = DelayScheduler(self.model, self.planner.mode, self.planner.holds,
+                                    start_only=[x for x, r in enumerate(self.robots) if r.max_accel is not None])
+        if self.planner.detours:
+            self.sched.after = self._detour
 
     def _set_route(self, x: int, path: np.ndarray | None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Give robot x this path, driven from standstill to standstill with its acceleration."""
@@ -230,6 +280,8 @@ class _Session:
             self.paths[x] = self.times[x] = None
             return {}
         r = self.robots[x]
+        if self.planner.holds == "anywhere" and r.max_accel is None:
+            path = _subdivide(path, self.hold_step)   # places to wait: about one per cell
         points, times = drive_profile(path, r.max_speed, r.max_accel)
         self.paths[x], self.times[x] = points, times
         return {x: (points, times)}
@@ -322,6 +374,51 @@ class _Session:
             if progress:
                 progress(self.reorders, limit, "re-ordering")
 
+    def _detour(self, x: int) -> bool:
+        """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
+        the stretch after its longest wait (keeping what x must avoid) and keep the one with the
+        earliest arrival; True if x's path changed."""
+        if x < self.fixed:
+            return False
+        me, sched = self.robots[x], self.sched
+        changed = False
+        for _ in range(self.planner.detours):
+            arr, dep = sched.arr[x], sched.dep[x]
+            if len(arr) < 3:
+                return changed
+            wait = dep[:-1] - arr[:-1]
+            if float(wait.sum()) <= self.planner.detour_min:
+                return changed
+            v = int(np.argmax(wait))
+            old_path, old_times = self.route_of(x)
+            reach = me.radius + 0.05
+            ends = np.array([me.start, me.goal], dtype=float)
+            ahead = [p for p in old_path[v + 1:v + 4] if np.hypot(*(ends - p).T).min() > reach + me.radius]
+            if not ahead:
+                return changed
+            rank = self.rank
+            avoid = ([(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
+                      if y != x and rank[y] > rank[x]]
+                     + [(self.robots[y].goal, self.keep_out(x, y)) for y in range(len(self.robots))
+                        if y != x and rank[y] < rank[x]]
+                     + [d for discs in self.must.get(x, {}).values() for d in discs]
+                     + [((float(p[0]), float(p[1])), reach) for p in ahead])
+            path = self.finder.get(me.radius).find(me.start, me.goal, avoid=avoid)
+            if path is None:
+                return changed
+            before = float(arr[-1])
+            old_arr, old_dep = arr.copy(), dep.copy()
+            self.model.set_paths(self._set_route(x, path))
+            if sched.schedule_robot(x, self.rank) is None and float(sched.arr[x][-1]) < before - 1e-6:
+                self.detoured += 1
+                changed = True
+                continue
+            self.paths[x], self.times[x] = old_path, old_times
+            self.model.set_paths({x: (old_path, old_times)})
+            sched.set_timing(x, 0.0, old_arr, old_dep)
+            return changed
+        return changed
+
     def _reroute(self, x: int, owner: int, disc: tuple[tuple[float, float], float]) -> bool:
         """Re-plan x to keep off ``disc`` (the start or goal of ``owner``); True if x's path changed."""
         self.must.setdefault(x, {}).setdefault(owner, []).append(disc)
@@ -333,6 +430,9 @@ class _Session:
         return True
 
     def timed_paths(self) -> list[TimedPath]:
+        if self.planner.holds == "anywhere":
+            return [_held_path(r.id, r.radius, self.route_of(x)[0], self.sched.arr[x], self.sched.dep[x])
+                    for x, r in enumerate(self.robots)]
         return [timed_path_from_profile(r.id, r.radius, *self.route_of(x), float(self.sched.delays[x]))
                 for x, r in enumerate(self.robots)]
 
@@ -411,6 +511,58 @@ def _remaining(tp: TimedPath, t0: float) -> tuple[np.ndarray, np.ndarray, float]
     k = int(np.searchsorted(wp[:, 2], t0, side="right"))   # next vertex ahead of t0
     here = np.array(tp.position(t0))
     return np.vstack([here, wp[k:last + 2, :2]]), np.concatenate([[0.0], wp[k:last + 2, 2] - t0]), 0.0
+
+
+def _subdivide(path: np.ndarray, step: float) -> np.ndarray:
+    """The polyline with extra vertices, so that no segment is longer than ``step``."""
+    pts = np.asarray(path, dtype=float).reshape(-1, 2)
+    if len(pts) < 2:
+        return pts
+    out = [pts[:1]]
+    for a, b in zip(pts[:-1], pts[1:]):
+        k = max(1, math.ceil(float(np.hypot(*(b - a))) / step - 1e-9))
+        out.append(a + (b - a) * (np.arange(1, k + 1) / k)[:, None])
+    return np.vstack(out)
+
+
+def _held_path(robot_id: str, radius: float, points: np.ndarray, arr: np.ndarray, dep: np.ndarray) -> TimedPath:
+    """A timed path through ``points``, reaching vertex k at ``arr[k]`` and leaving it at
+    ``dep[k]`` (two waypoints where it holds; the last vertex is the goal, parked for ever)."""
+    rows = []
+    for k, (x, y) in enumerate(np.asarray(points, dtype=float).reshape(-1, 2)):
+        rows.append((x, y, arr[k]))
+        if k < len(points) - 1 and dep[k] > arr[k]:
+            rows.append((x, y, dep[k]))
+    return TimedPath(robot_id, radius, np.array(rows, dtype=float))
+
+
+def _remaining_held(tp: TimedPath, t0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The part of a timed path (holds anywhere) still ahead at ``t0``: (polyline from the robot's
+    position at t0, its drive profile: the times at which it would pass the vertices without holds,
+    the times from t0 at which it reaches and leaves each vertex)."""
+    wp = tp.waypoints
+    # collapse repeated points into one vertex with its arrival and departure
+    same = np.concatenate([[False], np.hypot(*np.diff(wp[:, :2], axis=0).T) <= 1e-9])
+    first = np.nonzero(~same)[0]
+    pts = wp[first, :2]
+    arr = wp[first, 2] - t0
+    dep = np.concatenate([wp[first[1:] - 1, 2], [np.inf]]) - t0
+    arr[0] = -np.inf
+    if len(pts) > 1 and arr[-1] > 0:
+        k = int(np.searchsorted(dep, 0.0, side="right"))   # first vertex the robot leaves after t0
+        if arr[k] <= 0:   # holding on vertex k at t0 (or parked on its start)
+            pts, arr, dep = pts[k:], arr[k:], dep[k:]
+        else:             # on the segment from vertex k - 1 to k
+            here = np.array(tp.position(t0))
+            pts = np.vstack([here, pts[k:]])
+            arr, dep = np.concatenate([[0.0], arr[k:]]), np.concatenate([[0.0], dep[k:]])
+    else:
+        pts, arr, dep = pts[-1:], np.zeros(1), np.array([np.inf])
+    arr[0] = 0.0
+    dep[0] = max(dep[0], 0.0)
+    moving = arr[1:] - dep[:-1]
+    times = np.concatenate([[0.0], np.cumsum(moving)])
+    return pts, times, arr, dep
 
 
 def _top_speed(path: np.ndarray, times: np.ndarray) -> float:
