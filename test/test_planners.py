@@ -30,7 +30,8 @@ def test_a_variant_is_its_class_with_its_options_and_the_callers():
 def test_a_variant_refuses_options_that_contradict_it():
     with pytest.raises(ValueError, match=r"planner 'md-box': mode is 'box' in this variant \(got mode='exact'\)"):
         get_planner("md-box", mode="exact")
-    with pytest.raises(ValueError, match=r"unknown planner 'nope'; choose one of md, md-box, prior, crowd"):
+    with pytest.raises(ValueError, match=r"unknown planner 'nope'; choose one of md, md-box, prior, md-departure, "
+                                         r"md-holds, md-routes, crowd"):
         get_planner("nope")
     with pytest.raises(TypeError):
         get_planner("prior", mode="box")
