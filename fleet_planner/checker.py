@@ -1,6 +1,6 @@
 """The independent plan checker: the oracle every planner test and benchmark trusts.
 
-It re-derives, from the plan contract of ARCHITECTURE.md alone, whether a plan is valid, and shares
+It re-derives, from the plan contract of docs/ARCHITECTURE.md alone, whether a plan is valid, and shares
 no code with the planners (no import of ``collision``, ``scheduler`` or ``planners``) so that a bug
 there cannot hide itself here. A robot sits on its first waypoint until that waypoint's time,
 moves in a straight line at constant speed between consecutive waypoints and sits on its last

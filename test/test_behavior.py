@@ -1,5 +1,6 @@
-"""BBMRCA behaviour layer (paper 002, section IV): geometry, traffic rules, docking, deadlocks,
-and the fleet simulation (liveness within a time bound, and never two overlapping discs)."""
+"""BBMRCA behaviour layer (Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance",
+section IV): geometry, traffic rules, docking, deadlocks, and the fleet simulation (liveness within a
+time bound, and never two overlapping discs)."""
 from __future__ import annotations
 
 import math
