@@ -5,26 +5,11 @@ the paper leaves the case open, see the "Interpretation" notes in fleet_planner/
 from __future__ import annotations
 
 import numpy as np
+from test_behavior import run as _drive  # steps a fleet, checks walls, returns the smallest gap
 
 from fleet_planner.behavior import Behavior, BehaviorFleet, BehaviorParams
 from fleet_planner.grid import GridMap
 from fleet_planner.model import RobotSpec
-
-
-def _drive(fleet: BehaviorFleet, limit_s: float, dt: float = 0.1) -> float:
-    """Step until every robot arrived or ``limit_s``; the smallest gap between discs seen."""
-    radii = np.array([fleet.view(i).radius for i in fleet.ids])
-    need = radii[:, None] + radii[None, :]
-    np.fill_diagonal(need, -np.inf)
-    smallest = np.inf
-    while fleet.time < limit_s and not all(fleet.arrived(i) for i in fleet.ids):
-        fleet.step(dt)
-        p = fleet.positions()
-        gap = np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1]) - need
-        np.fill_diagonal(gap, np.inf)
-        smallest = min(smallest, float(gap.min()))
-        assert all(fleet.grid.disc_is_free(x, y, r) for (x, y), r in zip(p, radii)), f"t={fleet.time}"
-    return smallest
 
 
 def test_a_docking_robot_pushed_behind_a_wall_corner_replans():

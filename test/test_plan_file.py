@@ -23,16 +23,8 @@ from fleet_planner.scenario import Scenario, load_scenario, parse_scenario, plan
 
 DATA = Path(__file__).resolve().parent / "data" / "plan_files"
 
-# three robots crossing between shelf blocks: two links, no re-ordering
-CROSSING = """\
-map:
-  rows: ["..........", "..@@..@@..", "..........", "..@@..@@..", "..........", ".........."]
-  resolution: 1.0
-robots:
-  - {id: a, radius: 0.4, max_speed: 1.0, start: [2.5, 2.5], goal: [9.5, 2.5]}
-  - {id: b, radius: 0.4, max_speed: 1.0, start: [4.5, 0.5], goal: [4.5, 5.5]}
-  - {id: c, kind: manipulator, radius: 0.35, max_speed: 0.8, start: [7.5, 4.5], goal: [0.5, 4.5]}
-"""
+# three robots crossing between shelf blocks: two links, no re-ordering (the CLI tests' scenario)
+from test_cli import CROSSING  # noqa: E402
 
 # a robot parks in the middle aisle that another one drives through: unbounded times (null in the
 # file), re-routings and (box mode, prior) re-orderings
