@@ -48,7 +48,7 @@ from fleet_planner.grid import GridMap  # noqa: E402
 from fleet_planner.warehouse import generate_warehouse, load_warehouse  # noqa: E402
 
 BUILTIN_MAPS = ("warehouse", "large")
-QUICK = {"maps": "warehouse", "sizes": "20", "methods": ",".join(m for m in METHODS if m != "md-box"), "per_robot": 2}
+QUICK = {"maps": "warehouse", "sizes": "20", "methods": "md,prior,behavior", "per_robot": 2}
 
 
 @dataclass

@@ -15,7 +15,9 @@ Methods (:data:`METHODS`):
   (:class:`~fleet_planner.planners.md.MDPlanner`) plans it around the trajectories every other
   robot is driving; robots follow their timed paths exactly. ``md-box`` uses the paper's collision
   boxes, ``md`` the exact regions.
-* ``prior`` - the same flow with :class:`~fleet_planner.planners.prior.PriorPlanner`.
+* ``prior`` - the same flow with :class:`~fleet_planner.planners.prior.PriorPlanner`; every other
+  planner of the registry (``md-departure``, ``md-holds``, ``md-routes``, ``crowd``) runs the
+  same central flow through its ``plan_incremental``.
 * ``behavior`` - BBMRCA (:mod:`.behavior_run`): :class:`~fleet_planner.behavior.BehaviorFleet`,
   each robot plans its own A* path and the behaviours resolve conflicts locally, stepped with a
   fixed ``dt``.
@@ -39,13 +41,15 @@ from __future__ import annotations
 
 import math
 
+from ..planners import planner_names
 from .behavior_run import simulate_behavior
 from .central import simulate_central
 from .layout import ROBOT_RADIUS, choose_spots, driving_distances, spread_stations
 from .problem import DOCK_S, TOP_SPEED, Delivery, DeliveryProblem, delivery_problem, warehouse_problem
 from .result import DeliveryResult, RunLimits, SimProgress
 
-METHODS = ("md", "md-box", "prior", "behavior")
+#: every registered planner (central: ``plan_incremental`` per leg) and the behaviour fleet
+METHODS = (*planner_names(), "behavior")
 
 
 def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: float = 4 * 3600.0,
