@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -43,30 +44,53 @@ class Region:
         return self.b_lo, self.b_hi, self.a_lo, self.a_hi
 
 
-def _segments(paths: Sequence[np.ndarray], times: Sequence[np.ndarray]):
-    """Flatten polylines into segment arrays (with each segment's start time and speed). A path
-    of one point (a robot that does not move) is a zero-length segment, so a parked robot still
-    has regions with everyone passing by."""
-    starts, dirs, lens, owner, offset, t0, speed, index = [], [], [], [], [], [], [], []
-    for idx, (pts, tt) in enumerate(zip(paths, times)):
-        pts = np.asarray(pts, dtype=float).reshape(-1, 2)
-        if len(pts) == 1:
-            pts, tt = np.vstack([pts, pts]), np.array([0.0, 1.0])
-        d = np.diff(pts, axis=0)
-        seg_len = np.hypot(d[:, 0], d[:, 1])
-        unit = np.divide(d, seg_len[:, None], out=np.tile([1.0, 0.0], (len(d), 1)), where=seg_len[:, None] > 0)
-        starts.append(pts[:-1])
-        dirs.append(unit)
-        lens.append(seg_len)
-        owner.append(np.full(len(d), idx))
-        offset.append(np.concatenate([[0.0], np.cumsum(seg_len)[:-1]]))
-        t0.append(tt[:-1])
-        speed.append(np.where(seg_len > 0, seg_len / np.maximum(np.diff(tt), 1e-12), 1.0))
-        index.append(np.arange(len(d)))
-    first = np.concatenate([np.arange(len(o)) == 0 for o in owner])
-    last = np.concatenate([np.arange(len(o)) == len(o) - 1 for o in owner])
-    return (np.vstack(starts), np.vstack(dirs), np.concatenate(lens), np.concatenate(owner),
-            np.concatenate(offset), first, last, np.concatenate(t0), np.concatenate(speed), np.concatenate(index))
+class _Segs(NamedTuple):
+    """Segment arrays of one or more robots' paths (one row per segment)."""
+
+    p0: np.ndarray      # start point
+    u: np.ndarray       # unit direction
+    length: np.ndarray
+    owner: np.ndarray   # robot index
+    offset: np.ndarray  # travelled length at the segment start
+    first: np.ndarray   # first segment of its path
+    last: np.ndarray    # last segment of its path
+    t0: np.ndarray      # undelayed time at the segment start
+    speed: np.ndarray
+    index: np.ndarray   # index of the segment along its path
+
+
+def _robot_segments(idx: int, pts: np.ndarray, tt: np.ndarray) -> _Segs:
+    """One path as segments (with each segment's start time and speed). A path of one point (a
+    robot that does not move) is a zero-length segment, so a parked robot still has regions with
+    everyone passing by."""
+    pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+    tt = np.asarray(tt, dtype=float)
+    if len(pts) == 1:
+        pts, tt = np.vstack([pts, pts]), np.array([0.0, 1.0])
+    d = np.diff(pts, axis=0)
+    seg_len = np.hypot(d[:, 0], d[:, 1])
+    unit = np.divide(d, seg_len[:, None], out=np.tile([1.0, 0.0], (len(d), 1)), where=seg_len[:, None] > 0)
+    n = len(d)
+    index = np.arange(n)
+    return _Segs(pts[:-1], unit, seg_len, np.full(n, idx), np.concatenate([[0.0], np.cumsum(seg_len)[:-1]]),
+                 index == 0, index == n - 1, tt[:-1],
+                 np.where(seg_len > 0, seg_len / np.maximum(np.diff(tt), 1e-12), 1.0), index)
+
+
+def _cat(parts: Sequence[_Segs]) -> _Segs:
+    return _Segs(*(np.concatenate(col) for col in zip(*parts)))
+
+
+def _take(segs: _Segs, rows: np.ndarray) -> _Segs:
+    return _Segs(*(col[rows] for col in segs))
+
+
+def _swap(a: _Segs, b: _Segs, swap: np.ndarray) -> tuple[_Segs, _Segs]:
+    """The two sides of segment pairs exchanged where ``swap``."""
+    def pick(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.where(swap[:, None] if x.ndim == 2 else swap, y, x)
+
+    return _Segs(*(pick(x, y) for x, y in zip(a, b))), _Segs(*(pick(y, x) for x, y in zip(a, b)))
 
 
 def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -123,16 +147,22 @@ class CollisionModel:
     ``radii`` are the robots' radii; two discs are in conflict when closer than
     ``r_x + r_y + margin``. How each robot drives its path is given either by constant ``speeds``
     or by ``times``: per robot, the time (from its departure) at which it passes each vertex
-    (a speed profile with ramps, :func:`fleet_planner.model.drive_profile`). ``set_path`` replaces
-    one robot's path and recomputes only its pairs (re-ordering robots re-plans one or two paths;
-    everything else is kept).
+    (a speed profile with ramps, :func:`fleet_planner.model.drive_profile`). ``set_paths`` replaces
+    robots' paths and recomputes only their pairs: their new segments are looked up in a segment
+    index of the fleet that is rebuilt only after many paths have changed (the segments of robots
+    changed since are tested against a small index of their own), so a route-choice try or a
+    re-ordering costs what that robot touches, not the fleet. Regions (the pieces merged into
+    components) are computed when first asked for: the scheduler works on the pieces.
     """
+
+    #: rebuild the fleet's segment index when this share of its segments has changed since
+    REBUILD_SHARE = 0.2
 
     def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0,
                  speeds: Sequence[float] | None = None, times: Sequence[np.ndarray] | None = None,
                  fast_merge: bool = False):
-        #: merge a pair's pieces into regions with numpy (the same regions; ties in ``a_lo`` may be
-        #: numbered differently): for paths with many short segments (holds, docs/ARCHITECTURE.md)
+        #: merge a pair's pieces into regions with compiled connected components (the same regions;
+        #: ties in ``a_lo`` may be numbered differently): for paths with many short segments (holds)
         self.fast_merge = fast_merge
         self.radii = np.asarray(radii, dtype=float)
         self.margin = float(margin)
@@ -144,15 +174,35 @@ class CollisionModel:
         self.times = [np.asarray(t, dtype=float) for t in times]
         self.lengths = np.array([c[-1] for c in self.cumlen])
         self.travel = np.array([float(t[-1]) for t in self.times])
+        self._segs = [_robot_segments(x, p, t) for x, (p, t) in enumerate(zip(self.paths, self.times))]
         self._regions: dict[tuple[int, int], list[Region]] = {}
         self._pieces: dict[tuple[int, int], np.ndarray] = {}
         self._adj: dict[int, set[int]] = {}
+        #: the segment index: an STRtree of segment envelopes, the segments it was built from, and
+        #: the robots whose paths changed since (their rows in it are stale)
+        self._tree = None
+        self._tree_segs: _Segs | None = None
+        self._stale: set[int] = set()
+        self._stale_rows = 0
         self._compute(range(len(self.paths)), all_pairs=True)
 
     # -- queries --------------------------------------------------------------------------------
     def regions(self, x: int, y: int) -> list[Region]:
         """Regions between robots x and y (any order), sorted along the smaller index's path."""
-        return self._regions.get((min(x, y), max(x, y)), [])
+        key = (min(x, y), max(x, y))
+        found = self._regions.get(key)
+        if found is None:
+            chunk = self._pieces.get(key)
+            if chunk is None:
+                return []
+            if self.fast_merge:   # every pair still to merge, in one batch
+                missing = [k for k in self._pieces if k not in self._regions]
+                merged = _merge_boxes_batch([self._pieces[k][:, P_A_LO:P_B_HI + 1] for k in missing])
+                for k, boxes in zip(missing, merged):
+                    self._regions[k] = [Region(k[0], k[1], *b) for b in boxes]
+                return self._regions[key]
+            found = self._regions[key] = [Region(key[0], key[1], *b) for b in _merge_boxes(chunk[:, P_A_LO:P_B_HI + 1])]
+        return found
 
     def pieces(self, x: int, y: int) -> np.ndarray:
         """Per-segment-pair pieces of the regions of x < y: rows indexed by the ``P_*`` columns."""
@@ -163,11 +213,11 @@ class CollisionModel:
         return self._adj.get(x, ())
 
     def pairs(self) -> Iterable[tuple[int, int]]:
-        return self._regions.keys()
+        return self._pieces.keys()
 
     @property
     def region_count(self) -> int:
-        return sum(len(v) for v in self._regions.values())
+        return sum(len(self.regions(*pair)) for pair in self._pieces)
 
     # -- updates --------------------------------------------------------------------------------
     def tau(self, x: int, s):
@@ -182,69 +232,105 @@ class CollisionModel:
             self.cumlen[x] = _cumlen(self.paths[x])
             self.lengths[x] = self.cumlen[x][-1]
             self.travel[x] = float(self.times[x][-1])
+            self._segs[x] = _robot_segments(x, self.paths[x], self.times[x])
         dirty = set(changed)
-        self._regions = {k: v for k, v in self._regions.items() if k[0] not in dirty and k[1] not in dirty}
-        self._pieces = {k: v for k, v in self._pieces.items() if k[0] not in dirty and k[1] not in dirty}
         for x in dirty:
             for y in self._adj.pop(x, ()):
+                key = (min(x, y), max(x, y))
+                self._pieces.pop(key, None)
+                self._regions.pop(key, None)
                 self._adj.get(y, set()).discard(x)
         self._compute(sorted(dirty), all_pairs=False)
 
     # -- the geometry ---------------------------------------------------------------------------
+    def _build_tree(self) -> None:
+        import shapely
+
+        segs = _cat(self._segs)
+        p1 = segs.p0 + segs.u * segs.length[:, None]
+        lo, hi = np.minimum(segs.p0, p1), np.maximum(segs.p0, p1)
+        self._tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        self._tree_segs = segs
+        self._stale, self._stale_rows = set(), 0
+
     def _compute(self, robots: Iterable[int], all_pairs: bool) -> None:
         import shapely
 
         robots = list(robots)
         if not robots or len(self.paths) < 2:
             return
-        p0, u, seg_len, owner, offset, first, last, seg_t0, seg_v, seg_index = _segments(self.paths, self.times)
-        p1 = p0 + u * seg_len[:, None]
-        lines = shapely.linestrings(np.stack([p0, p1], axis=1))
         reach = 2 * float(self.radii.max()) + self.margin
-        tree = shapely.STRtree(lines)
+        if all_pairs or self._tree is None or self._stale_rows > self.REBUILD_SHARE * len(self._tree_segs.p0):
+            self._build_tree()
+        tree, tsegs = self._tree, self._tree_segs
+        assert tree is not None and tsegs is not None
+        mine = _cat([self._segs[x] for x in robots])
         # candidates by envelopes grown by the reach (the exact test is the capsule computation
         # below); not the "dwithin" predicate, which misses zero-length segments (parked robots)
         # in GEOS 3.14
-        lo, hi = np.minimum(p0, p1) - reach, np.maximum(p0, p1) + reach
-        mine = np.arange(len(p0)) if all_pairs else np.nonzero(np.isin(owner, robots))[0]
-        qi, ti = tree.query(shapely.box(lo[mine, 0], lo[mine, 1], hi[mine, 0], hi[mine, 1]))
-        qi = mine[qi]
-        # keep each unordered segment pair once, of two different robots
-        keep = owner[qi] < owner[ti]
-        if not all_pairs:
-            # a pair of two changed robots is found from both sides; a pair (changed, unchanged)
-            # only from the changed side, possibly with the changed robot second
-            swap = (owner[qi] > owner[ti]) & ~np.isin(owner[ti], robots)
-            qi, ti = np.concatenate([qi[keep], ti[swap]]), np.concatenate([ti[keep], qi[swap]])
-        else:
+        p1 = mine.p0 + mine.u * mine.length[:, None]
+        lo, hi = np.minimum(mine.p0, p1) - reach, np.maximum(mine.p0, p1) + reach
+        boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+        if all_pairs:
+            qi, ti = tree.query(boxes)
+            keep = mine.owner[qi] < tsegs.owner[ti]
+            a, b = mine, tsegs
             qi, ti = qi[keep], ti[keep]
+        else:
+            changed = set(robots)
+            # unchanged robots from the fleet's index
+            qi, ti = tree.query(boxes)
+            owner_t = tsegs.owner[ti]
+            fresh = ~np.isin(owner_t, list(self._stale | changed))
+            parts_q, parts_t = [qi[fresh]], [ti[fresh]]
+            # robots changed since the index was built (these included): a small index of their own
+            recent = sorted(self._stale | changed)
+            rsegs = _cat([self._segs[x] for x in recent])
+            rp1 = rsegs.p0 + rsegs.u * rsegs.length[:, None]
+            rlo, rhi = np.minimum(rsegs.p0, rp1), np.maximum(rsegs.p0, rp1)
+            rq, rt = shapely.STRtree(shapely.box(rlo[:, 0], rlo[:, 1], rhi[:, 0], rhi[:, 1])).query(boxes)
+            # a pair of two changed robots once (owner order), never a robot with itself
+            both = np.isin(rsegs.owner[rt], robots)
+            keep = np.where(both, mine.owner[rq] < rsegs.owner[rt], mine.owner[rq] != rsegs.owner[rt])
+            parts_q.append(rq[keep])
+            parts_t.append(rt[keep] + len(tsegs.p0))
+            qi, ti = np.concatenate(parts_q), np.concatenate(parts_t)
+            a, b = mine, _cat([tsegs, rsegs])
+            for x in robots:
+                if x not in self._stale:
+                    self._stale.add(x)
+                    self._stale_rows += len(self._segs[x].p0)
         if len(qi) == 0:
             return
-        R = self.radii[owner[qi]] + self.radii[owner[ti]] + self.margin
-        a_lo, a_hi = capsule_interval(p0[qi], u[qi], seg_len[qi], p0[ti], u[ti], seg_len[ti], R)
-        b_lo, b_hi = capsule_interval(p0[ti], u[ti], seg_len[ti], p0[qi], u[qi], seg_len[qi], R)
+        # orient each pair so that the smaller robot index is x
+        A, B = _take(a, qi), _take(b, ti)
+        swap = A.owner > B.owner
+        if swap.any():
+            A, B = _swap(A, B, swap)
+        R = self.radii[A.owner] + self.radii[B.owner] + self.margin
+        a_lo, a_hi = capsule_interval(A.p0, A.u, A.length, B.p0, B.u, B.length, R)
+        b_lo, b_hi = capsule_interval(B.p0, B.u, B.length, A.p0, A.u, A.length, R)
         hit = (a_lo <= a_hi) & (b_lo <= b_hi)
-        qi, ti, R = qi[hit], ti[hit], R[hit]
-        if len(qi) == 0:
+        if not hit.any():
             return
-        pieces = _piece_table(p0[qi], u[qi], seg_len[qi], offset[qi], seg_t0[qi], seg_v[qi],
-                              p0[ti], u[ti], seg_len[ti], offset[ti], seg_t0[ti], seg_v[ti], R)
-        pieces[:, P_X], pieces[:, P_Y] = owner[qi], owner[ti]
-        pieces[:, P_A_LO], pieces[:, P_A_HI] = offset[qi] + a_lo[hit], offset[qi] + a_hi[hit]
-        pieces[:, P_B_LO], pieces[:, P_B_HI] = offset[ti] + b_lo[hit], offset[ti] + b_hi[hit]
-        pieces[:, P_X_FIRST], pieces[:, P_X_LAST] = first[qi], last[qi]
-        pieces[:, P_Y_FIRST], pieces[:, P_Y_LAST] = first[ti], last[ti]
-        pieces[:, P_X_SEG], pieces[:, P_Y_SEG] = seg_index[qi], seg_index[ti]
+        A, B, R = _take(A, hit), _take(B, hit), R[hit]
+        pieces = _piece_table(A.p0, A.u, A.length, A.offset, A.t0, A.speed,
+                              B.p0, B.u, B.length, B.offset, B.t0, B.speed, R)
+        pieces[:, P_X], pieces[:, P_Y] = A.owner, B.owner
+        pieces[:, P_A_LO], pieces[:, P_A_HI] = A.offset + a_lo[hit], A.offset + a_hi[hit]
+        pieces[:, P_B_LO], pieces[:, P_B_HI] = B.offset + b_lo[hit], B.offset + b_hi[hit]
+        pieces[:, P_X_FIRST], pieces[:, P_X_LAST] = A.first, A.last
+        pieces[:, P_Y_FIRST], pieces[:, P_Y_LAST] = B.first, B.last
+        pieces[:, P_X_SEG], pieces[:, P_Y_SEG] = A.index, B.index
         pieces = pieces[np.lexsort((pieces[:, P_B_LO], pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
         cuts = np.nonzero(np.diff(pair_key))[0] + 1
         for chunk in np.split(pieces, cuts):
             x, y = int(chunk[0, P_X]), int(chunk[0, P_Y])
             self._pieces[(x, y)] = chunk
+            self._regions.pop((x, y), None)
             self._adj.setdefault(x, set()).add(y)
             self._adj.setdefault(y, set()).add(x)
-            merge = _merge_boxes_np if self.fast_merge and len(chunk) > 8 else _merge_boxes
-            self._regions[(x, y)] = [Region(x, y, *b) for b in merge(chunk[:, P_A_LO:P_B_HI + 1])]
 
 
 # Columns of a piece table: one row per pair of segments (one of robot x, one of robot y, x < y)
@@ -345,36 +431,47 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
     return [(c[0], c[1], c[2], c[3]) for c in comps]
 
 
-def _merge_boxes_np(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
+def _merge_boxes_batch(chunks: Sequence[np.ndarray]) -> list[list[tuple[float, float, float, float]]]:
     """What :func:`_merge_boxes` computes (boxes that overlap or touch, and the bounding boxes of
-    what they form, merged until none touch another), by label propagation over all pairs."""
+    what they form, merged until none touch another) for many pairs' boxes at once: the touching
+    pairs within each chunk, vectorised, then SciPy's compiled connected components of that graph,
+    repeated on the merged boxes until none touch (one or two rounds)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if not chunks:
+        return []
+    boxes = np.vstack(chunks)
+    chunk = np.repeat(np.arange(len(chunks)), [len(c) for c in chunks])
     while True:
-        a_lo, a_hi, b_lo, b_hi = boxes.T
-        touch = ((a_lo[:, None] <= a_hi[None, :] + EPS) & (a_lo[None, :] <= a_hi[:, None] + EPS)
-                 & (b_lo[:, None] <= b_hi[None, :] + EPS) & (b_lo[None, :] <= b_hi[:, None] + EPS))
         n = len(boxes)
-        label = np.arange(n)
-        while True:
-            new = np.where(touch, label[None, :], n).min(1)
-            new = new[new]
-            if np.array_equal(new, label):
-                break
-            label = new
-        roots, comp = np.unique(label, return_inverse=True)
-        merged = np.empty((len(roots), 4))
-        merged[:, 0] = np.full(len(roots), np.inf)
-        np.minimum.at(merged[:, 0], comp, a_lo)
-        merged[:, 1] = -np.inf
-        np.maximum.at(merged[:, 1], comp, a_hi)
-        merged[:, 2] = np.inf
-        np.minimum.at(merged[:, 2], comp, b_lo)
-        merged[:, 3] = -np.inf
-        np.maximum.at(merged[:, 3], comp, b_hi)
-        if len(merged) == n:
+        sizes = np.bincount(chunk, minlength=len(chunks))
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        per = sizes[chunk]                        # partners of each box: its chunk's boxes
+        first = np.repeat(np.arange(n), per)
+        block = np.concatenate([[0], np.cumsum(per)[:-1]])
+        second = starts[chunk[first]] + (np.arange(len(first)) - np.repeat(block, per))
+        sel = first < second
+        first, second = first[sel], second[sel]
+        a, b = boxes[first], boxes[second]
+        touch = ((a[:, 0] <= b[:, 1] + EPS) & (b[:, 0] <= a[:, 1] + EPS)
+                 & (a[:, 2] <= b[:, 3] + EPS) & (b[:, 2] <= a[:, 3] + EPS))
+        graph = coo_matrix((np.ones(int(touch.sum())), (first[touch], second[touch])), shape=(n, n))
+        count, comp = connected_components(graph, directed=False)
+        if count == n:
             break
-        boxes = merged
-    boxes = boxes[np.lexsort((boxes[:, 2], boxes[:, 0]))]
-    return [(float(a), float(b), float(c), float(d)) for a, b, c, d in boxes]
+        merged = np.empty((count, 4))
+        merged[:, [0, 2]], merged[:, [1, 3]] = np.inf, -np.inf
+        for col, fn in ((0, np.minimum), (1, np.maximum), (2, np.minimum), (3, np.maximum)):
+            fn.at(merged[:, col], comp, boxes[:, col])
+        owner = np.empty(count, dtype=np.int64)
+        owner[comp] = chunk
+        boxes, chunk = merged, owner
+    order = np.lexsort((boxes[:, 2], boxes[:, 0], chunk))
+    boxes, chunk = boxes[order], chunk[order]
+    bounds = np.searchsorted(chunk, np.arange(len(chunks) + 1))
+    rows = boxes.tolist()
+    return [[tuple(r) for r in rows[lo:hi]] for lo, hi in zip(bounds[:-1], bounds[1:])]  # type: ignore[misc]
 
 
 def _cumlen(path: np.ndarray) -> np.ndarray:

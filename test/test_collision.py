@@ -100,3 +100,47 @@ def test_ramped_profiles_are_scheduled_exactly():
     wp = lead.waypoints[lead.waypoints[:, 2] >= lead.start_time]
     first_speed = np.hypot(*(wp[1, :2] - wp[0, :2])) / (wp[1, 2] - wp[0, 2])
     assert first_speed < 0.5
+
+
+@pytest.mark.parametrize("share", [0.0, 0.2, 10.0])
+def test_many_incremental_updates_equal_a_rebuild(monkeypatch, share):
+    """Successive updates of one or two robots (parked ones too), with the fleet's segment index
+    rebuilt after every update, after some, or never: always the pairs and pieces of a fresh model."""
+    monkeypatch.setattr(CollisionModel, "REBUILD_SHARE", share)
+    rng = np.random.default_rng(11)
+    n = 14
+    paths = [np.cumsum(rng.uniform(-3, 3, (5, 2)), axis=0) + rng.uniform(0, 8, 2) for _ in range(n)]
+    paths[4] = paths[4][:1]   # parked
+    radii = rng.uniform(0.3, 0.5, n)
+
+    def times(p):
+        return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
+
+    model = CollisionModel(paths, radii, 0.05, times=[times(p) for p in paths])
+    for step in range(12):
+        who = rng.choice(n, size=1 + step % 2, replace=False)
+        for x in who:
+            k = int(rng.integers(1, 6))
+            paths[x] = np.cumsum(rng.uniform(-3, 3, (k, 2)), axis=0) + rng.uniform(0, 8, 2)
+        model.set_paths({int(x): (paths[x], times(paths[x])) for x in who})
+        fresh = CollisionModel(paths, radii, 0.05, times=[times(p) for p in paths])
+        assert set(model.pairs()) == set(fresh.pairs())
+        for x in range(n):
+            assert set(model.neighbours(x)) == set(fresh.neighbours(x))
+        for pair in fresh.pairs():
+            np.testing.assert_allclose(model.pieces(*pair), fresh.pieces(*pair))
+            assert model.regions(*pair) == fresh.regions(*pair)
+
+
+def test_the_batched_merge_finds_the_regions_of_the_sequential_one():
+    from fleet_planner.collision import _merge_boxes, _merge_boxes_batch
+
+    rng = np.random.default_rng(3)
+    chunks = []
+    for k in range(30):
+        lo = rng.uniform(0, 20, (int(rng.integers(1, 25)), 2))
+        size = rng.uniform(0.1, 3, lo.shape)
+        boxes = np.stack([lo[:, 0], lo[:, 0] + size[:, 0], lo[:, 1], lo[:, 1] + size[:, 1]], 1)
+        chunks.append(boxes[np.argsort(boxes[:, 0])])
+    for boxes, merged in zip(chunks, _merge_boxes_batch(chunks)):
+        np.testing.assert_allclose(sorted(merged), sorted(_merge_boxes(boxes)))
