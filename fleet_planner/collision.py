@@ -242,6 +242,37 @@ class CollisionModel:
                 self._adj.get(y, set()).discard(x)
         self._compute(sorted(dirty), all_pairs=False)
 
+    def snapshot(self, x: int) -> tuple:
+        """What :meth:`restore` needs to put robot x's path and pairs back as they are now (a
+        route-choice try that does not pay is undone without recomputing anything)."""
+        pairs = {y: ((min(x, y), max(x, y))) for y in self._adj.get(x, ())}
+        return (x, self.paths[x], self.times[x], self.cumlen[x], float(self.lengths[x]), float(self.travel[x]),
+                self._segs[x], {y: self._pieces[k] for y, k in pairs.items()},
+                {y: self._regions[k] for y, k in pairs.items() if k in self._regions})
+
+    def restore(self, snap: tuple) -> None:
+        """Robot x back as it was at :meth:`snapshot` (its path may have changed since, nobody
+        else's)."""
+        x, path, times, cumlen, length, travel, segs, pieces, regions = snap
+        for y in self._adj.pop(x, ()):
+            key = (min(x, y), max(x, y))
+            self._pieces.pop(key, None)
+            self._regions.pop(key, None)
+            self._adj.get(y, set()).discard(x)
+        self.paths[x], self.times[x], self.cumlen[x] = path, times, cumlen
+        self.lengths[x], self.travel[x] = length, travel
+        self._segs[x] = segs
+        for y, chunk in pieces.items():
+            key = (min(x, y), max(x, y))
+            self._pieces[key] = chunk
+            if y in regions:
+                self._regions[key] = regions[y]
+            self._adj.setdefault(x, set()).add(y)
+            self._adj.setdefault(y, set()).add(x)
+        if x not in self._stale and self._tree_segs is not None:   # its rows in the index are stale
+            self._stale.add(x)
+            self._stale_rows += len(segs.p0)
+
     # -- the geometry ---------------------------------------------------------------------------
     def _build_tree(self) -> None:
         import shapely
@@ -284,11 +315,20 @@ class CollisionModel:
             fresh = ~np.isin(owner_t, list(self._stale | changed))
             parts_q, parts_t = [qi[fresh]], [ti[fresh]]
             # robots changed since the index was built (these included): a small index of their own
+            # (envelopes compared directly, in blocks: cheaper than building an index per call)
             recent = sorted(self._stale | changed)
             rsegs = _cat([self._segs[x] for x in recent])
             rp1 = rsegs.p0 + rsegs.u * rsegs.length[:, None]
             rlo, rhi = np.minimum(rsegs.p0, rp1), np.maximum(rsegs.p0, rp1)
-            rq, rt = shapely.STRtree(shapely.box(rlo[:, 0], rlo[:, 1], rhi[:, 0], rhi[:, 1])).query(boxes)
+            found_q, found_t = [], []
+            step = max(1, 200_000 // max(1, len(rlo)))
+            for k in range(0, len(lo), step):
+                qlo, qhi = lo[k:k + step, None, :], hi[k:k + step, None, :]
+                near = ((qlo <= rhi[None]) & (rlo[None] <= qhi)).all(2)
+                q, t = np.nonzero(near)
+                found_q.append(q + k)
+                found_t.append(t)
+            rq, rt = np.concatenate(found_q), np.concatenate(found_t)
             # a pair of two changed robots once (owner order), never a robot with itself
             both = np.isin(rsegs.owner[rt], robots)
             keep = np.where(both, mine.owner[rq] < rsegs.owner[rt], mine.owner[rq] != rsegs.owner[rt])

@@ -77,7 +77,7 @@ class DelayScheduler:
     """
 
     def __init__(self, model: CollisionModel, mode: str = "box", holds: str = "none",
-                 start_only: Iterable[int] = ()):
+                 start_only: Iterable[int] = (), early_holds: bool = False):
         if mode not in COLLISION_TESTS:
             raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         if holds not in HOLDS:
@@ -91,6 +91,9 @@ class DelayScheduler:
         #: robots that may hold only before they depart (their drive profile has speed ramps: a
         #: stop en route would need a braking and an accelerating ramp the profile does not have)
         self.start_only = set(start_only)
+        #: with holds: move each robot's waits back along its path as far as its arrival allows
+        #: (to where it already stands, its start if it can; :func:`_holds_early`)
+        self.early_holds = bool(early_holds)
         #: with holds: per robot, when it reaches (``arr``) and leaves (``dep``) each vertex of its
         #: driven path; arr[0] = 0 (it is there from the start), dep[-1] = inf (it parks on its goal)
         self.arr: list[np.ndarray] = []
@@ -397,7 +400,7 @@ class DelayScheduler:
         G_groups = _groups(edge, g_lo, g_hi, len(hold_at) - 1)
         safes = [_safe(*grp) for grp in F_groups]
         durations = np.diff(T0[hold_at])
-        found = _earliest(safes, G_groups, durations)
+        found = _earliest(safes, G_groups, durations, early_holds=self.early_holds)
         if found is None:
             relaxed = _earliest([[(0.0, INF)]] + safes[1:], G_groups, durations)
             self.set_timing(j, 0.0)
@@ -514,7 +517,7 @@ def _allowed(lo: list[float], hi: list[float], a: float, e: float):
 
 
 def _earliest(safes: list[list[tuple[float, float]]], edges: list[tuple[list[float], list[float]]],
-              durations: np.ndarray) -> tuple[list[float], list[float]] | None:
+              durations: np.ndarray, early_holds: bool = False) -> tuple[list[float], list[float]] | None:
     """Earliest arrival along a chain of hold vertices: ``safes[k]`` the safe intervals of vertex k,
     ``edges[k]`` the forbidden departure times from vertex k to k + 1 (sorted by lo), which takes
     ``durations[k]``. The robot is on vertex 0 at t = 0 and must stay on the last one for ever.
@@ -548,9 +551,35 @@ def _earliest(safes: list[list[tuple[float, float]]], edges: list[tuple[list[flo
     if not safes[-1] or not math.isinf(safes[-1][final][1]) or final not in best[-1]:
         return None
     arrive, leave = [0.0] * len(safes), [INF] * len(safes)
+    interval = [0] * len(safes)
     si = final
     for k in range(len(safes) - 1, 0, -1):
         t, parent, depart = best[k][si]
         arrive[k], leave[k - 1] = t, depart
+        interval[k] = si
         si = parent
+    if early_holds:
+        _holds_early(safes, edges, durations.tolist(), arrive, leave, interval)
     return arrive, leave
+
+
+def _holds_early(safes: list[list[tuple[float, float]]], edges: list[tuple[list[float], list[float]]],
+                 durations: list[float], arrive: list[float], leave: list[float], interval: list[int]) -> None:
+    """Move waits back along the path, keeping the arrival at the goal: from the last vertex back,
+    leave each vertex as late as it can and still reach the next one by the time it leaves that one
+    (staying in the safe interval it arrived in, outside the forbidden departure times). An earliest
+    arrival rushes ahead and waits in front of the conflict, in an aisle others use (docs/ARCHITECTURE.md,
+    measured fact 5); this waits where it was already standing, at its start if it can."""
+    last = len(safes) - 1
+    for k in range(last - 1, -1, -1):
+        latest = arrive[last] if k + 1 == last else leave[k + 1]
+        until = min(latest - durations[k], safes[k][interval[k]][1])
+        if until <= leave[k]:
+            continue
+        lo, hi = edges[k]
+        best = None
+        for _, end in _allowed(lo, hi, leave[k], until):
+            best = end
+        if best is not None and best > leave[k]:
+            leave[k] = best
+            arrive[k + 1] = best + durations[k]

@@ -144,3 +144,22 @@ def test_the_batched_merge_finds_the_regions_of_the_sequential_one():
         chunks.append(boxes[np.argsort(boxes[:, 0])])
     for boxes, merged in zip(chunks, _merge_boxes_batch(chunks)):
         np.testing.assert_allclose(sorted(merged), sorted(_merge_boxes(boxes)))
+
+
+def test_a_snapshot_restores_a_robots_pairs():
+    rng = np.random.default_rng(5)
+    paths = [np.cumsum(rng.uniform(-3, 3, (4, 2)), axis=0) + rng.uniform(0, 8, 2) for _ in range(10)]
+    radii = rng.uniform(0.3, 0.5, 10)
+    model = CollisionModel(paths, radii, 0.05)
+    before = {pair: model.pieces(*pair).copy() for pair in model.pairs()}
+    snap = model.snapshot(3)
+    other = paths[3][::-1] + 1.5
+    model.set_paths({3: (other, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(other, axis=0).T))]))})
+    model.restore(snap)
+    assert set(model.pairs()) == set(before)
+    for pair, chunk in before.items():
+        np.testing.assert_array_equal(model.pieces(*pair), chunk)
+    model.set_paths({5: (paths[5] + 0.3, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(paths[5], axis=0).T))]))})
+    paths[5] = paths[5] + 0.3
+    fresh = CollisionModel(paths, radii, 0.05)
+    assert set(model.pairs()) == set(fresh.pairs())

@@ -45,12 +45,13 @@ def register(name: str, target: str, summary: str = "", **options: Any) -> None:
 register("md", "fleet_planner.planners.md:MDPlanner",
          "the (M,D) network of You & Ji with exact collision regions (robots may follow each other)")
 register("md-box", "fleet_planner.planners.md:MDPlanner",
-         "the (M,D) network of You & Ji with the paper's collision boxes", mode="box", holds="none")
+         "the (M,D) network of You & Ji with the paper's collision boxes", mode="box", holds="none",
+         search=False, fallback=None)
 register("prior", "fleet_planner.planners.prior:PriorPlanner",
          "prioritized planning in space-time (van den Berg & Overmars)")
 register("md-departure", "fleet_planner.planners.md:MDPlanner",
          "md by its method: exact collision regions, departure delays only (what md is today)",
-         mode="exact", holds="none")
+         mode="exact", holds="none", search=False, fallback=None)
 register("md-holds", "fleet_planner.planners.md:MDPlanner",
          "md with holds anywhere along the path (earliest arrival against the higher robots' timed trajectories)",
          mode="exact", holds="anywhere")

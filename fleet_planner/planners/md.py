@@ -41,6 +41,7 @@ from ..model import (
 )
 from ..scheduler import HOLDS, Blocked, DelayScheduler
 from .base import Planner, Progress
+from .md_search import PrioritySearch
 
 if TYPE_CHECKING:
     from ..paths import PathFinder
@@ -82,32 +83,44 @@ def schedule_paths(ids: Sequence[str], paths: Sequence[np.ndarray], radii: Seque
 
 
 class MDPlanner(Planner):
-    """Central planner: safe paths, (M,D) network, departure delays, re-ordering on deadlock.
+    """Central planner (md v2, issue 8): safe paths, the (M,D) network, holds anywhere along the
+    path, route choice in time, priority search; the paper's departure-only method with
+    ``holds="none"`` (registered as ``md-departure``), its boxes with ``mode="box"`` (``md-box``).
 
     ``margin`` (m) is added to every pair's sum of radii; ``order`` is the initial priority:
     "shortest" (default; the best sum of arrival times on every map we measured, measured fact 4) and
     "longest" sort by straight-line distance to the goal (longest first tends to the shorter
     makespan), "given" keeps the list order, "parking" puts first the robots whose start lies on
     many others' shortest paths and last those whose goal does (fewest re-orderings in crowds);
-    ``max_reorders`` bounds the re-ordering attempts (default 4 N); ``mode`` picks the collision
-    test: "exact" (default; robots may follow each other) or "box" (You & Ji as written); ``holds``
-    where a robot may wait on its path: "none" (default: only before it departs, the paper's
-    departure delays; the only choice with boxes) or "anywhere" (exact regions: at any vertex, an
-    earliest-arrival search against the higher robots' timed trajectories; not the default yet:
-    better sums of arrivals on 4 of 6 benchmark instances, worse on 2 and in the delivery
-    benchmark, where robots holding in aisles hold up the robots behind them, measured fact 5). Robots with
-    ``max_accel`` wait only before they depart in either case (a stop en route would need braking
-    and accelerating ramps their drive profile does not have). ``hold_step`` (m, default one grid
-    cell): with holds, paths get a vertex at least this often, so that there is somewhere to wait.
-    ``detours`` (default 0, off): route choice in time (issue 8, a first step): a robot that waits
-    more than ``detour_min`` s in all is re-planned up to this many times around the stretch after
-    its longest wait and takes the candidate with the earliest arrival under holds."""
+    ``max_reorders`` bounds the re-ordering attempts of one attempt (default 4 N); ``mode`` picks
+    the collision test: "exact" (default; robots may follow each other) or "box" (You & Ji as
+    written); ``holds`` where a robot may wait on its path: "anywhere" (the default with exact
+    regions: at any vertex, an earliest-arrival search against the higher robots' timed
+    trajectories) or "none" (only before it departs, the paper's departure delays; the default and
+    only choice with boxes). Robots with ``max_accel`` wait only before they depart in either case
+    (a stop en route would need braking and accelerating ramps their drive profile does not have).
+    ``hold_step`` (m, default one grid cell): with holds, paths get a vertex at least this often, so
+    that there is somewhere to wait. ``early_holds`` (default off): move waits back along the path
+    as far as the arrival allows (measured: slightly worse sums of arrivals, kept as an option).
+    ``detours`` (default 2 with holds, else 0): route choice in time: a robot that waits more than
+    ``detour_min`` s in all is re-planned up to this many times around the stretch after its longest
+    wait and takes the candidate with the earliest arrival under holds. ``search`` (default on):
+    when greedy re-ordering gives up, the priority search of :mod:`.md_search` tries further orders
+    until ``time_limit`` s have passed since planning began; ``fallback`` (default "crowd"; a
+    registered ``dense`` planner is preferred when there is one): the dense solver that plans when
+    the search fails, named in the plan's ``info["fallback"]``; None refuses instead. The live
+    fleet's legs (:meth:`plan_incremental`) stop trying detours once ``time_limit`` is spent."""
 
     name = "md"
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
-                 mode: str = "exact", holds: str = "none", hold_step: float | None = None,
-                 detours: int = 0, detour_min: float = 2.0):
+                 mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
+                 detours: int | None = None, detour_min: float = 2.0, early_holds: bool = False,
+                 time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd"):
+        if holds is None:
+            holds = "anywhere" if mode == "exact" else "none"
+        if detours is None:
+            detours = 2 if holds == "anywhere" else 0
         if mode not in COLLISION_TESTS:
             raise ValueError(f"mode: must be one of {', '.join(COLLISION_TESTS)} (got {mode!r})")
         self.mode = mode
@@ -126,6 +139,15 @@ class MDPlanner(Planner):
         if not (math.isfinite(detour_min) and detour_min >= 0):
             raise ValueError(f"detour_min: must be a finite number >= 0 (got {detour_min!r})")
         self.detours, self.detour_min = detours, float(detour_min)
+        self.early_holds = bool(early_holds)
+        if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) \
+                or not (math.isfinite(time_limit) and time_limit > 0):
+            raise ValueError(f"time_limit: must be a finite number of seconds > 0 (got {time_limit!r})")
+        self.time_limit = float(time_limit)
+        self.search = bool(search)
+        if fallback is not None and fallback not in ("crowd", "dense"):
+            raise ValueError(f"fallback: must be 'crowd', 'dense' or None (got {fallback!r})")
+        self.fallback = fallback
         if order not in ORDERS:
             raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
         if not margin >= 0:
@@ -138,19 +160,66 @@ class MDPlanner(Planner):
     # ------------------------------------------------------------------------------------------
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         t_start = time.perf_counter()
+        deadline = t_start + self.time_limit
         robots = list(robots)
         _check_endpoints(robots, self.margin)
         shortest: dict[int, np.ndarray] = {}
         order = self._initial_order(grid, robots, shortest)
-        session = _Session(self, grid, robots, order, fixed=0, hints=shortest)
-        session.route(progress)
-        session.resolve(progress)
+        search = PrioritySearch(seed=0)
+        ids = {r.id: x for x, r in enumerate(robots)}
+        attempts = 0
+        must: dict[int, dict[int, list]] = {}   # discs each robot was found to block, kept across attempts
+        while True:
+            attempts += 1
+            session = _Session(self, grid, robots, list(order), fixed=0, hints=dict(shortest),
+                               deadline=deadline if attempts > 1 else None, must=must)
+            try:
+                session.route(progress)
+                session.resolve(progress)
+                break
+            except PlanningError as exc:
+                blocked = next(iter(exc.blockers.items()), None)
+                if (not self.search or blocked is None or time.perf_counter() >= deadline
+                        or blocked[0] not in ids or blocked[1] not in ids):
+                    return self._fallback(grid, robots, exc, attempts, t_start, deadline)
+                order = search.next_order(session.order, ids[blocked[0]], ids[blocked[1]])
+                if progress:
+                    progress(attempts, attempts + 1, "priority search")
         network = session.sched.network(session.order, [r.id for r in robots])
         info: dict[str, Any] = {"reorders": session.reorders, "reroutes": session.reroutes,
                                 "regions": session.model.region_count}
         if self.detours:
             info["detours"] = session.detoured
+        if attempts > 1:
+            info["search"] = {"attempts": attempts, "priorities": len(search.constraints)}
         return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network)
+
+    def _fallback(self, grid: GridMap, robots: list[RobotSpec], failure: PlanningError, attempts: int,
+                  t_start: float, deadline: float) -> Plan:
+        """When prioritized planning finds no plan: the registered dense solver (``dense`` if there
+        is one, else ``crowd``) with what is left of the time budget (at least a second), its plan
+        under md's name with ``info["fallback"]`` saying which; or the original refusal."""
+        if self.fallback is None:
+            raise failure
+        from . import get_planner, planner_names
+
+        name = "dense" if "dense" in planner_names() else self.fallback
+        budget = max(deadline - time.perf_counter(), 1.0)
+        try:
+            try:
+                dense = get_planner(name, time_limit_s=budget)
+            except TypeError:
+                dense = get_planner(name)
+            plan = dense.plan(grid, robots)
+        except PlanningError as exc:
+            why = "; ".join(f"{rid}: {w}" for rid, w in list(exc.failures.items())[:3])
+            failure.failures = {rid: f"{w} (priority search: {attempts} attempt(s); {name}: {why})"
+                                for rid, w in failure.failures.items()}
+            raise failure from exc
+        info = dict(plan.info)
+        info.update({"fallback": name, "search": {"attempts": attempts},
+                     "why": "; ".join(f"{rid}: {w}" for rid, w in list(failure.failures.items())[:3])})
+        return Plan("md", plan.paths, time.perf_counter() - t_start, info, plan.network)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
                          t0: float) -> list[TimedPath]:
@@ -235,8 +304,11 @@ class _Session:
 
     def __init__(self, planner: MDPlanner, grid: GridMap, robots: list[RobotSpec], order: list[int],
                  fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = (),
-                 hints: dict[int, np.ndarray] | None = None):
+                 hints: dict[int, np.ndarray] | None = None, deadline: float | None = None,
+                 must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] | None = None):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
+        #: perf_counter time after which re-ordering gives up and route choice stops trying (None: no bound)
+        self.deadline = deadline
         self.margin = planner.margin
         self.rank = {x: k for k, x in enumerate(order)}
         self.finder = planner._finders.of(grid)
@@ -247,7 +319,7 @@ class _Session:
         self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
         #: per robot, discs it was found to block and must keep off, by the robot whose start or
         #: goal they are
-        self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {}
+        self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {} if must is None else must
         self.reorders = self.reroutes = self.detoured = 0
         #: shortest paths already known (robot -> path): kept when they avoid what they must
         self.hints: dict[int, np.ndarray] = {} if hints is None else hints
@@ -270,7 +342,8 @@ class _Session:
         self.model = CollisionModel([p for p, _ in routes], [r.radius for r in self.robots], self.margin,
                                     times=[t for _, t in routes], fast_merge=self.planner.holds == "anywhere")
         self.sched = DelayScheduler(self.model, self.planner.mode, self.planner.holds,
-                                    start_only=[x for x, r in enumerate(self.robots) if r.max_accel is not None])
+                                    start_only=[x for x, r in enumerate(self.robots) if r.max_accel is not None],
+                                    early_holds=self.planner.early_holds)
         if self.planner.detours:
             self.sched.after = self._detour
 
@@ -342,7 +415,8 @@ class _Session:
             j, i = blocked.j, blocked.blocker
             tries[(j, i)] = tries.get((j, i), 0) + 1
             why = f"blocked by {robots[i].id}, which {blocked.why}"
-            if tries[(j, i)] > _MAX_TRIES or self.reorders >= limit:
+            late = self.deadline is not None and time.perf_counter() > self.deadline
+            if tries[(j, i)] > _MAX_TRIES or self.reorders >= limit or late:
                 raise PlanningError({robots[j].id: f"{why}; re-routing and re-ordering did not help"},
                                     {robots[j].id: robots[i].id})
             # 1. re-route: the robot that moves keeps off the disc where the other one is parked
@@ -378,7 +452,7 @@ class _Session:
         """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
         the stretch after its longest wait (keeping what x must avoid) and keep the one with the
         earliest arrival; True if x's path changed."""
-        if x < self.fixed:
+        if x < self.fixed or (self.deadline is not None and time.perf_counter() > self.deadline):
             return False
         me, sched = self.robots[x], self.sched
         changed = False
@@ -408,13 +482,14 @@ class _Session:
                 return changed
             before = float(arr[-1])
             old_arr, old_dep = arr.copy(), dep.copy()
+            snap = self.model.snapshot(x)
             self.model.set_paths(self._set_route(x, path))
             if sched.schedule_robot(x, self.rank) is None and float(sched.arr[x][-1]) < before - 1e-6:
                 self.detoured += 1
                 changed = True
                 continue
             self.paths[x], self.times[x] = old_path, old_times
-            self.model.set_paths({x: (old_path, old_times)})
+            self.model.restore(snap)
             sched.set_timing(x, 0.0, old_arr, old_dep)
             return changed
         return changed
