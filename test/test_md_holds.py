@@ -77,8 +77,10 @@ def test_the_md_planner_holds_where_a_delay_costs_more():
 
 
 def test_holds_options():
-    assert MDPlanner().holds == "none" and get_planner("md").holds == "none"
+    assert MDPlanner().holds == "anywhere" and get_planner("md").holds == "anywhere"   # md v2
+    assert get_planner("md").detours == 2 and get_planner("md", holds="none").detours == 0
     assert get_planner("md-holds").holds == get_planner("md-routes").holds == "anywhere"
+    assert get_planner("md-holds").detours == 0
     assert MDPlanner(mode="box").holds == "none"
     assert get_planner("md-departure").holds == "none"
     assert get_planner("md-box").holds == "none"

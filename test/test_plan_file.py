@@ -39,7 +39,7 @@ robots:
 """
 
 SCENARIOS = ("corridor", "crossing", "default")
-PLANNERS = ("md", "md-box", "prior", "md-departure")   # md-departure: md before holds, same bytes
+PLANNERS = ("md", "md-box", "prior", "md-departure")   # md: v2 (holds, route choice); md-departure: the paper's
 
 
 def scenario(name: str) -> Scenario:
@@ -81,8 +81,9 @@ def test_the_network_read_back_is_the_planners(planner):
     assert isinstance(back.network, Network) and back.network == plan.network
     assert back.network.mode == ("box" if planner == "md-box" else "exact")
     assert any(float("inf") in (link.M, link.D, link.ke) for link in back.network.links)   # written as null
-    assert back.info == plan.info == {"reorders": plan.info["reorders"], "reroutes": plan.info["reroutes"],
-                                      "regions": plan.info["regions"]}
+    assert back.info == plan.info
+    # md v2 also says how many robots took a detour (route choice); md-box is the paper's method
+    assert set(plan.info) == {"reorders", "reroutes", "regions"} | ({"detours"} if planner == "md" else set())
 
 
 def test_the_network_is_not_an_info_entry():

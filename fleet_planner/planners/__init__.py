@@ -43,18 +43,19 @@ def register(name: str, target: str, summary: str = "", **options: Any) -> None:
 
 
 register("md", "fleet_planner.planners.md:MDPlanner",
-         "the (M,D) network of You & Ji with exact collision regions (robots may follow each other)")
+         "md v2: the (M,D) network of You & Ji with exact collision regions, holds anywhere, route choice "
+         "and priority search (--holds none: the paper's departure delays)")
 register("md-box", "fleet_planner.planners.md:MDPlanner",
          "the (M,D) network of You & Ji with the paper's collision boxes", mode="box", holds="none",
          search=False, fallback=None)
 register("prior", "fleet_planner.planners.prior:PriorPlanner",
          "prioritized planning in space-time (van den Berg & Overmars)")
 register("md-departure", "fleet_planner.planners.md:MDPlanner",
-         "md by its method: exact collision regions, departure delays only (what md is today)",
+         "the paper's method: exact collision regions, departure delays only, greedy re-ordering (md before v2)",
          mode="exact", holds="none", search=False, fallback=None)
 register("md-holds", "fleet_planner.planners.md:MDPlanner",
-         "md with holds anywhere along the path (earliest arrival against the higher robots' timed trajectories)",
-         mode="exact", holds="anywhere")
+         "md with holds anywhere along the path but no route choice (earliest arrival against the higher robots' timed trajectories)",
+         mode="exact", holds="anywhere", detours=0)
 register("md-routes", "fleet_planner.planners.md:MDPlanner",
          "md with route choice in time: robots that wait long try detours, the earliest arrival wins",
          mode="exact", holds="anywhere", detours=2)

@@ -602,11 +602,24 @@ def _subdivide(path: np.ndarray, step: float) -> np.ndarray:
 
 def _held_path(robot_id: str, radius: float, points: np.ndarray, arr: np.ndarray, dep: np.ndarray) -> TimedPath:
     """A timed path through ``points``, reaching vertex k at ``arr[k]`` and leaving it at
-    ``dep[k]`` (two waypoints where it holds; the last vertex is the goal, parked for ever)."""
+    ``dep[k]`` (two waypoints where it holds; the last vertex is the goal, parked for ever).
+    Vertices passed without a hold in a straight line at the same speed are left out (the same
+    motion; the extra vertices were only places where the robot might have waited)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    keep = np.ones(len(pts), dtype=bool)
+    if len(pts) > 2:
+        a, b = pts[1:-1] - pts[:-2], pts[2:] - pts[1:-1]
+        la, lb = np.hypot(*a.T), np.hypot(*b.T)
+        ta, tb = arr[1:-1] - dep[:-2], arr[2:] - dep[1:-1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            straight = (np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) <= 1e-9 * la * lb) & ((a * b).sum(1) > 0)
+            same_speed = np.abs(la * tb - lb * ta) <= 1e-9 * np.maximum(la * tb, 1e-12)
+        keep[1:-1] = ~(straight & same_speed & (dep[1:-1] <= arr[1:-1]) & (la > 0) & (lb > 0) & (ta > 0) & (tb > 0))
     rows = []
-    for k, (x, y) in enumerate(np.asarray(points, dtype=float).reshape(-1, 2)):
+    for k in np.nonzero(keep)[0]:
+        x, y = pts[k]
         rows.append((x, y, arr[k]))
-        if k < len(points) - 1 and dep[k] > arr[k]:
+        if k < len(pts) - 1 and dep[k] > arr[k]:
             rows.append((x, y, dep[k]))
     return TimedPath(robot_id, radius, np.array(rows, dtype=float))
 
