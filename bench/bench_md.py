@@ -13,8 +13,12 @@ longest no-interference arrival time; re-orderings; collision regions (md); and 
 refused, with a PlanningError), ``timeout`` or ``error``. Exit status 1 when any plan was invalid.
 
     .venv/bin/python bench/bench_md.py [--sizes 10,50,100,200,500] [--planners md,md-departure,md-box,prior]
-        [--maps warehouse-10-20-10-2-1,...] [--maps-dir DIR] [--seed 0] [--timeout 600]
+        [--maps warehouse-10-20-10-2-1,...] [--maps-dir DIR] [--seed 0] [--timeout 600] [--time-limit S]
         [--csv out/bench_md.csv] [--plot out/bench_md.png]
+
+    # issue 8's table: md (v2), the paper's method (md-departure) and PRIOR on warehouse-10-20-10-2-1,
+    # -10-2-2 and warehouse-20-40-10-2-2 at 100, 200, 400, 500 robots (and 1000 on the two larger maps)
+    nice .venv/bin/python bench/bench_md.py --suite issue8 --maps-dir ../shared/data/maps --timeout 120
 
 Without the maps directory a generated warehouse (1 m cells, 1-cell aisles) with random start/goal
 pairs stands in, and the output says so.
@@ -47,6 +51,13 @@ from fleet_planner.scenario import ScenarioError, scenario_from_movingai  # noqa
 RADIUS = (0.35, 0.45)
 SPEED = (0.7, 1.0)
 
+#: presets: maps, sizes, planners, and extra sizes on some maps only
+SUITES = {
+    "issue8": {"maps": ["warehouse-10-20-10-2-1", "warehouse-10-20-10-2-2", "warehouse-20-40-10-2-2"],
+               "sizes": [100, 200, 400, 500], "planners": ["md", "md-departure", "prior"],
+               "extra": {"warehouse-10-20-10-2-2": [1000], "warehouse-20-40-10-2-2": [1000]}},
+}
+
 
 @dataclass
 class Instance:
@@ -63,12 +74,15 @@ class Row:
     n: int
     planner: str
     time_s: float | None = None
+    cpu_s: float | None = None
     soc_ratio: float | None = None
     makespan_ratio: float | None = None
     reorders: int | None = None
     regions: int | None = None
     verdict: str = ""
     detail: str = ""
+    #: md's priority search and fallback: e.g. "search 3", "fallback crowd"
+    notes: str = ""
 
 
 def _args(argv=None) -> argparse.Namespace:
@@ -82,9 +96,29 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--planners", default="md,md-box", help=f"of {', '.join(planner_names())} (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="radii and speeds (default: %(default)s)")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds per planning run (default: %(default)s)")
+    p.add_argument("--time-limit", type=float, dest="time_limit",
+                   help="md planners: seconds for the priority search before the dense fallback (default: md's own)")
+    p.add_argument("--suite", choices=sorted(SUITES),
+                   help="a preset of maps, sizes and planners (issue8: md v2, md-departure, prior on three "
+                        "warehouses at 100-500 robots, 1000 on the two larger maps); --maps, --sizes, --planners "
+                        "given as well override it")
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     p.add_argument("--plot", type=Path, help="also draw time and quality against N to this PNG")
     args = p.parse_args(argv)
+    if args.suite:
+        suite = SUITES[args.suite]
+        given = set(argv if argv is not None else sys.argv[1:])
+        if "--sizes" not in given:
+            args.sizes = ",".join(str(n) for n in suite["sizes"])
+        if "--planners" not in given:
+            args.planners = ",".join(suite["planners"])
+        if args.maps is None:
+            args.maps = ",".join(suite["maps"])
+        args.extra = suite["extra"]
+    else:
+        args.extra = {}
+    if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
+        p.error(f"--time-limit: must be a finite number of seconds > 0 (got {args.time_limit!r})")
     try:
         args.sizes = sorted({int(s) for s in args.sizes.split(",") if s.strip()})
     except ValueError:
@@ -159,12 +193,21 @@ class AloneTimes:
 # ---------------------------------------------------------------------------------------------
 # one planning run, in a child process
 # ---------------------------------------------------------------------------------------------
-def _child(results, grid: GridMap, robots: list[RobotSpec], name: str) -> None:
+def _planner(name: str, time_limit: float | None):
+    """The planner ``name``, with the search budget where it takes one (the md variants that search)."""
+    planner = get_planner(name)
+    if time_limit is not None and getattr(planner, "search", False):
+        planner = get_planner(name, time_limit=time_limit)
+    return planner
+
+
+def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, time_limit: float | None = None) -> None:
     try:
-        t0 = time.perf_counter()
-        plan = get_planner(name).plan(grid, robots)
+        t0, c0 = time.perf_counter(), time.process_time()
+        plan = _planner(name, time_limit).plan(grid, robots)
         elapsed = time.perf_counter() - t0
         plan.network = None   # large and not needed here
+        plan.info["cpu_s"] = time.process_time() - c0
         results.put(("ok", elapsed, plan))
     except PlanningError as exc:
         results.put(("no plan", time.perf_counter() - t0, str(exc).splitlines()[1].strip()))
@@ -172,12 +215,13 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], name: str) -> None:
         results.put(("error", None, traceback.format_exc(limit=3)))
 
 
-def run_one(inst: Instance, n: int, planner: str, timeout: float, alone: AloneTimes) -> Row:
+def run_one(inst: Instance, n: int, planner: str, timeout: float, alone: AloneTimes,
+            time_limit: float | None = None) -> Row:
     robots = inst.robots[:n]
     row = Row(inst.name, n, planner)
     ctx = mp.get_context("fork")
     results = ctx.Queue()
-    proc = ctx.Process(target=_child, args=(results, inst.grid, robots, planner), daemon=True)
+    proc = ctx.Process(target=_child, args=(results, inst.grid, robots, planner, time_limit), daemon=True)
     proc.start()
     try:
         status, elapsed, payload = results.get(timeout=timeout)
@@ -199,6 +243,15 @@ def run_one(inst: Instance, n: int, planner: str, timeout: float, alone: AloneTi
     row.makespan_ratio = max(arrivals.values()) / max(base)
     row.reorders = plan.info.get("reorders")
     row.regions = plan.info.get("regions")
+    row.cpu_s = plan.info.get("cpu_s")
+    notes = []
+    if "fallback" in plan.info:
+        notes.append(f"fallback {plan.info['fallback']}")
+    if isinstance(plan.info.get("search"), dict):
+        notes.append(f"search {plan.info['search'].get('attempts')}")
+    if plan.info.get("detours"):
+        notes.append(f"detours {plan.info['detours']}")
+    row.notes = ", ".join(notes)
     violations = check_plan(inst.grid, robots, plan)
     if violations:
         row.verdict = f"FAIL ({len(violations)})"
@@ -219,13 +272,13 @@ def _fmt(value, spec: str) -> str:
 def table(rows: list[Row]) -> str:
     w = max([3] + [len(r.map) for r in rows])
     pw = max([7] + [len(r.planner) for r in rows])
-    head = f"{'map':<{w}} {'N':>4} {'planner':<{pw}} {'time s':>8} {'SoC/free':>8} {'mkspan/free':>11} " \
-           f"{'reorders':>8} {'regions':>8}  valid"
+    head = f"{'map':<{w}} {'N':>4} {'planner':<{pw}} {'time s':>8} {'cpu s':>8} {'SoC/free':>8} {'mkspan/free':>11} " \
+           f"{'reorders':>8} {'regions':>8}  valid   notes"
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r.map:<{w}} {r.n:>4} {r.planner:<{pw}} {_fmt(r.time_s, '8.2f')} {_fmt(r.soc_ratio, '8.3f')} "
-                     f"{_fmt(r.makespan_ratio, '11.3f')} {_fmt(r.reorders, '8d')} {_fmt(r.regions, '8d')}  "
-                     f"{r.verdict}")
+        lines.append(f"{r.map:<{w}} {r.n:>4} {r.planner:<{pw}} {_fmt(r.time_s, '8.2f')} {_fmt(r.cpu_s, '8.2f')} "
+                     f"{_fmt(r.soc_ratio, '8.3f')} {_fmt(r.makespan_ratio, '11.3f')} {_fmt(r.reorders, '8d')} "
+                     f"{_fmt(r.regions, '8d')}  {r.verdict:<7} {r.notes}")
     return "\n".join(lines)
 
 
@@ -233,11 +286,11 @@ def write_csv(rows: list[Row], path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as f:
         out = csv.writer(f)
-        out.writerow(["map", "n", "planner", "time_s", "soc_ratio", "makespan_ratio", "reorders", "regions",
-                      "verdict", "detail"])
+        out.writerow(["map", "n", "planner", "time_s", "cpu_s", "soc_ratio", "makespan_ratio", "reorders",
+                      "regions", "verdict", "notes", "detail"])
         for r in rows:
-            out.writerow([r.map, r.n, r.planner, r.time_s, r.soc_ratio, r.makespan_ratio, r.reorders, r.regions,
-                          r.verdict, r.detail])
+            out.writerow([r.map, r.n, r.planner, r.time_s, r.cpu_s, r.soc_ratio, r.makespan_ratio, r.reorders,
+                          r.regions, r.verdict, r.notes, r.detail])
 
 
 def plot(rows: list[Row], path: Path) -> None:
@@ -270,7 +323,8 @@ def main(argv=None) -> int:
 
     tqdm.monitor_interval = 0   # no monitor thread: the planning runs are forked
     args = _args(argv)
-    n_max = args.sizes[-1]
+    extra = {m: [n for n in ns if n not in args.sizes] for m, ns in args.extra.items()} if args.maps_dir.is_dir() else {}
+    n_max = max([args.sizes[-1]] + [n for ns in extra.values() for n in ns])
     if args.maps_dir.is_dir():
         names = [s.strip() for s in args.maps.split(",")] if args.maps else None
         instances = movingai_instances(args.maps_dir, names, args.scen, n_max, args.seed)
@@ -278,16 +332,24 @@ def main(argv=None) -> int:
         print(f"bench_md: no maps directory {args.maps_dir}: using a generated warehouse with random "
               f"start/goal pairs instead of MovingAI maps", file=sys.stderr)
         instances = [generated_instance(n_max, args.seed)]
-    for name in args.planners:   # import every planner now, so that all runs use the same code
-        get_planner(name)
+    for name in args.planners:   # import and run every planner once now (lazy imports, caches of
+        # nothing the runs share: each run is a fresh fork), so that no run pays for the imports
+        small = instances[0].robots[:2]
+        try:
+            _planner(name, args.time_limit).plan(instances[0].grid, small)
+        except PlanningError:
+            pass
     rows: list[Row] = []
-    jobs = [(inst, n, p) for inst in instances for n in args.sizes for p in args.planners]
+    jobs = [(inst, n, p) for inst in instances for n in sorted(args.sizes + extra.get(inst.name, []))
+            for p in args.planners]
     alone = {inst.name: AloneTimes(inst.grid) for inst in instances}
     with tqdm(jobs, unit="run", file=sys.stderr) as bar:
         for inst, n, planner in bar:
             bar.set_postfix_str(f"{inst.name} N={n} {planner}")
-            row = run_one(inst, n, planner, args.timeout, alone[inst.name])
+            row = run_one(inst, n, planner, args.timeout, alone[inst.name], args.time_limit)
             rows.append(row)
+            if args.csv:   # as it goes, so that a long run killed half way keeps what it measured
+                write_csv(rows, args.csv)
             if row.verdict.startswith("FAIL"):
                 bar.write(f"!!! FAIL: invalid plan on {inst.name} N={n} planner={planner} seed={args.seed}: "
                           f"{row.detail}", file=sys.stderr)

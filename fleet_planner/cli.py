@@ -1,7 +1,7 @@
 """``fleet-plan``: plan a scenario file offline and write the plan file.
 
     fleet-plan SCENARIO.yaml --out PLAN.json [--planner md|md-box|prior|md-departure] [--holds none|anywhere]
-        [--plot PLAN.png] [--check] [--quiet]
+        [--mode exact|box] [--time-limit S] [--plot PLAN.png] [--check] [--quiet]
 
 The planners are the registered variants (:func:`fleet_planner.planners.planner_names`).
 
@@ -37,18 +37,33 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mode", choices=sorted(COLLISION_TESTS, reverse=True),   # exact first: md's default
                    help="md: collision test, exact regions (default) or the paper's boxes (as md-box)")
     p.add_argument("--holds", type=_holds,
-                   help="md: where a robot may wait on its path: none (md's default: departure delays only, "
-                        "the paper's method) or anywhere (at any vertex, exact regions only; as md-holds)")
+                   help="md: where a robot may wait on its path: anywhere (md's default with exact regions: at "
+                        "any vertex, with route choice) or none (departure delays only, the paper's method)")
     p.add_argument("--order", choices=["parking", "given", "shortest", "longest"],
                    help="initial priority order (default: the planner's own; md: shortest, prior: given; "
                         "parking is md only)")
     p.add_argument("--margin", type=float,
                    help="md, prior: metres added to every pair's sum of radii (default: 0.02)")
+    p.add_argument("--time-limit", type=_seconds, dest="time_limit",
+                   help="md: seconds for the priority search when greedy re-ordering gives up, then the "
+                        "dense fallback (default: 10)")
     p.add_argument("--plot", type=Path, help="also draw the plan to this PNG")
     p.add_argument("--check", action="store_true",
                    help="also report the checker's verdict and the smallest clearance between robots")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
+
+
+def _seconds(value: str) -> float:
+    import math
+
+    try:
+        seconds = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds (got {value!r})") from None
+    if not (math.isfinite(seconds) and seconds > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0 (got {value!r})")
+    return seconds
 
 
 def _holds(value: str) -> str:
@@ -103,7 +118,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     grid, robots = scenario.grid, scenario.robots
     # only what was asked for: each planner has its own defaults
     options = {k: v for k, v in (("margin", args.margin), ("order", args.order), ("mode", args.mode),
-                                 ("holds", args.holds)) if v is not None}
+                                 ("holds", args.holds), ("time_limit", args.time_limit)) if v is not None}
     try:
         planner = get_planner(args.planner, **options)
     except TypeError as exc:   # an option this planner does not have

@@ -274,6 +274,21 @@ class CollisionModel:
             self._stale_rows += len(segs.p0)
 
     # -- the geometry ---------------------------------------------------------------------------
+    def _bbox(self, x: int) -> np.ndarray:
+        """(min x, min y, max x, max y) of robot x's path."""
+        pts = self.paths[x]
+        return np.concatenate([pts.min(0), pts.max(0)])
+
+    def _near(self, robots: list[int], others: list[int], reach: float) -> list[int]:
+        """Those of ``others`` (sorted) whose path's bounding box comes within ``reach`` of the
+        bounding box of one of ``robots``' paths."""
+        others = sorted(others)
+        mine = np.array([self._bbox(x) for x in robots])
+        theirs = np.array([self._bbox(y) for y in others])
+        close = ((theirs[:, None, :2] <= mine[None, :, 2:] + reach)
+                 & (mine[None, :, :2] <= theirs[:, None, 2:] + reach)).all(2).any(1)
+        return [y for y, c in zip(others, close) if c]
+
     def _build_tree(self) -> None:
         import shapely
 
@@ -316,8 +331,9 @@ class CollisionModel:
             parts_q, parts_t = [qi[fresh]], [ti[fresh]]
             # robots changed since the index was built (these included): a small index of their own
             # (envelopes compared directly, in blocks: cheaper than building an index per call)
-            recent = sorted(self._stale | changed)
-            rsegs = _cat([self._segs[x] for x in recent])
+            # only robots whose whole path comes within reach of the changed ones' paths
+            near_robots = self._near(robots, list(self._stale | changed), reach)
+            rsegs = _cat([self._segs[x] for x in near_robots])
             rp1 = rsegs.p0 + rsegs.u * rsegs.length[:, None]
             rlo, rhi = np.minimum(rsegs.p0, rp1), np.maximum(rsegs.p0, rp1)
             found_q, found_t = [], []

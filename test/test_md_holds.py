@@ -96,7 +96,7 @@ def _from(path: TimedPath, t0: float) -> TimedPath:
     return TimedPath(path.robot_id, path.radius, np.vstack([[*path.position(t0), t0], wp[wp[:, 2] > t0]]))
 
 
-@pytest.mark.parametrize("name", ["md-holds", "md-departure", "md-routes"])
+@pytest.mark.parametrize("name", ["md", "md-holds", "md-departure", "md-routes"])
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=scenarios(), t0=st.sampled_from([0.0, 0.7, 2.0, 4.5]))
 def test_every_incremental_leg_is_valid(name, case, t0):

@@ -109,14 +109,17 @@ class MDPlanner(Planner):
     until ``time_limit`` s have passed since planning began; ``fallback`` (default "crowd"; a
     registered ``dense`` planner is preferred when there is one): the dense solver that plans when
     the search fails, named in the plan's ``info["fallback"]``; None refuses instead. The live
-    fleet's legs (:meth:`plan_incremental`) stop trying detours once ``time_limit`` is spent."""
+    fleet's legs (:meth:`plan_incremental`) stop trying detours and re-orderings once
+    ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
+    fleet manager re-plans later)."""
 
     name = "md"
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
                  mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
                  detours: int | None = None, detour_min: float = 2.0, early_holds: bool = False,
-                 time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd"):
+                 time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd",
+                 leg_time_limit: float = 0.5):
         if holds is None:
             holds = "anywhere" if mode == "exact" else "none"
         if detours is None:
@@ -144,6 +147,10 @@ class MDPlanner(Planner):
                 or not (math.isfinite(time_limit) and time_limit > 0):
             raise ValueError(f"time_limit: must be a finite number of seconds > 0 (got {time_limit!r})")
         self.time_limit = float(time_limit)
+        if isinstance(leg_time_limit, bool) or not isinstance(leg_time_limit, (int, float)) \
+                or not (math.isfinite(leg_time_limit) and leg_time_limit > 0):
+            raise ValueError(f"leg_time_limit: must be a finite number of seconds > 0 (got {leg_time_limit!r})")
+        self.leg_time_limit = float(leg_time_limit)
         self.search = bool(search)
         if fallback is not None and fallback not in ("crowd", "dense"):
             raise ValueError(f"fallback: must be 'crowd', 'dense' or None (got {fallback!r})")
@@ -239,7 +246,8 @@ class MDPlanner(Planner):
         shortest: dict[int, np.ndarray] = {}
         order = list(range(nf)) + [nf + x for x in self._initial_order(grid, robots, shortest)]
         session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept],
-                           hints={nf + x: path for x, path in shortest.items()})
+                           hints={nf + x: path for x, path in shortest.items()},
+                           deadline=time.perf_counter() + self.leg_time_limit)
         session.route()
         session.sched.delays[:nf] = [delay for _, _, delay in kept]
         for x, (_, _, arr, dep) in enumerate(held):

@@ -1,0 +1,143 @@
+"""md v2 (issue 8): priority search when greedy re-ordering gives up, the dense fallback, the time
+budget and its options. Plans are judged by the independent checker (fleet_planner/checker.py).
+
+The dense case: a comb of 1-cell aisles (rack rows of 3 cells, 1-cell gaps) with six robots of
+radius 0.4 m on 55 free cells. The paper's greedy re-ordering (``md-departure``) gives up on it
+("blocked by r4, which parks on its goal in the way"), although 420 of the 720 priority orders of
+these robots work for it; the priority search finds one.
+"""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fleet_planner import cli
+from fleet_planner.checker import check_plan
+from fleet_planner.grid import GridMap
+from fleet_planner.model import PlanningError, RobotSpec
+from fleet_planner.planners import get_planner
+from fleet_planner.planners.md import MDPlanner
+from fleet_planner.planners.md_search import PrioritySearch
+
+COMB = GridMap.from_rows(["...........",
+                          ".@@@.@@@.@.",
+                          "...........",
+                          ".@@@.@@@.@.",
+                          "..........."])
+
+
+def _robots(n: int, seed: int) -> list[RobotSpec]:
+    free = [(c, r) for r in range(COMB.height) for c in range(COMB.width) if not COMB.blocked[r, c]]
+    cells = np.random.default_rng(seed).permutation(len(free))
+    return [RobotSpec(f"r{i}", 0.4, 1.0, COMB.centre(*free[cells[i]]), COMB.centre(*free[cells[n + i]]))
+            for i in range(n)]
+
+
+DENSE = _robots(6, 8)
+
+
+def test_greedy_re_ordering_refuses_the_dense_case():
+    with pytest.raises(PlanningError, match="parks on its goal in the way"):
+        get_planner("md-departure").plan(COMB, DENSE)
+
+
+@pytest.mark.parametrize("holds", ["none", "anywhere"])
+def test_the_priority_search_solves_it_without_the_fallback(holds):
+    plan = get_planner("md", holds=holds, fallback=None, time_limit=60).plan(COMB, DENSE)
+    assert check_plan(COMB, DENSE, plan) == []
+    assert "fallback" not in plan.info
+    if holds == "none":   # md with departure delays only: the search is what solved it
+        assert plan.info["search"]["attempts"] > 1
+        assert plan.info["search"]["priorities"] >= 1
+
+
+def test_where_the_search_fails_the_dense_solver_plans_and_the_plan_says_so():
+    robots = _robots(12, 0)   # 12 robots on the comb: no priority order of md's paths works
+    with pytest.raises(PlanningError):
+        get_planner("md", fallback=None, time_limit=1.0).plan(COMB, robots)
+    plan = get_planner("md", time_limit=1.0).plan(COMB, robots)
+    assert plan.info["fallback"] in ("crowd", "dense") and plan.planner == "md"
+    assert plan.info["search"]["attempts"] >= 1 and plan.info["why"]
+    assert check_plan(COMB, robots, plan) == []
+
+
+def test_the_papers_methods_do_not_search():
+    for name in ("md-departure", "md-box"):
+        planner = get_planner(name)
+        assert planner.search is False and planner.fallback is None and planner.holds == "none"
+
+
+def test_the_md_planner_holds_en_route_where_a_delay_costs_more():
+    """The hand-worked case of test_md_holds (arrival 15 + sqrt 2 with a hold at (6, 11), 17 + sqrt 2
+    with a departure delay) through md v2 and md --holds none."""
+    from test_md_holds import GRID, SPECS
+
+    held = get_planner("md", order="given", margin=0.0).plan(GRID, SPECS)
+    delayed = get_planner("md", holds="none", order="given", margin=0.0).plan(GRID, SPECS)
+    for plan in (held, delayed):
+        assert check_plan(GRID, SPECS, plan) == []
+    assert held.by_id()["j"].arrival_time == pytest.approx(15 + math.sqrt(2))
+    assert held.by_id()["j"].start_time == pytest.approx(0.0)
+    assert delayed.by_id()["j"].arrival_time == pytest.approx(17 + math.sqrt(2))
+    assert delayed.by_id()["j"].start_time == pytest.approx(2 + math.sqrt(2))
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 9), seed=st.integers(0, 10_000), steps=st.integers(1, 12))
+def test_the_search_order_is_a_permutation_that_keeps_every_learnt_priority(n, seed, steps):
+    rng = np.random.default_rng(seed)
+    search = PrioritySearch(seed)
+    order = list(rng.permutation(n))
+    for _ in range(steps):
+        j, i = (int(v) for v in rng.choice(n, 2, replace=False))
+        order = search.next_order(order, j, i)
+        assert sorted(order) == list(range(n))
+        rank = {x: k for k, x in enumerate(order)}
+        assert rank[j] < rank[i]                       # the newest priority always holds
+        assert all(rank[a] < rank[b] for a, b in search.constraints)
+
+
+def test_bad_options_are_refused_naming_the_option(capsys, tmp_path):
+    for bad in (-1, 0, math.inf, math.nan, True):
+        with pytest.raises(ValueError, match="time_limit: must be a finite number of seconds > 0"):
+            MDPlanner(time_limit=bad)
+    with pytest.raises(ValueError, match="leg_time_limit"):
+        MDPlanner(leg_time_limit=-1)
+    with pytest.raises(ValueError, match="fallback: must be"):
+        MDPlanner(fallback="lacam")
+    scen = tmp_path / "s.yaml"
+    scen.write_text("map:\n  rows: ['........', '........']\n  resolution: 1.0\nrobots:\n"
+                    "  - {id: a, radius: 0.4, max_speed: 1.0, start: [0.5, 0.5], goal: [7.5, 0.5]}\n")
+    out = tmp_path / "p.json"
+    for argv, option in ((["--time-limit", "-1"], "--time-limit"), (["--time-limit", "soon"], "--time-limit"),
+                         (["--mode", "boxes"], "--mode"), (["--holds", "sometimes"], "--holds")):
+        with pytest.raises(SystemExit) as stop:
+            cli.main([str(scen), "--out", str(out), *argv])
+        assert stop.value.code == 2
+        assert option in capsys.readouterr().err
+    assert cli.main([str(scen), "--out", str(out), "--time-limit", "2.5", "--quiet"]) == cli.EXIT_OK
+    assert cli.main([str(scen), "--out", str(out), "--planner", "prior", "--time-limit", "2"]) == cli.EXIT_INPUT
+    assert "does not take that option" in capsys.readouterr().err
+
+
+def test_the_benchmark_refuses_bad_options_naming_them(capsys):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import bench_md
+
+    for argv, message in ((["--time-limit", "-1"], "--time-limit: must be a finite number of seconds > 0"),
+                          (["--time-limit", "nan"], "--time-limit: must be"),
+                          (["--planners", "md,nope"], "--planners: unknown"), (["--timeout", "0"], "--timeout: must"),
+                          (["--suite", "issue9"], "--suite")):
+        with pytest.raises(SystemExit) as stop:
+            bench_md._args(argv)
+        assert stop.value.code == 2
+        assert message in capsys.readouterr().err
+    args = bench_md._args(["--suite", "issue8", "--time-limit", "5"])
+    assert args.planners == ["md", "md-departure", "prior"] and args.sizes == [100, 200, 400, 500]
+    assert args.extra == {"warehouse-10-20-10-2-2": [1000], "warehouse-20-40-10-2-2": [1000]}
+    assert args.time_limit == 5.0
