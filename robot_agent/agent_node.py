@@ -25,10 +25,12 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import String
 
 from fleet_planner.fleet import COORDINATION, RobotAgent
+from fleet_planner.fleet.intake import MAX_PATH_OFFSET_S, MAX_PATH_POSES, MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.validation import printable
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
@@ -101,11 +103,16 @@ class AgentNode(Node):
     # -- callbacks: none of them lets an exception out ----------------------------------------------
     def _on_path(self, msg: Path) -> None:
         try:
+            if len(msg.poses) > MAX_PATH_POSES:
+                raise ValueError(f"timed path: {len(msg.poses)} poses (at most {MAX_PATH_POSES})")
             path, t0 = msg_to_timed_path(msg, self.robot_id, self.agent.model.kind.radius)
             t0_ns = stamp_to_ns(t0)
+            problem = stamp_problem("timed path", t0_ns / 1e9, self._now(), MAX_PATH_OFFSET_S, MAX_PATH_OFFSET_S)
+            if problem:
+                raise ValueError(problem)
             self.agent.on_path(path, t0_ns / 1e9, t0_ns)
         except (RecordError, ValueError) as exc:
-            self.get_logger().error(f"timed path ignored: {exc}")
+            self.get_logger().error(printable(f"timed path ignored: {exc}", 300), throttle_duration_sec=1.0)
 
     def _on_task(self, msg: String) -> None:
         try:
@@ -121,8 +128,12 @@ class AgentNode(Node):
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.agent.on_status(string_to_record(msg, RobotStatus))
-        except RecordError as exc:
+            status = string_to_record(msg, RobotStatus)
+            problem = stamp_problem(f"robot {status.id!r}", status.stamp, self._now(), float("inf"), MAX_STATUS_AGE_S)
+            if problem:  # (ahead: RobotAgent.on_status refuses those)
+                raise ValueError(problem)
+            self.agent.on_status(status)
+        except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_wait_message(self, msg: String) -> None:
@@ -130,6 +141,9 @@ class AgentNode(Node):
             self.agent.on_wait_message(string_to_record(msg, WaitMessageRecord))
         except RecordError as exc:
             self.get_logger().warning(f"wait message ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds / 1e9
 
     def _on_timer(self) -> None:
         try:

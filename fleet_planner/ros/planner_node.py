@@ -24,11 +24,14 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
+from fleet_planner.fleet.fleet_file import load_fleet
+from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.validation import printable
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import (
@@ -86,6 +89,11 @@ class PlannerNode(Node):
                         "only); restart with the same file and open jobs carry on", read_only=True)).value
         skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
             "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
+        self._max_age = self.declare_parameter("max_status_age_s", MAX_STATUS_AGE_S, _range(
+            "s a robot status may be stamped behind the planner's clock before it is refused", 1.0, 3600.0)).value
+        fleet_file = self.declare_parameter("fleet_file", "", ParameterDescriptor(
+            description="fleet YAML whose robot ids are the roster: statuses of other ids are ignored (one "
+                        "warning each); empty: any robot may join", read_only=True)).value
         defaults = DispatchParams()
         values = {}
         for f in fields(DispatchParams):
@@ -97,11 +105,13 @@ class PlannerNode(Node):
 
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         kinds = kinds if kinds is not None else load_kinds(kinds_file or None)
+        roster = [m.id for m in load_fleet(fleet_file, kinds)] if fleet_file else None
         if coordination not in COORDINATION:
             raise ValueError(f"parameter coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
                                   [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
-                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew)
+                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew,
+                                  roster=roster)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
@@ -128,16 +138,21 @@ class PlannerNode(Node):
         try:
             events = self.fleet.submit(msg.data, now)
         except Exception as exc:  # a bug must not take the fleet down: answer, log, carry on
-            self.get_logger().error(f"task {msg.data[:200]!r}: {exc!r}")
-            events = [TaskEvent(task_id="?", event="rejected", stamp=now, reason=f"internal error: {exc}")]
+            self.get_logger().error(f"task {msg.data[:200]!r}: {printable(repr(exc), 300)}")
+            events = [TaskEvent(task_id="?", event="rejected", stamp=now,
+                                reason=printable(f"internal error: {exc}", 300))]
         for ev in events:
             if ev.event == "rejected":
-                self.get_logger().warning(f"task {ev.task_id} rejected: {ev.reason}")
+                self.get_logger().warning(f"task {ev.task_id} rejected: {ev.reason}", throttle_duration_sec=1.0)
         self._publish_events(events)
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.fleet.on_status(string_to_record(msg, RobotStatus), self._now())
+            status, now = string_to_record(msg, RobotStatus), self._now()
+            problem = stamp_problem(f"robot {status.id!r}", status.stamp, now, float("inf"), self._max_age)
+            if problem:  # (ahead: the fleet manager's max_clock_skew_s)
+                raise ValueError(problem)
+            self.fleet.on_status(status, now)
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
         except Exception as exc:
