@@ -30,6 +30,7 @@ from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.origin import OriginCheck
 from fleet_planner.validation import printable
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
@@ -69,6 +70,9 @@ class AgentNode(Node):
             "warehouse YAML (empty: the shipped config/warehouse.yaml)")).value
         kinds_file = self.declare_parameter("kinds_file", "", _fixed(
             "robot kinds YAML (empty: the shipped config/robot_kinds.yaml)")).value
+        planner = self.declare_parameter("planner", "planner", _fixed(
+            "the planner's node name (relative to this node's namespace, or absolute): task events and timed "
+            "paths are taken only while no other node publishes them")).value
 
         robot_id = robot_id or self.get_namespace().rstrip("/").rsplit("/", 1)[-1]
         problem = robot_id_problem(robot_id)
@@ -82,15 +86,17 @@ class AgentNode(Node):
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         chargers = [s.pose for s in warehouse.stations_of("charger")]
         model = RobotModel(robot_id, kinds[kind], x, y, yaw, battery, chargers)
-        self.agent = RobotAgent(model, warehouse, mode)
+        self.planner = OriginCheck.qualify(self, planner)
+        self.agent = RobotAgent(model, warehouse, mode, planner=self.planner)
         self.robot_id = robot_id
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
         # every waiting message at each wake-up: the whole fleet's statuses keep coming (see drain.py)
         subscribe = partial(create_draining_subscription, self)
-        subscribe(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
+        paths = subscribe(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
-        subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
         subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._waits: Publisher | None = None
         if self.agent.strategy.exchanges_wait_messages:
@@ -103,6 +109,9 @@ class AgentNode(Node):
     # -- callbacks: none of them lets an exception out ----------------------------------------------
     def _on_path(self, msg: Path) -> None:
         try:
+            problem = self._path_origin.problem()
+            if problem:
+                raise ValueError(f"not from the planner: {problem}")
             if len(msg.poses) > MAX_PATH_POSES:
                 raise ValueError(f"timed path: {len(msg.poses)} poses (at most {MAX_PATH_POSES})")
             path, t0 = msg_to_timed_path(msg, self.robot_id, self.agent.model.kind.radius)
@@ -122,7 +131,11 @@ class AgentNode(Node):
 
     def _on_event(self, msg: String) -> None:
         try:
-            self.agent.on_event(string_to_record(msg, TaskEvent))
+            event = string_to_record(msg, TaskEvent)
+            problem = self._event_origin.problem()
+            if problem:
+                raise RecordError(f"task event {event.task_id} {event.event}: not from the planner: {problem}")
+            self.agent.on_event(event, sender=self.planner)
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
 

@@ -141,6 +141,8 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
     # the agent ignores stale statuses of others and keeps its own going
     agent._on_status(status("r2", agent._now() - 3600.0, "manipulator", CHARGERS[1]))
     assert "r2" not in agent.agent.heard
+    agent._on_timer()  # (the core refuses statuses stamped ahead of its last tick)
     agent._on_status(status("r2", agent._now(), "manipulator", CHARGERS[1]))
     assert "r2" in agent.agent.heard
     agent._on_timer()
+

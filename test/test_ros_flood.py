@@ -5,6 +5,7 @@ agents listen to; afterwards every node is still up and a good job is done witho
 import json
 import random
 
+import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
@@ -14,8 +15,10 @@ from std_msgs.msg import String
 from test_records_total import GOOD_ALL
 from test_ros_system import MEMBERS, ended, no_contact, running_fleet, wait_for
 
+from fleet_planner.model import TimedPath
 from msg_schemas import topics
-from msg_schemas.records import RobotStatus, Task
+from msg_schemas.convert import ns_to_stamp, timed_path_to_msg
+from msg_schemas.records import RobotStatus, Task, TaskEvent
 
 
 @pytest.fixture(scope="module")
@@ -82,6 +85,19 @@ def test_a_flood_of_hostile_messages_leaves_every_node_up_and_a_good_job_is_done
     for msg in broken_paths(rng):
         for pub in path_pubs:
             pub.publish(msg)
+    forged_events = stranger.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
+    r1 = fleet.agents["r1"]
+    x, y = r1.agent.model.x, r1.agent.model.y
+    into_racks = TimedPath("r1", 0.3, np.array([[x, y, 0.0], [x, y - 6.0, 6.0]]))
+    path_pubs[0].publish(timed_path_to_msg(into_racks, ns_to_stamp(r1.get_clock().now().nanoseconds + 10**9), "map"))
+    for m in MEMBERS:
+        forged_events.publish(String(data=TaskEvent(task_id="X1", event="assigned", stamp=mon.now(),
+                                                    robot_id=m.id).to_json()))
+    assert wait_for(fleet, lambda: all(a._event_origin.refused >= 1 for a in fleet.agents.values())
+                    and r1._path_origin.refused >= 1)
+    assert all(a.agent.job is None for a in fleet.agents.values()) and r1.agent.model.path is None
+    for pub in [*pubs.values(), *path_pubs, forged_events]:
+        stranger.destroy_publisher(pub)  # the stranger leaves
     planner = fleet.planner
     assert not any(rid.startswith("ghost") for rid in planner.fleet.robots)
     mon.submit(Task(id="F1", pick="chute_1", place="B03-02"))
