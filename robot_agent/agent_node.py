@@ -31,11 +31,20 @@ from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
 from fleet_planner.ros.origin import OriginCheck
+from fleet_planner.ros.signing import Keys, PathPairing
 from fleet_planner.validation import printable
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
-from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent, WaitMessageRecord, robot_id_problem
+from msg_schemas.records import (
+    PathAuth,
+    RecordError,
+    RobotStatus,
+    Task,
+    TaskEvent,
+    WaitMessageRecord,
+    robot_id_problem,
+)
 
 
 def _range(description: str, lo: float, hi: float) -> ParameterDescriptor:
@@ -73,6 +82,9 @@ class AgentNode(Node):
         planner = self.declare_parameter("planner", "planner", _fixed(
             "the planner's node name (relative to this node's namespace, or absolute): task events and timed "
             "paths are taken only while no other node publishes them")).value
+        trust_file = self.declare_parameter("auth_trust_file", "", _fixed(
+            "key file of the planner (fleet_planner/auth.py): with it, only task events and timed paths signed "
+            "by one of its keys are taken, from any node (empty: only from the planner node, unsigned)")).value
 
         robot_id = robot_id or self.get_namespace().rstrip("/").rsplit("/", 1)[-1]
         problem = robot_id_problem(robot_id)
@@ -97,6 +109,13 @@ class AgentNode(Node):
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
+        self.keys = Keys(trust_file=trust_file)
+        self._events_topic = events.topic_name
+        self._pairing: PathPairing | None = None
+        if self.keys.checks:  # signed paths: their signatures come beside them
+            auth = subscribe(String, topics.timed_path_auth_topic(robot_id), self._on_path_auth,
+                             topics.TIMED_PATH_AUTH_QOS)
+            self._pairing = PathPairing(self.keys, robot_id, auth.topic_name)
         subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._waits: Publisher | None = None
         if self.agent.strategy.exchanges_wait_messages:
@@ -108,10 +127,30 @@ class AgentNode(Node):
 
     # -- callbacks: none of them lets an exception out ----------------------------------------------
     def _on_path(self, msg: Path) -> None:
+        if self._pairing is not None:  # keys: followed once its signature checks out
+            self._follow(self._pairing.offer_path(msg))
+            return
+        problem = self._path_origin.problem()
+        if problem:
+            self.get_logger().error(printable(f"timed path ignored: not from the planner: {problem}", 300),
+                                    throttle_duration_sec=1.0)
+            return
+        self._follow(msg)
+
+    def _on_path_auth(self, msg: String) -> None:
         try:
-            problem = self._path_origin.problem()
-            if problem:
-                raise ValueError(f"not from the planner: {problem}")
+            assert self._pairing is not None
+            self._follow(self._pairing.offer_auth(string_to_record(msg, PathAuth)))
+            if self._pairing.problem:
+                raise RecordError(self._pairing.problem)
+        except RecordError as exc:
+            self.get_logger().error(printable(f"timed path refused: {exc} ({self.keys.refused} refused so far)",
+                                              300), throttle_duration_sec=1.0)
+
+    def _follow(self, msg: Path | None) -> None:
+        if msg is None:
+            return
+        try:
             if len(msg.poses) > MAX_PATH_POSES:
                 raise ValueError(f"timed path: {len(msg.poses)} poses (at most {MAX_PATH_POSES})")
             path, t0 = msg_to_timed_path(msg, self.robot_id, self.agent.model.kind.radius)
@@ -132,8 +171,12 @@ class AgentNode(Node):
     def _on_event(self, msg: String) -> None:
         try:
             event = string_to_record(msg, TaskEvent)
-            problem = self._event_origin.problem()
-            if problem:
+            if self.keys.checks:
+                problem = self.keys.problem(event, self._events_topic)
+                if problem:
+                    raise RecordError(f"task event {event.task_id} {event.event}: task_event.auth: {problem} "
+                                      f"({self.keys.refused} refused so far)")
+            elif problem := self._event_origin.problem():
                 raise RecordError(f"task event {event.task_id} {event.event}: not from the planner: {problem}")
             self.agent.on_event(event, sender=self.planner)
         except RecordError as exc:

@@ -31,6 +31,7 @@ from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.signing import Keys
 from fleet_planner.validation import printable
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
@@ -42,7 +43,7 @@ from msg_schemas.convert import (
     string_to_record,
     timed_path_to_msg,
 )
-from msg_schemas.records import RecordError, RobotStatus, TaskEvent
+from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent
 
 #: parameters that shape planned legs and cannot change while the node runs
 _FIXED = ("speed_factor", "safety_margin")
@@ -94,6 +95,12 @@ class PlannerNode(Node):
         fleet_file = self.declare_parameter("fleet_file", "", ParameterDescriptor(
             description="fleet YAML whose robot ids are the roster: statuses of other ids are ignored (one "
                         "warning each); empty: any robot may join", read_only=True)).value
+        self.keys = Keys(self.declare_parameter("auth_key_file", "", ParameterDescriptor(
+            description="key file (fleet_planner/auth.py): sign task events and timed paths with its first key "
+                        "(empty: unsigned)", read_only=True)).value,
+                         self.declare_parameter("auth_trust_file", "", ParameterDescriptor(
+            description="key file of the clients: with it, only tasks signed by one of its keys are taken "
+                        "(empty: any task)", read_only=True)).value)
         defaults = DispatchParams()
         values = {}
         for f in fields(DispatchParams):
@@ -118,9 +125,9 @@ class PlannerNode(Node):
         self._schedule = self.create_publisher(String, topics.SCHEDULE, topics.SCHEDULE_QOS)
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
-        self._paths: dict[str, Publisher] = {}
+        self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
-        create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        self._tasks = create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._timer = self.create_timer(period, self._on_timer)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
@@ -136,7 +143,7 @@ class PlannerNode(Node):
     def _on_task(self, msg: String) -> None:
         now = self._now()
         try:
-            events = self.fleet.submit(msg.data, now)
+            events = self._signed_task(msg, now) if self.keys.checks else self.fleet.submit(msg.data, now)
         except Exception as exc:  # a bug must not take the fleet down: answer, log, carry on
             self.get_logger().error(f"task {msg.data[:200]!r}: {printable(repr(exc), 300)}")
             events = [TaskEvent(task_id="?", event="rejected", stamp=now,
@@ -145,6 +152,18 @@ class PlannerNode(Node):
             if ev.event == "rejected":
                 self.get_logger().warning(f"task {ev.task_id} rejected: {ev.reason}", throttle_duration_sec=1.0)
         self._publish_events(events)
+
+    def _signed_task(self, msg: String, now: float) -> list[TaskEvent]:
+        """A task, taken only with a good signature of a client key (rejected and counted otherwise)."""
+        try:
+            task = string_to_record(msg, Task)
+        except RecordError:
+            return self.fleet.submit(msg.data, now)  # the rejection names the field
+        problem = self.keys.problem(task, self._tasks.topic_name)
+        if problem:
+            return [TaskEvent(task_id=task.id, event="rejected", stamp=now,
+                              reason=f"task.auth: {problem} ({self.keys.refused} refused so far)")]
+        return self.fleet.submit(replace(task, auth=None), now)
 
     def _on_status(self, msg: String) -> None:
         try:
@@ -187,7 +206,11 @@ class PlannerNode(Node):
         for leg in d.legs:
             try:
                 msg = timed_path_to_msg(leg.relative(), ns_to_stamp(leg.path_id), self.frame_id)
-                self._path_publisher(leg.robot_id).publish(msg)
+                path_pub, auth_pub = self._path_publisher(leg.robot_id)
+                if auth_pub is not None:  # the signature first: the agent holds the path until it has both
+                    auth = self.keys.path_auth(msg, leg.robot_id, auth_pub.topic_name)
+                    auth_pub.publish(record_to_string(auth))
+                path_pub.publish(msg)
             except ValueError as exc:
                 log.error(f"robot {leg.robot_id}: timed path not sent: {exc}")
         self._publish_events(d.events)
@@ -197,12 +220,15 @@ class PlannerNode(Node):
 
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:
-            self._events.publish(record_to_string(ev))
+            self._events.publish(record_to_string(self.keys.sign(ev, self._events.topic_name)))
 
-    def _path_publisher(self, robot_id: str) -> Publisher:
+    def _path_publisher(self, robot_id: str) -> tuple[Publisher, Publisher | None]:
+        """The publishers of a robot's timed paths and (with a signing key) of their signatures."""
         if robot_id not in self._paths:
-            self._paths[robot_id] = self.create_publisher(Path, topics.timed_path_topic(robot_id),
-                                                          topics.TIMED_PATH_QOS)
+            auth = None if self.keys.signer is None else self.create_publisher(
+                String, topics.timed_path_auth_topic(robot_id), topics.TIMED_PATH_AUTH_QOS)
+            self._paths[robot_id] = (self.create_publisher(Path, topics.timed_path_topic(robot_id),
+                                                           topics.TIMED_PATH_QOS), auth)
         return self._paths[robot_id]
 
 
