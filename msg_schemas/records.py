@@ -32,7 +32,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, fields, replace
 from typing import Any, ClassVar
 
 from fleet_planner.model import CAPABILITIES, ROBOT_KINDS, STATUS_MODES, Behavior
@@ -241,6 +241,12 @@ def _plain(value: Any) -> Any:
     return value
 
 
+#: ``auth``: a shared-key signature of the record (fleet_planner/auth.py says how it is made and
+#: checked): the key's id, the signer's counter and the HMAC-SHA256 in hex
+AUTH: dict[str, Check] = {"key": nonempty, "ctr": integer(lo=0),
+                          "mac": _V.string(min_len=64, max_len=64, pattern=re.compile(r"[0-9a-f]+"))}
+
+
 # -- the records -------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Task(Record):
@@ -256,6 +262,7 @@ class Task(Record):
     payload_kg: float = spec(number(lo=0.0), default=0.0)
     priority: int = spec(integer(), default=0)
     created: float | None = spec(optional(number()), default=None)
+    auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with keys)
 
 
 @dataclass(frozen=True)
@@ -270,6 +277,7 @@ class TaskEvent(Record):
     stamp: float = spec(number())
     robot_id: str | None = spec(optional(ros_id), default=None)
     reason: str | None = spec(optional(text), default=None)
+    auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with keys)
 
     def _check_together(self) -> None:
         if self.event in EVENTS_NEEDING_REASON and self.reason is None:
@@ -377,10 +385,33 @@ class WaitMessageRecord(Record):
             raise RecordError(f"wait_message.receiver: a robot does not wait for itself ({self.sender!r})")
 
 
-RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord)
+@dataclass(frozen=True)
+class PathAuth(Record):
+    """The signature of a timed path (``/robots/<id>/timed_path_auth``, beside the path, which as a
+    ``nav_msgs/Path`` has no room for one): which path (its header stamp in ns), its SHA-256
+    digest (fleet_planner/ros/signing.py) and the signature of this record."""
 
-__all__ = ["BEHAVIORS", "BEHAVIOR_STATE", "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH",
+    SCHEMA: ClassVar[str] = "fleet/path_auth@1"
+    NAME: ClassVar[str] = "path_auth"
+
+    robot_id: str = spec(ros_id)
+    path_id: int = spec(integer())
+    digest: str = spec(_V.string(min_len=64, max_len=64, pattern=re.compile(r"[0-9a-f]+")))
+    auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)
+
+
+def unsigned_json(rec: Record) -> str:
+    """What a record's signature covers: its JSON without ``auth``."""
+    if getattr(rec, "auth", None) is None:
+        return rec.to_json()
+    return replace(rec, auth=None).to_json()  # type: ignore[call-arg]  # (the signed records have auth)
+
+
+RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth)
+
+__all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH",
            "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS",
-           "RECORDS", "TASK_EVENTS", "Check", "Record", "RecordError", "RobotStatus", "Schedule", "Task", "TaskEvent",
-           "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json", "nonempty",
-           "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text"]
+           "RECORDS", "TASK_EVENTS", "Check", "PathAuth", "Record", "RecordError", "RobotStatus", "Schedule", "Task",
+           "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json",
+           "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text",
+           "unsigned_json"]

@@ -42,6 +42,11 @@ def timed_path_topic(robot_id: str) -> str:
     return f"/robots/{robot_id}/timed_path"
 
 
+def timed_path_auth_topic(robot_id: str) -> str:
+    """``/robots/<robot_id>/timed_path_auth``: the signatures of its timed paths (where keys are configured)."""
+    return timed_path_topic(robot_id) + "_auth"
+
+
 def _qos(depth: int, reliable: bool = True, latched: bool = False) -> QoSProfile:
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=depth,
@@ -54,6 +59,7 @@ TASK_EVENTS_QOS = _qos(1000)
 ROBOT_STATUS_QOS = _qos(100, reliable=False)
 LATCHED_QOS = _qos(1, latched=True)
 TIMED_PATH_QOS = LATCHED_QOS
+TIMED_PATH_AUTH_QOS = LATCHED_QOS
 SCHEDULE_QOS = LATCHED_QOS
 MARKERS_QOS = LATCHED_QOS
 MAP_QOS = LATCHED_QOS

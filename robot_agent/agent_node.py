@@ -25,14 +25,26 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import String
 
 from fleet_planner.fleet import COORDINATION, RobotAgent
+from fleet_planner.fleet.intake import MAX_PATH_OFFSET_S, MAX_PATH_POSES, MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.origin import OriginCheck
+from fleet_planner.ros.signing import Keys, PathPairing
+from fleet_planner.validation import printable
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
-from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent, WaitMessageRecord, robot_id_problem
+from msg_schemas.records import (
+    PathAuth,
+    RecordError,
+    RobotStatus,
+    Task,
+    TaskEvent,
+    WaitMessageRecord,
+    robot_id_problem,
+)
 
 
 def _range(description: str, lo: float, hi: float) -> ParameterDescriptor:
@@ -67,6 +79,12 @@ class AgentNode(Node):
             "warehouse YAML (empty: the shipped config/warehouse.yaml)")).value
         kinds_file = self.declare_parameter("kinds_file", "", _fixed(
             "robot kinds YAML (empty: the shipped config/robot_kinds.yaml)")).value
+        planner = self.declare_parameter("planner", "planner", _fixed(
+            "the planner's node name (relative to this node's namespace, or absolute): task events and timed "
+            "paths are taken only while no other node publishes them")).value
+        trust_file = self.declare_parameter("auth_trust_file", "", _fixed(
+            "key file of the planner (fleet_planner/auth.py): with it, only task events and timed paths signed "
+            "by one of its keys are taken, from any node (empty: only from the planner node, unsigned)")).value
 
         robot_id = robot_id or self.get_namespace().rstrip("/").rsplit("/", 1)[-1]
         problem = robot_id_problem(robot_id)
@@ -80,15 +98,24 @@ class AgentNode(Node):
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         chargers = [s.pose for s in warehouse.stations_of("charger")]
         model = RobotModel(robot_id, kinds[kind], x, y, yaw, battery, chargers)
-        self.agent = RobotAgent(model, warehouse, mode)
+        self.planner = OriginCheck.qualify(self, planner)
+        self.agent = RobotAgent(model, warehouse, mode, planner=self.planner)
         self.robot_id = robot_id
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
         # every waiting message at each wake-up: the whole fleet's statuses keep coming (see drain.py)
         subscribe = partial(create_draining_subscription, self)
-        subscribe(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
+        paths = subscribe(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
-        subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
+        self.keys = Keys(trust_file=trust_file)
+        self._events_topic = events.topic_name
+        self._pairing: PathPairing | None = None
+        if self.keys.checks:  # signed paths: their signatures come beside them
+            auth = subscribe(String, topics.timed_path_auth_topic(robot_id), self._on_path_auth,
+                             topics.TIMED_PATH_AUTH_QOS)
+            self._pairing = PathPairing(self.keys, robot_id, auth.topic_name)
         subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._waits: Publisher | None = None
         if self.agent.strategy.exchanges_wait_messages:
@@ -100,12 +127,40 @@ class AgentNode(Node):
 
     # -- callbacks: none of them lets an exception out ----------------------------------------------
     def _on_path(self, msg: Path) -> None:
+        if self._pairing is not None:  # keys: followed once its signature checks out
+            self._follow(self._pairing.offer_path(msg))
+            return
+        problem = self._path_origin.problem()
+        if problem:
+            self.get_logger().error(printable(f"timed path ignored: not from the planner: {problem}", 300),
+                                    throttle_duration_sec=1.0)
+            return
+        self._follow(msg)
+
+    def _on_path_auth(self, msg: String) -> None:
         try:
+            assert self._pairing is not None
+            self._follow(self._pairing.offer_auth(string_to_record(msg, PathAuth)))
+            if self._pairing.problem:
+                raise RecordError(self._pairing.problem)
+        except RecordError as exc:
+            self.get_logger().error(printable(f"timed path refused: {exc} ({self.keys.refused} refused so far)",
+                                              300), throttle_duration_sec=1.0)
+
+    def _follow(self, msg: Path | None) -> None:
+        if msg is None:
+            return
+        try:
+            if len(msg.poses) > MAX_PATH_POSES:
+                raise ValueError(f"timed path: {len(msg.poses)} poses (at most {MAX_PATH_POSES})")
             path, t0 = msg_to_timed_path(msg, self.robot_id, self.agent.model.kind.radius)
             t0_ns = stamp_to_ns(t0)
+            problem = stamp_problem("timed path", t0_ns / 1e9, self._now(), MAX_PATH_OFFSET_S, MAX_PATH_OFFSET_S)
+            if problem:
+                raise ValueError(problem)
             self.agent.on_path(path, t0_ns / 1e9, t0_ns)
         except (RecordError, ValueError) as exc:
-            self.get_logger().error(f"timed path ignored: {exc}")
+            self.get_logger().error(printable(f"timed path ignored: {exc}", 300), throttle_duration_sec=1.0)
 
     def _on_task(self, msg: String) -> None:
         try:
@@ -115,14 +170,26 @@ class AgentNode(Node):
 
     def _on_event(self, msg: String) -> None:
         try:
-            self.agent.on_event(string_to_record(msg, TaskEvent))
+            event = string_to_record(msg, TaskEvent)
+            if self.keys.checks:
+                problem = self.keys.problem(event, self._events_topic)
+                if problem:
+                    raise RecordError(f"task event {event.task_id} {event.event}: task_event.auth: {problem} "
+                                      f"({self.keys.refused} refused so far)")
+            elif problem := self._event_origin.problem():
+                raise RecordError(f"task event {event.task_id} {event.event}: not from the planner: {problem}")
+            self.agent.on_event(event, sender=self.planner)
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.agent.on_status(string_to_record(msg, RobotStatus))
-        except RecordError as exc:
+            status = string_to_record(msg, RobotStatus)
+            problem = stamp_problem(f"robot {status.id!r}", status.stamp, self._now(), float("inf"), MAX_STATUS_AGE_S)
+            if problem:  # (ahead: RobotAgent.on_status refuses those)
+                raise ValueError(problem)
+            self.agent.on_status(status)
+        except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_wait_message(self, msg: String) -> None:
@@ -130,6 +197,9 @@ class AgentNode(Node):
             self.agent.on_wait_message(string_to_record(msg, WaitMessageRecord))
         except RecordError as exc:
             self.get_logger().warning(f"wait message ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds / 1e9
 
     def _on_timer(self) -> None:
         try:

@@ -58,6 +58,9 @@ from .jobstore import DuplicateJob, JobStore
 from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .state import FleetRobot, Job, Target, can_do
 
+#: unknown robot ids (off the roster) warned about one by one; beyond that, silently ignored
+MAX_STRANGERS = 1000
+
 
 class FleetManager:
     """Keeps the fleet's state and turns tasks and statuses into legs and task events.
@@ -223,11 +226,13 @@ class FleetManager:
             raise ValueError(f"robot {status.id!r}: status stamped {status.stamp - now:.3g} s ahead of the "
                              f"planner's clock (at most {self.max_clock_skew_s:g} s)")
         if self.roster is not None and status.id not in self.roster:
-            first = status.id not in self._strangers
-            self._strangers.add(status.id)
-            if first:  # one warning per unknown id; its statuses never make it part of the fleet
-                raise ValueError(f"robot {status.id!r}: not on the fleet's roster; its statuses are ignored")
-            return
+            if status.id in self._strangers or len(self._strangers) > MAX_STRANGERS:
+                return  # warned already (or about too many): its statuses never make it part of the fleet
+            self._strangers.add(status.id)  # one warning per unknown id, for at most MAX_STRANGERS ids
+            if len(self._strangers) > MAX_STRANGERS:
+                raise ValueError(f"more than {MAX_STRANGERS} robot ids not on the fleet's roster; "
+                                 "further ones are ignored without a word")
+            raise ValueError(f"robot {status.id!r}: not on the fleet's roster; its statuses are ignored")
         kind = self.kinds.get(status.kind)
         if kind is None:
             raise ValueError(f"robot {status.id!r}: kind {status.kind!r} is not one of the known kinds "

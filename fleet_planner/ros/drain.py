@@ -17,6 +17,10 @@ statuses), at most :data:`DRAIN_LIMIT`. A flood must not starve the node's other
 planner's step among them: the rest comes on the next cycle. It takes the messages the way
 rclpy's own :func:`rclpy.wait_for_message` does (``Subscription.handle.take_message``), under any
 executor, without overriding executor internals. See docs/ARCHITECTURE.md, "Topics and QoS".
+
+Every callback is total by construction: an exception it lets out (a bug; the nodes' callbacks
+catch what they expect) is logged in one bounded, throttled line and the next message is handled;
+it never reaches the executor, which would stop the node.
 """
 from __future__ import annotations
 
@@ -27,6 +31,8 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.subscription import Subscription
+
+from fleet_planner.validation import printable
 
 #: at most this many messages per wake-up of one subscription
 DRAIN_LIMIT = 1000
@@ -59,16 +65,24 @@ def create_draining_subscription(node: Node, msg_type: Any, topic: str, callback
     if limit < 1:
         raise ValueError(f"limit must be >= 1 (got {limit})")
     sub: Subscription | None = None
+    log = node.get_logger()
+
+    def handle(msg: Any) -> None:
+        try:
+            callback(msg)
+        except Exception as exc:  # noqa: BLE001 - a message must never stop the node
+            log.error(printable(f"{topic}: message dropped, handler failed: {exc!r}", 300),
+                      throttle_duration_sec=5.0)
 
     def on_message(msg: Any) -> None:
-        callback(msg)
+        handle(msg)
         for _ in range(limit - 1):
             if sub is None:
                 return
             more = take_waiting(sub)
             if more is None:
                 return
-            callback(more)
+            handle(more)
 
     sub = node.create_subscription(msg_type, topic, on_message, qos, **kwargs)
     return sub

@@ -24,11 +24,15 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
+from fleet_planner.fleet.fleet_file import load_fleet
+from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.signing import Keys
+from fleet_planner.validation import printable
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import (
@@ -39,7 +43,7 @@ from msg_schemas.convert import (
     string_to_record,
     timed_path_to_msg,
 )
-from msg_schemas.records import RecordError, RobotStatus, TaskEvent
+from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent
 
 #: parameters that shape planned legs and cannot change while the node runs
 _FIXED = ("speed_factor", "safety_margin")
@@ -86,6 +90,17 @@ class PlannerNode(Node):
                         "only); restart with the same file and open jobs carry on", read_only=True)).value
         skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
             "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
+        self._max_age = self.declare_parameter("max_status_age_s", MAX_STATUS_AGE_S, _range(
+            "s a robot status may be stamped behind the planner's clock before it is refused", 1.0, 3600.0)).value
+        fleet_file = self.declare_parameter("fleet_file", "", ParameterDescriptor(
+            description="fleet YAML whose robot ids are the roster: statuses of other ids are ignored (one "
+                        "warning each); empty: any robot may join", read_only=True)).value
+        self.keys = Keys(self.declare_parameter("auth_key_file", "", ParameterDescriptor(
+            description="key file (fleet_planner/auth.py): sign task events and timed paths with its first key "
+                        "(empty: unsigned)", read_only=True)).value,
+                         self.declare_parameter("auth_trust_file", "", ParameterDescriptor(
+            description="key file of the clients: with it, only tasks signed by one of its keys are taken "
+                        "(empty: any task)", read_only=True)).value)
         defaults = DispatchParams()
         values = {}
         for f in fields(DispatchParams):
@@ -97,20 +112,22 @@ class PlannerNode(Node):
 
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         kinds = kinds if kinds is not None else load_kinds(kinds_file or None)
+        roster = [m.id for m in load_fleet(fleet_file, kinds)] if fleet_file else None
         if coordination not in COORDINATION:
             raise ValueError(f"parameter coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
                                   [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
-                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew)
+                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew,
+                                  roster=roster)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
         self._schedule = self.create_publisher(String, topics.SCHEDULE, topics.SCHEDULE_QOS)
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
-        self._paths: dict[str, Publisher] = {}
+        self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
-        create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
+        self._tasks = create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._timer = self.create_timer(period, self._on_timer)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
@@ -126,18 +143,35 @@ class PlannerNode(Node):
     def _on_task(self, msg: String) -> None:
         now = self._now()
         try:
-            events = self.fleet.submit(msg.data, now)
+            events = self._signed_task(msg, now) if self.keys.checks else self.fleet.submit(msg.data, now)
         except Exception as exc:  # a bug must not take the fleet down: answer, log, carry on
-            self.get_logger().error(f"task {msg.data[:200]!r}: {exc!r}")
-            events = [TaskEvent(task_id="?", event="rejected", stamp=now, reason=f"internal error: {exc}")]
+            self.get_logger().error(f"task {msg.data[:200]!r}: {printable(repr(exc), 300)}")
+            events = [TaskEvent(task_id="?", event="rejected", stamp=now,
+                                reason=printable(f"internal error: {exc}", 300))]
         for ev in events:
             if ev.event == "rejected":
-                self.get_logger().warning(f"task {ev.task_id} rejected: {ev.reason}")
+                self.get_logger().warning(f"task {ev.task_id} rejected: {ev.reason}", throttle_duration_sec=1.0)
         self._publish_events(events)
+
+    def _signed_task(self, msg: String, now: float) -> list[TaskEvent]:
+        """A task, taken only with a good signature of a client key (rejected and counted otherwise)."""
+        try:
+            task = string_to_record(msg, Task)
+        except RecordError:
+            return self.fleet.submit(msg.data, now)  # the rejection names the field
+        problem = self.keys.problem(task, self._tasks.topic_name)
+        if problem:
+            return [TaskEvent(task_id=task.id, event="rejected", stamp=now,
+                              reason=f"task.auth: {problem} ({self.keys.refused} refused so far)")]
+        return self.fleet.submit(replace(task, auth=None), now)
 
     def _on_status(self, msg: String) -> None:
         try:
-            self.fleet.on_status(string_to_record(msg, RobotStatus), self._now())
+            status, now = string_to_record(msg, RobotStatus), self._now()
+            problem = stamp_problem(f"robot {status.id!r}", status.stamp, now, float("inf"), self._max_age)
+            if problem:  # (ahead: the fleet manager's max_clock_skew_s)
+                raise ValueError(problem)
+            self.fleet.on_status(status, now)
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
         except Exception as exc:
@@ -172,7 +206,11 @@ class PlannerNode(Node):
         for leg in d.legs:
             try:
                 msg = timed_path_to_msg(leg.relative(), ns_to_stamp(leg.path_id), self.frame_id)
-                self._path_publisher(leg.robot_id).publish(msg)
+                path_pub, auth_pub = self._path_publisher(leg.robot_id)
+                if auth_pub is not None:  # the signature first: the agent holds the path until it has both
+                    auth = self.keys.path_auth(msg, leg.robot_id, auth_pub.topic_name)
+                    auth_pub.publish(record_to_string(auth))
+                path_pub.publish(msg)
             except ValueError as exc:
                 log.error(f"robot {leg.robot_id}: timed path not sent: {exc}")
         self._publish_events(d.events)
@@ -182,12 +220,15 @@ class PlannerNode(Node):
 
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:
-            self._events.publish(record_to_string(ev))
+            self._events.publish(record_to_string(self.keys.sign(ev, self._events.topic_name)))
 
-    def _path_publisher(self, robot_id: str) -> Publisher:
+    def _path_publisher(self, robot_id: str) -> tuple[Publisher, Publisher | None]:
+        """The publishers of a robot's timed paths and (with a signing key) of their signatures."""
         if robot_id not in self._paths:
-            self._paths[robot_id] = self.create_publisher(Path, topics.timed_path_topic(robot_id),
-                                                          topics.TIMED_PATH_QOS)
+            auth = None if self.keys.signer is None else self.create_publisher(
+                String, topics.timed_path_auth_topic(robot_id), topics.TIMED_PATH_AUTH_QOS)
+            self._paths[robot_id] = (self.create_publisher(Path, topics.timed_path_topic(robot_id),
+                                                           topics.TIMED_PATH_QOS), auth)
         return self._paths[robot_id]
 
 

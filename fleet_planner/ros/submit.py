@@ -3,7 +3,11 @@
     fleet-submit --pick chute_2 --place B12-04 --needs forklift [--id J1] [--timeout 60]
 
 Prints each task event of the job as it comes (``J1 assigned to r3``) and exits 0 when it is done,
-1 when it is rejected, fails or the timeout (wall seconds) runs out first.
+1 when it is rejected, fails or the timeout (wall seconds) runs out first. Events count only from
+the planner node (``--planner``, default ``planner``): while another node publishes task events,
+they are refused (``fleet_planner/ros/origin.py``), so a forged ``done`` never reads as success.
+With keys (``fleet_planner/auth.py``): ``--key FILE`` signs the task with the file's first key,
+``--trust FILE`` takes only events signed by one of that file's keys (then from any node).
 """
 from __future__ import annotations
 
@@ -22,6 +26,8 @@ from std_msgs.msg import String
 
 from fleet_planner.model import CAPABILITIES
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.origin import OriginCheck
+from fleet_planner.ros.signing import Keys
 from msg_schemas import topics
 from msg_schemas.convert import string_to_record
 from msg_schemas.records import RecordError, Task, TaskEvent
@@ -42,26 +48,40 @@ def planner_matched(node: Node, tasks_pub: Publisher, events_sub: Subscription) 
 class Submitter(Node):
     """Publishes one task once the planner can hear it, and collects the task's events."""
 
-    def __init__(self, task: Task, name: str = "fleet_submit", **kwargs: Any):
+    def __init__(self, task: Task, name: str = "fleet_submit", *, planner: str = "planner", keys: Keys | None = None,
+                 **kwargs: Any):
         super().__init__(name, **kwargs)
         self.task = task
+        self.keys = keys or Keys()
         self.events: list[TaskEvent] = []
         self._pub = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
         self._sub = self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        self.origin = OriginCheck(self, self._sub, planner)
 
     def planner_ready(self) -> bool:
         return planner_matched(self, self._pub, self._sub)
 
     def send(self) -> None:
-        self._pub.publish(String(data=self.task.to_json()))
+        self._pub.publish(String(data=self.keys.sign(self.task, self._pub.topic_name).to_json()))
 
     def _on_event(self, msg: String) -> None:
         try:
             ev = string_to_record(msg, TaskEvent)
         except RecordError:
             return
-        if ev.task_id == self.task.id:
-            self.events.append(ev)
+        if ev.task_id != self.task.id:
+            return
+        if self.keys.checks:
+            problem = self.keys.problem(ev, self._sub.topic_name)
+            if problem:
+                self.get_logger().warning(f"task event {ev.event} ignored: task_event.auth: {problem}",
+                                          throttle_duration_sec=2.0)
+                return
+        elif problem := self.origin.problem():
+            self.get_logger().warning(f"task event {ev.event} ignored: not from the planner: {problem}",
+                                      throttle_duration_sec=2.0)
+            return
+        self.events.append(ev)
 
 
 def describe(ev: TaskEvent) -> str:
@@ -83,6 +103,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--priority", type=int, default=0, help="higher goes first (default 0)")
     p.add_argument("--id", help="task id (default: a fresh one)")
     p.add_argument("--timeout", type=float, default=60.0, help="wall seconds to wait for the end (default 60)")
+    p.add_argument("--key", default="", metavar="FILE", help="key file: sign the task with its first key")
+    p.add_argument("--trust", default="", metavar="FILE",
+                   help="key file of the planner: take only events signed by one of its keys")
+    p.add_argument("--planner", default="planner",
+                   help="the planner's node name; events from other nodes are refused (default planner)")
     return p
 
 
@@ -120,11 +145,12 @@ def main(args: list[str] | None = None) -> None:
     try:
         task = Task(id=opts.id or f"job_{uuid.uuid4().hex[:8]}", pick=opts.pick, place=opts.place,
                     needs=tuple(opts.needs), payload_kg=opts.payload, priority=opts.priority)
-    except RecordError as exc:
+        keys = Keys(opts.key, opts.trust)
+    except (RecordError, ValueError) as exc:
         _parser().error(str(exc))
     # interrupted: 1 (not done); a bad --ros-args shows its traceback, as before
-    run_node(lambda: Submitter(task), argv, prog="fleet-submit", spin=lambda node: follow(node, opts.timeout),
-             errors=(), interrupted=1)
+    run_node(lambda: Submitter(task, planner=opts.planner, keys=keys), argv, prog="fleet-submit",
+             spin=lambda node: follow(node, opts.timeout), errors=(), interrupted=1)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,93 @@
+"""Authenticated commands on the live fleet (issue 9, deliverable 5): with keys configured, a task
+signed by a client key is done; unsigned and wrongly signed tasks are rejected with the reason and
+counted; forged events and timed paths (unsigned, or signed with a key the robots do not trust) are
+refused and counted by the agents, even from a node that calls itself the planner."""
+import os
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from std_msgs.msg import String
+from test_ros_system import KINDS, MEMBERS, PARKING, RATE, WH, ended, no_contact, wait_for
+
+from fleet_planner.auth import new_key_line
+from fleet_planner.ros.demo.bringup import Fleet, agent_params
+from fleet_planner.ros.demo.monitor import FleetMonitor, spin_until
+from fleet_planner.ros.planner_node import PlannerNode
+from fleet_planner.ros.signing import Keys
+from fleet_planner.ros.sim_clock import SimClock
+from msg_schemas import topics
+from msg_schemas.records import Task, TaskEvent
+from robot_agent.agent_node import AgentNode
+
+
+def key(tmp_path, name):
+    path = tmp_path / name
+    path.write_text(new_key_line(name.split(".")[0]) + "\n")
+    os.chmod(path, 0o600)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def keyed(ros_context, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("keys")
+    files = {name: key(tmp, f"{name}.key") for name in ("planner", "client", "forger")}
+    sim = [Parameter("use_sim_time", value=True)]
+    clock = SimClock(context=ros_context, parameter_overrides=[Parameter("rate", value=RATE)])
+    planner = PlannerNode(context=ros_context, warehouse=WH, kinds=KINDS, parameter_overrides=sim + [
+        Parameter("parking", value=PARKING), Parameter("auth_key_file", value=files["planner"]),
+        Parameter("auth_trust_file", value=files["client"])])
+    agents = {m.id: AgentNode(f"agent_{m.id}", context=ros_context, warehouse=WH, kinds=KINDS,
+                              parameter_overrides=sim + agent_params(m) + [
+                                  Parameter("auth_trust_file", value=files["planner"])]) for m in MEMBERS[:2]}
+    monitor = FleetMonitor(context=ros_context, parameter_overrides=sim)
+    fleet = Fleet(clock, planner, agents, monitor, SingleThreadedExecutor(context=ros_context))
+    for node in fleet.nodes:
+        fleet.executor.add_node(node)
+    try:
+        assert spin_until(fleet.executor, lambda: monitor.planner_ready() and set(agents) <= set(monitor.status), 60)
+        yield fleet, files
+    finally:
+        fleet.destroy()
+
+
+def test_only_signed_tasks_are_taken_and_only_signed_commands_obeyed(keyed, ros_context):
+    fleet, files = keyed
+    mon, planner = fleet.monitor, fleet.planner
+    client, forger = Keys(sign_file=files["client"]), Keys(sign_file=files["forger"])
+    channel = topics.TASKS
+    mon.submit(Task(id="U1", pick="chute_1", place="B01-01"))                               # unsigned
+    mon.submit(forger.sign(Task(id="U2", pick="chute_1", place="B01-01"), channel))        # untrusted key
+    tampered = client.sign(Task(id="U3", pick="chute_1", place="B01-01"), channel)
+    mon.submit(tampered.to_json().replace('"B01-01"', '"B02-01"'))                          # altered after signing
+    assert wait_for(fleet, lambda: all(ended(fleet, t, "rejected") for t in ("U1", "U2", "U3")))
+    reasons = {t: mon.last_event[t].reason for t in ("U1", "U2", "U3")}
+    assert "task.auth: unsigned" in reasons["U1"] and "does not accept" in reasons["U2"]
+    assert "wrong signature" in reasons["U3"] and planner.keys.refused == 3
+    assert mon.last_event["U1"].auth["key"] == "planner"  # the planner signs what it says
+
+    # a node that calls itself the planner: names are not proof, signatures are
+    impostor = rclpy.create_node("planner", namespace="/", context=ros_context)
+    fleet.executor.add_node(impostor)
+    try:
+        fake = impostor.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
+        good = client.sign(Task(id="K1", pick="chute_2", place="B03-02"), channel)
+        mon.submit(good)
+        assert wait_for(fleet, lambda: any(e.event == "assigned" for e in mon.events_of("K1")))
+        robot = next(e.robot_id for e in mon.events_of("K1") if e.event == "assigned")
+        agent = fleet.agents[robot]
+        refused = agent.keys.refused
+        for ev in (TaskEvent(task_id="K1", event="cancelled", stamp=mon.now(), robot_id=robot),
+                   forger.sign(TaskEvent(task_id="K1", event="cancelled", stamp=mon.now(), robot_id=robot),
+                               topics.TASK_EVENTS)):
+            fake.publish(String(data=ev.to_json()))
+        assert wait_for(fleet, lambda: agent.keys.refused >= refused + 2)
+        assert agent.agent.job == "K1"
+        assert wait_for(fleet, lambda: ended(fleet, "K1") and mon.last_event["K1"].auth is not None)
+    finally:
+        fleet.executor.remove_node(impostor)
+        impostor.destroy_node()
+    said = [e.event for e in mon.events_of("K1") if e.auth and e.auth["key"] == "planner"]  # (the monitor has no keys)
+    assert said == ["accepted", "assigned", "picked", "placed", "done"]
+    no_contact(fleet)
