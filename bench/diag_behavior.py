@@ -37,9 +37,16 @@ def main() -> None:
     p.add_argument("--stall", type=float, default=300.0)
     p.add_argument("--cap", type=float, default=4 * 3600.0)
     p.add_argument("--wall-cap", type=float, default=300.0)
+    p.add_argument("--lanes", choices=("none", "armo"), default="none",
+                   help="armo: the robots plan along ARMO's road map (the 'armo' method)")
     a = p.parse_args()
     args = argparse.Namespace(per_robot=a.per_robot, dock=5.0, seed=0, stations=8, maps_dir=a.maps_dir)
     problem = make_problem(a.map, a.n, args)
+    if a.lanes == "armo":
+        from fleet_planner.delivery import armo_problem
+
+        problem, info = armo_problem(problem)
+        print("ARMO:", info)
     limits = RunLimits(cap_s=a.cap, stall_s=a.stall, no_progress_s=120.0, retry_s=2.0, wall_cap_s=a.wall_cap)
     run = _BehaviorRun(problem, 0.1, limits, False, None)
     res = run.run()

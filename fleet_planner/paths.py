@@ -138,6 +138,11 @@ class PathFinder:
             if d[0] and d[1]:  # no corner cutting
                 ok &= shifted(d[0], 0) & shifted(0, d[1])
             moves[1:-1, 1:-1] |= ok.astype(np.uint8) * np.uint8(_BIT[d])
+        # a road map of directed lanes carried by the map (fleet_planner.roadmap.with_lanes): only
+        # its moves remain, and paths are not straightened (that would leave the lanes)
+        self._lanes = getattr(grid, "lanes", None)
+        if self._lanes is not None:
+            moves[1:-1, 1:-1] &= self._lanes.move_mask((h, w))
         self._free_p = free_p
         #: padded wall cells (the outside of the map is a wall): a point inside one is not free
         self._solid = np.pad(grid.blocked, 1, constant_values=True)
@@ -176,6 +181,7 @@ class PathFinder:
         inspect or plot what the smoothing started from.
         """
         a, b = _point("start", start), _point("goal", goal)
+        smooth = smooth and self._lanes is None
         discs = _discs(avoid)
         if len(discs):
             keep = ((np.hypot(*(discs[:, :2] - a).T) > discs[:, 2])

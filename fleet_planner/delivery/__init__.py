@@ -48,8 +48,30 @@ from .layout import ROBOT_RADIUS, choose_spots, driving_distances, spread_statio
 from .problem import DOCK_S, TOP_SPEED, Delivery, DeliveryProblem, delivery_problem, warehouse_problem
 from .result import DeliveryResult, RunLimits, SimProgress
 
-#: every registered planner (central: ``plan_incremental`` per leg) and the behaviour fleet
-METHODS = (*planner_names(), "behavior")
+#: every registered planner (central: ``plan_incremental`` per leg), the behaviour fleet, and ARMO
+#: (the behaviour fleet driving along ARMO's road map of directed lanes, :func:`armo_problem`)
+METHODS = (*planner_names(), "behavior", "armo")
+
+
+def armo_problem(problem: DeliveryProblem, **options) -> tuple[DeliveryProblem, object]:
+    """The problem on ARMO's road map for its demand (:func:`fleet_planner.roadmap.armo_roadmap`):
+    every method run on it plans along the lanes. Returns (problem, the program's info)."""
+    from dataclasses import replace
+
+    from ..roadmap import armo_roadmap, demand_of, with_lanes
+
+    lanes, info = armo_roadmap(problem.grid, problem.radius, problem.stations,
+                               demand_of(problem.deliveries, list(problem.stations)), **options)
+    return replace(problem, grid=with_lanes(problem.grid, lanes)), info
+
+
+def lanes_problem(problem: DeliveryProblem, lanes) -> DeliveryProblem:
+    """The problem on a given road map (:class:`fleet_planner.roadmap.RoadMap`, e.g. a lanes file)."""
+    from dataclasses import replace
+
+    from ..roadmap import with_lanes
+
+    return replace(problem, grid=with_lanes(problem.grid, lanes))
 
 
 def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: float = 4 * 3600.0,
@@ -77,11 +99,19 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
         raise ValueError(f"wall_cap_s: must be > 0 (got {wall_cap_s!r})")
     limits = RunLimits(cap_s=cap_s, stall_s=stall_s, no_progress_s=no_progress_s, retry_s=retry_s,
                        wall_cap_s=wall_cap_s)
+    if method == "armo":   # ARMO: robots plan along the road map, the behaviours keep them apart
+        from ..roadmap import lanes_of
+
+        if lanes_of(problem.grid) is None:
+            problem = armo_problem(problem)[0]
+        res = simulate_behavior(problem, limits, dt=dt, record=record, progress=progress)
+        res.method = "armo"
+        return res
     if method == "behavior":
         return simulate_behavior(problem, limits, dt=dt, record=record, progress=progress)
     return simulate_central(problem, method, limits, planner_options, progress)
 
 
-__all__ = ["DOCK_S", "METHODS", "ROBOT_RADIUS", "TOP_SPEED", "Delivery", "DeliveryProblem", "DeliveryResult",
+__all__ = ["DOCK_S", "METHODS", "armo_problem", "lanes_problem", "ROBOT_RADIUS", "TOP_SPEED", "Delivery", "DeliveryProblem", "DeliveryResult",
            "RunLimits", "SimProgress", "choose_spots", "delivery_problem", "driving_distances", "simulate",
            "spread_stations", "warehouse_problem"]

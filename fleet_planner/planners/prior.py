@@ -140,7 +140,9 @@ class PriorPlanner(Planner):
 
     def _roadmap(self, grid: GridMap, radius: float) -> _Roadmap:
         """Roadmaps are cached by map content and radius (the delivery benchmark calls us often)."""
-        key = (grid.blocked.shape, grid.resolution, hash(grid.blocked.tobytes()), float(radius))
+        lanes = getattr(grid, "lanes", None)   # a road map of directed lanes (fleet_planner.roadmap)
+        key = (grid.blocked.shape, grid.resolution, hash(grid.blocked.tobytes()), float(radius),
+               None if lanes is None else hash(lanes.allowed.tobytes()))
         rm = self._roadmaps.get(key)
         if rm is None:
             if len(self._roadmaps) > 16:
@@ -179,9 +181,13 @@ def _build_roadmap(grid: GridMap, radius: float) -> _Roadmap:
         return ok
 
     free = clear(shapely.Point(0.5, 0.5))
+    lanes = getattr(grid, "lanes", None)   # only the moves of its road map of directed lanes
+    allowed = None if lanes is None else lanes.move_mask((h, w))
     src, dst, length = [], [], []
-    for dc, dr in _DIRS:
+    for bit, (dc, dr) in enumerate(_DIRS):
         ok = free & clear(shapely.LineString([(0.5, 0.5), (0.5 + dc, 0.5 + dr)]))
+        if allowed is not None:
+            ok &= (allowed & (1 << bit)) > 0
         rows, cols = np.nonzero(ok)
         src.append(rows * w + cols)
         dst.append((rows + dr) * w + cols + dc)
@@ -683,7 +689,9 @@ class _RobotSearch:
         self.start_node = n_cells if s_off > 0 else cs
         self.goal_node = self.start_node if (gx, gy) == (sx, sy) else n_cells + 1 if g_off > 0 else cg
 
-        self.dist, pred = dijkstra(self.rm.graph, indices=cg, return_predecessors=True)  # reachable: checked up front
+        # distances to the goal: along the reversed moves (the same graph unless lanes are one-way)
+        to_goal = self.rm.graph if getattr(grid, "lanes", None) is None else self.rm.graph.T.tocsr()
+        self.dist, pred = dijkstra(to_goal, indices=cg, return_predecessors=True)  # reachable: checked up front
         self.free_path = [cs]
         while self.free_path[-1] != cg:
             self.free_path.append(int(pred[self.free_path[-1]]))

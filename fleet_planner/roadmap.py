@@ -1,0 +1,570 @@
+"""Road maps of directed lanes: which grid moves a robot may make where (one-way aisles, two-way
+elsewhere), computed from the transport demand by ARMO-style linear programming or read from a
+lanes file in ``config/`` (what integrators configure by hand in real warehouses).
+
+A :class:`RoadMap` is a directed graph over the cells of one map: ``allowed[row, col]`` holds the
+bits of the moves out of the cell the road map allows (bit d = ``_pathgraph.DIRS[d]``, the move
+table's bits). It is *orthogonal* (Kleiner, Sun & Meyer-Delius, "ARMO: Adaptive Road Map
+Optimization for Large Robot Teams", IROS 2011, as summarised in section V of paper 002: "ARMO
+generates only orthogonal road map"): lanes run along rows and columns; a diagonal move is allowed
+where both of its L-shaped orthogonal ways are (so a diagonal never cuts a one-way lane the wrong
+way). Moves no lane restricts stay two-way.
+
+How planners use it: :func:`with_lanes` returns a copy of the map carrying the road map
+(``grid.lanes``); :class:`~fleet_planner.paths.PathFinder` on such a map removes the forbidden
+directed moves from its move graph and does not straighten its paths (a straightened path would
+leave the lanes), and PRIOR's roadmap does the same, so md, PRIOR and BBMRCA all plan along it
+without knowing about it.
+
+ARMO (:func:`armo_roadmap`) - ours after the paper's one-paragraph summary ("based on linear
+programming, ARMO computes an optimal road map according to environmental constraints and the
+demand for transportation tasks from stations"): a mixed-integer program (SciPy's HiGHS
+``milp``) over the 4-connected cells the disc fits on. Each maximal straight run of cells (a row
+or column stretch: an aisle lane) is one-way forward, one-way backward or two-way; two-way costs
+``two_way_cost`` per cell (one-way where the demand allows, two-way where it must). Flows, one
+commodity per station with demand out of it (its demand to every other station, from the delivery
+sequence), may use a run's edges only in its allowed directions; two connectivity commodities
+(root to every cell, every cell to root, tiny flows) make the whole free space strongly connected,
+so no lane is a dead end and every station reaches every other in both directions. The objective
+is the demand-weighted driving distance plus the two-way costs. A time limit keeps the best
+solution HiGHS has found (all two-way is always feasible).
+
+Lanes file (YAML; :func:`load_lanes`, :func:`save_lanes`)::
+
+    name: warehouse-armo
+    radius: 0.354                # the disc the lanes were laid out for (cells it fits on)
+    lanes:                       # one-way lanes, straight runs of cells (col, row): from -> to
+      - {from: [2, 11], to: [75, 11]}
+
+A lane whose cells are off the map or not free for the radius (an unknown cell), that is not
+straight, runs against another lane, or leaves a cell with a way in but no way out (a dead end) is
+rejected with a :class:`LanesError` naming the field.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ._pathgraph import DIRS
+from .grid import GridMap
+from .model import Point
+from .validation import ValidationError, Vocabulary, in_file, read_yaml
+
+_BIT = {d: 1 << k for k, d in enumerate(DIRS)}
+_ORTHO = ((1, 0), (-1, 0), (0, 1), (0, -1))
+ALL_ORTHOGONAL = _BIT[(1, 0)] | _BIT[(-1, 0)] | _BIT[(0, 1)] | _BIT[(0, -1)]
+
+
+class LanesError(ValidationError):
+    """A lanes file that cannot be used; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class RoadMap:
+    """Directed lanes over one map: ``allowed[row, col]`` = bits of the orthogonal moves out of
+    the cell the road map allows (walls are not its business: the path finder keeps those)."""
+
+    allowed: np.ndarray
+    resolution: float
+    name: str = "lanes"
+    radius: float | None = None
+
+    @classmethod
+    def open(cls, grid: GridMap, name: str = "lanes", radius: float | None = None) -> RoadMap:
+        """Every orthogonal move two-way (no lane)."""
+        return cls(np.full(grid.blocked.shape, ALL_ORTHOGONAL, dtype=np.uint8), grid.resolution, name, radius)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.allowed.shape)  # type: ignore[return-value]
+
+    def allows(self, col: int, row: int, dcol: int, drow: int) -> bool:
+        """The orthogonal move (dcol, drow) out of cell (col, row) is allowed."""
+        return bool(self.allowed[row, col] & _BIT[(dcol, drow)])
+
+    def move_mask(self, shape: tuple[int, int]) -> np.ndarray:
+        """uint8 ``[row, col]``: the 8-move bits the road map allows (orthogonal as laid out; a
+        diagonal where both of its L-shaped orthogonal ways are allowed)."""
+        if tuple(shape) != self.shape:
+            raise ValueError(f"lanes {self.name!r}: laid out for a {self.shape} map, not {tuple(shape)}")
+        a = self.allowed
+        h, w = a.shape
+        out = a & np.uint8(ALL_ORTHOGONAL)
+
+        def at(dcol: int, drow: int) -> np.ndarray:   # allowed bits of the neighbour (dcol, drow)
+            pad = np.zeros((h + 2, w + 2), dtype=np.uint8)
+            pad[1:-1, 1:-1] = a
+            return pad[1 + drow:h + 1 + drow, 1 + dcol:w + 1 + dcol]
+
+        for dc, dr in DIRS:
+            if not (dc and dr):
+                continue
+            bx, by = np.uint8(_BIT[(dc, 0)]), np.uint8(_BIT[(0, dr)])
+            via_x = ((a & bx) > 0) & ((at(dc, 0) & by) > 0)
+            via_y = ((a & by) > 0) & ((at(0, dr) & bx) > 0)
+            out |= (via_x & via_y).astype(np.uint8) * np.uint8(_BIT[(dc, dr)])
+        return out
+
+    def one_way_moves(self) -> int:
+        """How many orthogonal moves between neighbouring cells are allowed one way only."""
+        n = 0
+        a = self.allowed
+        h, w = a.shape
+        for dc, dr in ((1, 0), (0, 1)):
+            fwd = (a[:h - dr, :w - dc] & _BIT[(dc, dr)]) > 0
+            back = (a[dr:, dc:] & _BIT[(-dc, -dr)]) > 0
+            n += int(np.sum(fwd ^ back))
+        return n
+
+    def edges(self, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Directed orthogonal moves between traversable cells (``free[row, col]``) the road map
+        allows: (tails, heads) as flat cell indices ``row * width + col``."""
+        h, w = free.shape
+        tails, heads = [], []
+        for dc, dr in _ORTHO:
+            rows, cols = np.nonzero(free & ((self.allowed & _BIT[(dc, dr)]) > 0))
+            r2, c2 = rows + dr, cols + dc
+            ok = (r2 >= 0) & (r2 < h) & (c2 >= 0) & (c2 < w)
+            rows, cols, r2, c2 = rows[ok], cols[ok], r2[ok], c2[ok]
+            ok = free[r2, c2]
+            tails.append(rows[ok] * w + cols[ok])
+            heads.append(r2[ok] * w + c2[ok])
+        return np.concatenate(tails), np.concatenate(heads)
+
+    def unreachable_pairs(self, free: np.ndarray, cells: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
+        """Pairs (i, j) of ``cells`` (col, row) such that j cannot be reached from i along the lanes."""
+        from scipy.sparse import csr_matrix
+        from scipy.sparse.csgraph import shortest_path
+
+        h, w = free.shape
+        t, hd = self.edges(free)
+        g = csr_matrix((np.ones(len(t)), (t, hd)), shape=(h * w, h * w))
+        idx = [r * w + c for c, r in cells]
+        d = shortest_path(g, indices=idx, unweighted=True)
+        return [(i, j) for i in range(len(idx)) for j in range(len(idx)) if i != j and not np.isfinite(d[i, idx[j]])]
+
+    def dead_ends(self, free: np.ndarray) -> list[tuple[int, int]]:
+        """Traversable cells (col, row) with a way in along the lanes but no way out."""
+        h, w = free.shape
+        t, hd = self.edges(free)
+        out_deg = np.bincount(t, minlength=h * w)
+        in_deg = np.bincount(hd, minlength=h * w)
+        bad = np.nonzero(free.ravel() & (in_deg > 0) & (out_deg == 0))[0]
+        return [(int(k % w), int(k // w)) for k in bad]
+
+    def arrows(self, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For drawing, in metres: one-way moves ``(k, 4)`` as (x, y, dx, dy), and two-way
+        neighbour pairs ``(m, 4)`` as (x0, y0, x1, y1), between traversable cells."""
+        h, w = free.shape
+        res = self.resolution
+        one, two = [], []
+        a = self.allowed
+        for dc, dr in ((1, 0), (0, 1)):
+            both = free[:h - dr, :w - dc] & free[dr:, dc:]
+            fwd = both & ((a[:h - dr, :w - dc] & _BIT[(dc, dr)]) > 0)
+            back = both & ((a[dr:, dc:] & _BIT[(-dc, -dr)]) > 0)
+            for mask, sign in ((fwd & ~back, 1), (back & ~fwd, -1)):
+                rows, cols = np.nonzero(mask)
+                x, y = (cols + 0.5) * res, (rows + 0.5) * res
+                if sign < 0:
+                    x, y = x + dc * res, y + dr * res
+                one.append(np.column_stack([x, y, np.full(len(x), sign * dc * res), np.full(len(x), sign * dr * res)]))
+            rows, cols = np.nonzero(fwd & back)
+            x, y = (cols + 0.5) * res, (rows + 0.5) * res
+            two.append(np.column_stack([x, y, x + dc * res, y + dr * res]))
+        return np.vstack(one).reshape(-1, 4), np.vstack(two).reshape(-1, 4)
+
+
+def with_lanes(grid: GridMap, lanes: RoadMap | None) -> GridMap:
+    """A copy of ``grid`` whose path finders plan along ``lanes`` (``grid.lanes``); None: a plain copy."""
+    if lanes is not None:
+        lanes.move_mask(grid.blocked.shape)   # raises on a road map of another map
+    out = replace(grid, name=grid.name if lanes is None else f"{grid.name}+{lanes.name}")
+    out.lanes = lanes  # type: ignore[attr-defined]
+    return out
+
+
+def lanes_of(grid: GridMap) -> RoadMap | None:
+    """The road map a map carries (:func:`with_lanes`), or None."""
+    return getattr(grid, "lanes", None)
+
+
+def free_cells(grid: GridMap, radius: float) -> np.ndarray:
+    """``[row, col]``: the cells whose centre the disc fits on (the path finder's nodes)."""
+    from .paths import PathFinder
+
+    return PathFinder(replace(grid), radius).free
+
+
+# -- lanes files ---------------------------------------------------------------------------------
+_V = Vocabulary(LanesError)
+_CELL = _V.list_of(_V.integer(), min_len=2, max_len=2)
+
+
+def _lane_cells(a: tuple[int, int], b: tuple[int, int]) -> list[tuple[int, int]]:
+    dc, dr = int(np.sign(b[0] - a[0])), int(np.sign(b[1] - a[1]))
+    n = max(abs(b[0] - a[0]), abs(b[1] - a[1]))
+    return [(a[0] + dc * k, a[1] + dr * k) for k in range(n + 1)]
+
+
+def parse_lanes(data: object, grid: GridMap, radius: float | None = None, name: str = "lanes") -> RoadMap:
+    """A :class:`RoadMap` from the parsed YAML of a lanes file (see the module docstring).
+    ``radius`` overrides the file's."""
+    top = _V.keys(data, "", ("name", "radius", "lanes"), ("lanes",))
+    name = _V.string(min_len=1)(top.get("name", name), "name")
+    r = _V.number(above=0)(top.get("radius", radius if radius is not None else 0.354), "radius")
+    if radius is not None:
+        r = float(radius)
+    items = _V.list_of(lambda v, p: v, max_len=100_000)(top["lanes"], "lanes")
+    free = free_cells(grid, r)
+    h, w = free.shape
+    allowed = np.full((h, w), ALL_ORTHOGONAL, dtype=np.uint8)
+    owner: dict[tuple[int, int, int, int], int] = {}   # (col, row, dcol, drow) of a forbidden move -> lane
+    lane_of_cell: dict[tuple[int, int], int] = {}
+    for k, item in enumerate(items):
+        path = f"lanes[{k}]"
+        lane = _V.keys(item, path, ("from", "to"), ("from", "to"))
+        ends = []
+        for key in ("from", "to"):
+            c, rr = _CELL(lane[key], f"{path}.{key}")
+            if not (0 <= c < w and 0 <= rr < h):
+                _V.fail(f"{path}.{key}", f"unknown cell [{c}, {rr}]: the map has {w} columns and {h} rows")
+            if not free[rr, c]:
+                _V.fail(f"{path}.{key}", f"cell [{c}, {rr}] is not free for a disc of radius {r:g}")
+            ends.append((c, rr))
+        a, b = ends
+        if a == b or (a[0] != b[0] and a[1] != b[1]):
+            _V.fail(path, f"a lane runs straight along a row or a column between two cells (got {list(a)} "
+                          f"-> {list(b)})")
+        cells = _lane_cells(a, b)
+        for c, rr in cells:
+            if not free[rr, c]:
+                _V.fail(path, f"cell [{c}, {rr}] on the lane is not free for a disc of radius {r:g}")
+            lane_of_cell.setdefault((c, rr), k)
+        dc, dr = cells[1][0] - cells[0][0], cells[1][1] - cells[0][1]
+        for (c0, r0), (c1, r1) in zip(cells, cells[1:]):
+            if (c0, r0, dc, dr) in owner:
+                _V.fail(path, f"runs against lanes[{owner[(c0, r0, dc, dr)]}] at cell [{c0}, {r0}]")
+            allowed[r1, c1] &= np.uint8(~_BIT[(-dc, -dr)] & 0xFF)
+            owner[(c1, r1, -dc, -dr)] = k
+    rm = RoadMap(allowed, grid.resolution, name, r)
+    dead = rm.dead_ends(free)
+    if dead:
+        c, rr = dead[0]
+        k = lane_of_cell.get((c, rr))
+        where = f"lanes[{k}]" if k is not None else "lanes"
+        _V.fail(where, f"cell [{c}, {rr}] is a dead end: the lanes lead in but not out")
+    return rm
+
+
+def load_lanes(path: str | Path, grid: GridMap, radius: float | None = None) -> RoadMap:
+    """Read and validate a lanes file for ``grid`` (errors start with the file and the field)."""
+    path = Path(path)
+    data = read_yaml(path, LanesError, what="lanes file")
+    with in_file(path, LanesError):
+        return parse_lanes(data, grid, radius, path.stem)
+
+
+def lane_runs(rm: RoadMap, free: np.ndarray) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """The one-way moves of ``rm`` as maximal straight runs ``(from cell, to cell)``."""
+    h, w = free.shape
+    a = rm.allowed
+    runs = []
+    for dc, dr in _ORTHO:
+        def one_way(c: int, r: int) -> bool:
+            c2, r2 = c + dc, r + dr
+            return (0 <= c2 < w and 0 <= r2 < h and bool(free[r, c]) and bool(free[r2, c2])
+                    and bool(a[r, c] & _BIT[(dc, dr)]) and not a[r2, c2] & _BIT[(-dc, -dr)])
+        seen = set()
+        for r in range(h):
+            for c in range(w):
+                if (c, r) in seen or not one_way(c, r) or one_way(c - dc, r - dr):
+                    continue
+                c1, r1 = c, r
+                while one_way(c1, r1):
+                    seen.add((c1, r1))
+                    c1, r1 = c1 + dc, r1 + dr
+                runs.append(((c, r), (c1, r1)))
+    return runs
+
+
+def save_lanes(rm: RoadMap, grid: GridMap, path: str | Path, comment: str = "") -> Path:
+    """Write ``rm`` as a lanes file that :func:`load_lanes` reads back to the same road map."""
+    path = Path(path)
+    r = rm.radius if rm.radius is not None else 0.354
+    runs = lane_runs(rm, free_cells(grid, r))
+    lines = [f"# {line}".rstrip() for line in comment.splitlines()]
+    lines += [f"name: {yaml.safe_dump(rm.name).splitlines()[0]}", f"radius: {r!r}", "lanes:"]
+    lines += [f"  - {{from: [{a[0]}, {a[1]}], to: [{b[0]}, {b[1]}]}}" for a, b in runs]
+    if not runs:
+        lines[-1] = "lanes: []"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+# -- ARMO: the road map from the demand, by mixed-integer linear programming ---------------------
+@dataclass(frozen=True)
+class ArmoInfo:
+    """How the road map was computed."""
+
+    cells: int
+    runs: int
+    one_way_runs: int
+    commodities: int
+    variables: int
+    status: str
+    objective: float
+    solve_s: float
+
+
+def _runs(free: np.ndarray) -> tuple[list[list[int]], np.ndarray, np.ndarray, np.ndarray]:
+    """Maximal straight runs of traversable cells along rows and columns: their cells (flat), and
+    per undirected edge (forward move of a run): tail, head, run index."""
+    h, w = free.shape
+    runs: list[list[int]] = []
+    tails, heads, run_of = [], [], []
+    for r in range(h):                       # rows: forward = +col
+        c = 0
+        while c < w:
+            if not free[r, c]:
+                c += 1
+                continue
+            c1 = c
+            while c1 + 1 < w and free[r, c1 + 1]:
+                c1 += 1
+            if c1 > c:
+                cells = [r * w + k for k in range(c, c1 + 1)]
+                for x, y in zip(cells, cells[1:]):
+                    tails.append(x)
+                    heads.append(y)
+                    run_of.append(len(runs))
+                runs.append(cells)
+            c = c1 + 1
+    for c in range(w):                       # columns: forward = +row
+        r = 0
+        while r < h:
+            if not free[r, c]:
+                r += 1
+                continue
+            r1 = r
+            while r1 + 1 < h and free[r1 + 1, c]:
+                r1 += 1
+            if r1 > r:
+                cells = [k * w + c for k in range(r, r1 + 1)]
+                for x, y in zip(cells, cells[1:]):
+                    tails.append(x)
+                    heads.append(y)
+                    run_of.append(len(runs))
+                runs.append(cells)
+            r = r1 + 1
+    return runs, np.array(tails, dtype=np.int64), np.array(heads, dtype=np.int64), np.array(run_of, dtype=np.int64)
+
+
+def _nearest_free(free: np.ndarray, grid: GridMap, p: Point) -> int:
+    h, w = free.shape
+    c, r = grid.cell_of(*p)
+    if 0 <= r < h and 0 <= c < w and free[r, c]:
+        return r * w + c
+    rows, cols = np.nonzero(free)
+    k = int(np.argmin((cols - c) ** 2 + (rows - r) ** 2))
+    return int(rows[k] * w + cols[k])
+
+
+def _commodities(stations: Sequence[str], demand: Mapping[tuple[str, str], float]) -> list[tuple[str, str, dict]]:
+    """Group the station pairs with demand into commodities: a greedy vertex cover of the demand
+    graph, each chosen station carrying its uncovered pairs as one source commodity (out of it)
+    and one sink commodity (into it). ``[(kind, station, {other: weight})]``."""
+    left = {(a, b): v for (a, b), v in demand.items() if v > 0 and a != b and a in stations and b in stations}
+    out = []
+    while left:
+        score: dict[str, float] = {}
+        for (a, b) in left:
+            score[a] = score.get(a, 0) + 1
+            score[b] = score.get(b, 0) + 1
+        s = max(score, key=lambda x: (score[x], x))
+        src = {b: v for (a, b), v in left.items() if a == s}
+        dst = {a: v for (a, b), v in left.items() if b == s}
+        if src:
+            out.append(("source", s, src))
+        if dst:
+            out.append(("sink", s, dst))
+        left = {k: v for k, v in left.items() if s not in k}
+    return out
+
+
+def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
+                 demand: Mapping[tuple[str, str], float], *, minor_share: float = 0.2, keep_right: float = 0.2,
+                 rounds: int = 3, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
+    """ARMO's road map for discs of ``radius``: one-way runs where the demand allows.
+
+    The program (ours, after the paper's summary): the demand-weighted multi-commodity min-cost
+    flow over the directed orthogonal moves between the cells the disc fits on, as a linear
+    program (SciPy's HiGHS ``linprog``), each move costing its length plus ``keep_right`` when the
+    cell on its right is free (keep right: opposing flows take opposite sides of a wide aisle);
+    two connectivity commodities (root to every cell, every cell to root, tiny flows) keep the
+    whole free space strongly connected. Rounding, in ``rounds`` rounds: a run (maximal straight
+    row or column stretch of cells) whose flow against its main direction is at most
+    ``minor_share`` of the flow along it becomes one-way (its reverse moves removed) and the
+    program is solved again on what is left (so the flows re-route along the lanes); a batch that
+    makes the program infeasible (it would cut the space) is halved, the most balanced runs
+    staying two-way. Runs no flow uses stay two-way. ``demand[(a, b)]``: how often robots drive
+    from station a to station b (any scale)."""
+    import time
+
+    from scipy.optimize import linprog
+    from scipy.sparse import block_diag, coo_matrix, csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    t0 = time.perf_counter()
+    free = free_cells(grid, radius)
+    h, w = free.shape
+    runs, tails, heads, run_of = _runs(free)
+    g = csr_matrix((np.ones(len(tails)), (tails, heads)), shape=(h * w, h * w))
+    _, label = connected_components(g, directed=False)
+    st_cell = {s: _nearest_free(free, grid, p) for s, p in stations.items()}
+    comp = np.bincount([label[c] for c in st_cell.values()]).argmax() if st_cell else 0
+    cells = np.nonzero(free.ravel() & (label == comp))[0]
+    node = np.full(h * w, -1, dtype=np.int64)
+    node[cells] = np.arange(len(cells))
+    keep = node[tails] >= 0
+    tails, heads, run_of = tails[keep], heads[keep], run_of[keep]
+    n, m = len(cells), len(tails)
+    # directed arcs: 0..m-1 along their run (tail -> head), m..2m-1 against it
+    arc_t = np.concatenate([tails, heads])
+    arc_h = np.concatenate([heads, tails])
+    arc_run = np.concatenate([run_of, run_of])
+    dcol = arc_h % w - arc_t % w
+    drow = arc_h // w - arc_t // w
+    rc, rr = arc_t % w - drow, arc_t // w + dcol            # the cell on the right (y down): (-drow, dcol)
+    right_free = (rc >= 0) & (rc < w) & (rr >= 0) & (rr < h)
+    right_free[right_free] = free[rr[right_free], rc[right_free]]
+    cost = 1.0 + keep_right * right_free
+    n_arcs = 2 * m
+    # commodities
+    groups = _commodities(list(stations), demand)
+    total = float(sum(sum(d.values()) for _, _, d in groups)) or 1.0
+    supplies = []
+    for kind, s, other in groups:
+        b = np.zeros(n)
+        sign = -1.0 if kind == "source" else 1.0
+        for t, v in other.items():
+            b[node[st_cell[t]]] += sign * v / total
+        b[node[st_cell[s]]] -= b.sum()
+        supplies.append(b)
+    n_cost = len(supplies)
+    root = int(node[st_cell[next(iter(stations))]]) if stations else 0
+    eps = 1e-5
+    b = np.full(n, -eps)
+    b[root] = eps * (n - 1)
+    supplies += [b, -b]
+    k = len(supplies)
+    inc = coo_matrix((np.concatenate([np.ones(n_arcs), -np.ones(n_arcs)]),
+                      (np.concatenate([node[arc_t], node[arc_h]]), np.concatenate([np.arange(n_arcs)] * 2))),
+                     shape=(n, n_arcs)).tocsr()
+    a_eq = block_diag([inc] * k, format="csr")
+    b_eq = np.concatenate(supplies)
+    c = np.tile(cost, k)
+    open_arc = np.ones(n_arcs, dtype=bool)
+    status = "no demand"
+    objective = math.nan
+    one_way_runs: set[int] = set()
+
+    def solve(arcs_open: np.ndarray):
+        ub = np.tile(np.where(arcs_open, np.inf, 0.0), k)
+        return linprog(c, A_eq=a_eq, b_eq=b_eq, bounds=np.column_stack([np.zeros(len(c)), ub]), method="highs")
+
+    res = solve(open_arc)
+    if not res.success:
+        raise ValueError(f"armo: the free space of the stations is not connected ({res.message})")
+    for _ in range(max(rounds, 0)):
+        status, objective = str(res.message), float(res.fun)
+        flow = res.x[:n_cost * n_arcs].reshape(n_cost, n_arcs).sum(axis=0)
+        fwd = np.bincount(run_of, weights=flow[:m], minlength=len(runs))
+        back = np.bincount(run_of, weights=flow[m:], minlength=len(runs))
+        major, minor = np.maximum(fwd, back), np.minimum(fwd, back)
+        cand = [int(r) for r in np.nonzero((major > 1e-9) & (minor <= minor_share * major))[0]
+                if r not in one_way_runs]
+        cand.sort(key=lambda r: minor[r] / major[r])          # the clearest first
+        while cand:
+            trial = open_arc.copy()
+            for r in cand:
+                against = (arc_run == r) & (np.arange(n_arcs) >= m if fwd[r] >= back[r] else np.arange(n_arcs) < m)
+                trial[against] = False
+            new = solve(trial)
+            if new.success:
+                open_arc, res = trial, new
+                one_way_runs.update(cand)
+                break
+            cand = cand[:len(cand) // 2]
+        else:
+            break
+    status, objective = str(res.message), float(res.fun)
+    allowed = np.full((h, w), ALL_ORTHOGONAL, dtype=np.uint8)
+    shut = np.nonzero(~open_arc)[0]
+    for j in shut:   # the move against the lane is forbidden
+        t_cell = int(arc_t[j])
+        allowed[t_cell // w, t_cell % w] &= np.uint8(~_BIT[(int(dcol[j]), int(drow[j]))] & 0xFF)
+    rm = RoadMap(allowed, grid.resolution, name, float(radius))
+    info = ArmoInfo(n, len(np.unique(run_of)), len(one_way_runs), k, len(c), status, objective,
+                    time.perf_counter() - t0)
+    return rm, info
+
+
+def demand_of(deliveries: Sequence, stations: Sequence[str]) -> dict[tuple[str, str], float]:
+    """Driving demand of a delivery sequence (objects with ``pick`` and ``drop``): loaded legs pick
+    -> drop, and the empty legs from each drop to the next pick (robots take the next delivery)."""
+    out: dict[tuple[str, str], float] = {}
+    for d in deliveries:
+        out[(d.pick, d.drop)] = out.get((d.pick, d.drop), 0.0) + 1.0
+    picks = [d.pick for d in deliveries]
+    drops = [d.drop for d in deliveries]
+    pick_share = {s: picks.count(s) / len(picks) for s in set(picks)} if picks else {}
+    for s in set(drops):
+        n = drops.count(s)
+        for p, share in pick_share.items():
+            if p != s:
+                out[(s, p)] = out.get((s, p), 0.0) + n * share
+    return out
+
+
+def draw_lanes(ax, grid: GridMap, lanes: RoadMap, radius: float | None = None, zorder: float = 1.5) -> None:
+    """Draw the road map on a matplotlib axis (map coordinates, y down): one-way moves as small
+    arrows, two-way neighbour pairs as thin grey lines."""
+    from matplotlib.collections import LineCollection
+
+    free = free_cells(grid, radius if radius is not None else (lanes.radius or 0.354))
+    one, two = lanes.arrows(free)
+    if len(two):
+        ax.add_collection(LineCollection(two.reshape(-1, 2, 2), colors=[(0.6, 0.6, 0.6, 0.5)], linewidths=0.4,
+                                         zorder=zorder), autolim=False)
+    if len(one):
+        ax.quiver(one[:, 0], one[:, 1], one[:, 2], one[:, 3], angles="xy", scale_units="xy", scale=1.25,
+                  color=(0.1, 0.35, 0.8, 0.8), width=0.0025, headwidth=4, headlength=4, zorder=zorder)
+
+
+def plot_roadmap(grid: GridMap, lanes: RoadMap, path_png: str | Path,
+                 stations: Mapping[str, Point] | None = None, title: str | None = None) -> None:
+    """The map with its road map (and stations) to a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    w, h = grid.size_m
+    fig, ax = plt.subplots(figsize=(min(16.0, max(6.0, w / 3)), min(12.0, max(4.0, h / 3))))
+    ax.imshow(np.where(grid.blocked, 0.25, 0.97), cmap="gray", vmin=0, vmax=1, extent=(0, w, h, 0),
+              origin="upper", interpolation="nearest")
+    draw_lanes(ax, grid, lanes)
+    for s, (x, y) in (stations or {}).items():
+        ax.plot(x, y, "s", color="green", ms=5)
+    ax.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title=title or f"road map {lanes.name}",
+           xlabel="x [m]", ylabel="y [m] (downwards)")
+    fig.tight_layout()
+    Path(path_png).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path_png, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,131 @@
+"""Road maps of directed lanes (fleet_planner/roadmap.py): ARMO's program connects every station
+pair both ways, lanes files are validated field by field, and md, PRIOR and the path finder plan
+along the lanes, their plans passing the independent checker."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fleet_planner.checker import check_plan
+from fleet_planner.grid import GridMap
+from fleet_planner.model import RobotSpec
+from fleet_planner.paths import PathFinder
+from fleet_planner.planners import get_planner
+from fleet_planner.roadmap import (
+    LanesError,
+    RoadMap,
+    armo_roadmap,
+    free_cells,
+    lanes_of,
+    load_lanes,
+    parse_lanes,
+    save_lanes,
+    with_lanes,
+)
+
+# three one-cell aisles between two cross aisles (1 m cells, discs of radius 0.35 fit one cell)
+ROWS = ["............",
+        ".@@@@@@@@@@.",
+        "............",
+        ".@@@@@@@@@@.",
+        "............"]
+STATIONS = {"A": (0.5, 0.5), "B": (11.5, 4.5), "C": (0.5, 4.5), "D": (11.5, 0.5)}
+R = 0.35
+
+
+def _grid() -> GridMap:
+    return GridMap.from_rows(ROWS)
+
+
+def _cells(grid: GridMap) -> list[tuple[int, int]]:
+    return [grid.cell_of(*p) for p in STATIONS.values()]
+
+
+def test_armo_makes_one_way_lanes_that_connect_every_station_pair_both_ways():
+    grid = _grid()
+    demand = {("A", "B"): 5.0, ("B", "C"): 3.0, ("C", "D"): 5.0, ("D", "A"): 3.0}
+    lanes, info = armo_roadmap(grid, R, STATIONS, demand)
+    free = free_cells(grid, R)
+    assert info.one_way_runs > 0 and lanes.one_way_moves() > 0   # the demand allowed one-way aisles
+    assert lanes.unreachable_pairs(free, _cells(grid)) == []      # every pair, both directions
+    assert lanes.dead_ends(free) == []
+    # every traversable cell still reaches every other (the whole space strongly connected)
+    all_cells = [(int(c), int(r)) for r, c in zip(*np.nonzero(free))]
+    assert lanes.unreachable_pairs(free, all_cells[::7]) == []
+
+
+def _one_way_east_middle() -> dict:
+    return {"name": "t", "radius": R, "lanes": [{"from": [1, 2], "to": [10, 2]}]}
+
+
+def test_a_lanes_file_round_trips_and_paths_keep_to_its_lanes(tmp_path):
+    grid = _grid()
+    lanes = parse_lanes(_one_way_east_middle(), grid)
+    assert not lanes.allows(5, 2, -1, 0) and lanes.allows(5, 2, 1, 0)
+    path = save_lanes(lanes, grid, tmp_path / "lanes.yaml", "test")
+    back = load_lanes(path, grid)
+    assert np.array_equal(back.allowed, lanes.allowed)
+
+    plain = PathFinder(grid, R).find((10.5, 2.5), (1.5, 2.5))
+    assert len(plain) == 2                                  # straight west along the middle aisle
+    on_lanes = PathFinder(with_lanes(grid, lanes), R).find((10.5, 2.5), (1.5, 2.5))
+    assert on_lanes is not None
+    # it may not drive west along the one-way middle aisle: it leaves it for a cross aisle
+    assert np.abs(on_lanes[:, 1] - 2.5).max() >= 1.9
+
+
+@pytest.mark.parametrize("lane, field, words", [
+    ({"from": [1, 2], "to": [40, 2]}, "lanes[0].to", "unknown cell"),
+    ({"from": [1, 1], "to": [10, 1]}, "lanes[0].from", "not free"),
+    ({"from": [1, 2], "to": [3, 4]}, "lanes[0]", "straight"),
+])
+def test_a_lane_on_an_unknown_cell_is_rejected_naming_the_field(lane, field, words):
+    with pytest.raises(LanesError) as err:
+        parse_lanes({"lanes": [lane]}, _grid())
+    assert err.value.path == field and words in str(err.value)
+
+
+def test_a_dead_end_is_rejected_naming_the_lane():
+    grid = GridMap.from_rows(["......",
+                              "@@@@@.",
+                              "......"])
+    # the top row one-way west ends in the corner cell (0, 0), whose only other way is blocked
+    with pytest.raises(LanesError) as err:
+        parse_lanes({"lanes": [{"from": [5, 0], "to": [0, 0]}]}, grid)
+    assert err.value.path == "lanes[0]" and "dead end" in str(err.value)
+    with pytest.raises(LanesError) as err:
+        parse_lanes({"lanes": [{"from": [1, 2], "to": [9, 2]}]}, grid)
+    assert err.value.path == "lanes[0].to"
+    with pytest.raises(LanesError) as err:
+        parse_lanes({"lanes": [{"from": [1, 2], "to": [4, 2]}, {"from": [4, 2], "to": [1, 2]}]}, grid)
+    assert err.value.path == "lanes[1]" and "against lanes[0]" in str(err.value)
+
+
+@pytest.mark.parametrize("planner", ["md", "prior"])
+def test_md_and_prior_plan_along_the_lanes_and_pass_the_checker(planner):
+    grid = _grid()
+    lanes = parse_lanes(_one_way_east_middle(), grid)
+    lane_grid = with_lanes(grid, lanes)
+    assert lanes_of(lane_grid) is lanes and lanes_of(grid) is None
+    robots = [RobotSpec("r1", R, 1.0, (10.5, 2.5), (1.5, 2.5)),
+              RobotSpec("r2", R, 1.0, (1.5, 2.5), (10.5, 2.5)),
+              RobotSpec("r3", R, 1.0, (0.5, 0.5), (11.5, 4.5))]
+    plan = get_planner(planner).plan(lane_grid, robots)
+    assert check_plan(grid, robots, plan) == []
+    by_id = plan.by_id()
+    # r1 goes west: not along the east-bound middle aisle
+    assert _no_westward_run(by_id["r1"].waypoints)
+    assert np.abs(by_id["r1"].waypoints[:, 1] - 2.5).max() >= 1.9   # it took a cross aisle
+
+
+def _no_westward_run(wp: np.ndarray) -> bool:
+    """No piece of the path runs west along row 2 inside the aisle."""
+    for (x0, y0, _), (x1, y1, _) in zip(wp, wp[1:]):
+        if abs(y0 - 2.5) < 1e-6 and abs(y1 - 2.5) < 1e-6 and x1 < x0 - 1e-6 and min(x0, x1) < 10.0 and max(x0, x1) > 2.0:
+            return False
+    return True
+
+
+def test_a_road_map_of_another_map_is_refused():
+    with pytest.raises(ValueError):
+        with_lanes(_grid(), RoadMap.open(GridMap.from_rows(["...", "..."])))
