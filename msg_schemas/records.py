@@ -234,6 +234,8 @@ class Record:
 
 
 def _plain(value: Any) -> Any:
+    if isinstance(value, Record):
+        return value.to_dict()
     if isinstance(value, tuple):
         return [_plain(v) for v in value]
     if isinstance(value, dict):
@@ -407,11 +409,38 @@ def unsigned_json(rec: Record) -> str:
     return replace(rec, auth=None).to_json()  # type: ignore[call-arg]  # (the signed records have auth)
 
 
-RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth)
+#: the most statuses one neighbours record carries
+MAX_NEIGHBOURS = 512
+
+
+def _status(value: Any, path: str) -> RobotStatus:
+    """A robot status inside another record (its errors prefixed with ``path``)."""
+    if isinstance(value, RobotStatus):
+        return value
+    try:
+        return RobotStatus._from_dict(value)  # type: ignore[return-value]
+    except RecordError as exc:
+        raise RecordError(f"{path}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Neighbours(Record):
+    """What the planner relays to one robot (``id``): the last statuses of the robots within its
+    safety range and of those its execution gate watches (``fleet_planner.fleet.neighbours``)."""
+
+    SCHEMA: ClassVar[str] = "fleet/neighbours@1"
+    NAME: ClassVar[str] = "neighbours"
+
+    id: str = spec(ros_id)
+    stamp: float = spec(number())
+    robots: tuple[RobotStatus, ...] = spec(_V.list_of(_status, max_len=MAX_NEIGHBOURS))
+
+
+RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours)
 
 __all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH",
-           "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS",
-           "RECORDS", "TASK_EVENTS", "Check", "PathAuth", "Record", "RecordError", "RobotStatus", "Schedule", "Task",
-           "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json",
-           "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text",
-           "unsigned_json"]
+           "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES",
+           "MAX_TEXT_CHARS", "RECORDS", "TASK_EVENTS", "Check", "Neighbours", "PathAuth", "Record", "RecordError",
+           "RobotStatus", "Schedule", "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of",
+           "integer", "list_of", "load_json", "nonempty", "number", "obj", "optional", "point", "robot_id_problem",
+           "ros_id", "spec", "text", "unsigned_json"]

@@ -13,6 +13,8 @@ QoS choices:
   back. A best-effort subscription also matches reliable publishers (``ros2 topic pub`` defaults).
   Tests must wait for a status that satisfies a condition, not count messages. Every subscriber
   takes all waiting statuses at each wake-up (``fleet_planner/ros/drain.py``).
+* ``/robots/<id>/neighbours``: best effort, depth 10, as the statuses it relays: each record
+  supersedes the last, a few times a second.
 * ``WAIT_MESSAGES`` (behaviour coordination): reliable, volatile, depth 100. A waiting robot
   repeats its message every couple of seconds, but a wait cycle is only found when a message
   gets all the way round it, so none should be lost on the way.
@@ -47,6 +49,15 @@ def timed_path_auth_topic(robot_id: str) -> str:
     return timed_path_topic(robot_id) + "_auth"
 
 
+def neighbours_topic(robot_id: str) -> str:
+    """``/robots/<robot_id>/neighbours`` (the planner's relay of the statuses a robot must hear);
+    ValueError if the id cannot be part of a topic name."""
+    problem = robot_id_problem(robot_id)
+    if problem:
+        raise ValueError(f"robot id {problem}")
+    return f"/robots/{robot_id}/neighbours"
+
+
 def _qos(depth: int, reliable: bool = True, latched: bool = False) -> QoSProfile:
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=depth,
@@ -64,3 +75,4 @@ SCHEDULE_QOS = LATCHED_QOS
 MARKERS_QOS = LATCHED_QOS
 MAP_QOS = LATCHED_QOS
 WAIT_MESSAGES_QOS = _qos(100)
+NEIGHBOURS_QOS = _qos(10, reliable=False)

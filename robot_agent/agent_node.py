@@ -4,8 +4,9 @@ It follows the timed paths the planner sends on ``/robots/<id>/timed_path`` (wai
 clock for each departure), learns its jobs from ``/fleet/task_events`` (``assigned`` to its id) and
 their stations from ``/fleet/tasks``, picks, places and charges where its legs end, and publishes its
 status on ``/fleet/robot_status`` at ``status_rate_hz`` of ROS time (simulated time with
-``use_sim_time:=true``). It hears the other robots' statuses there too: for the safety net of a
-central robot (it waits rather than drive into one), and for the behaviours of a robot with
+``use_sim_time:=true``). It hears the robots near it from the planner's relay on
+``/robots/<id>/neighbours`` (``neighbours:=all``: every status on ``/fleet/robot_status``): for
+the safety net of a central robot (it waits rather than drive into one), and for the behaviours of a robot with
 ``coordination:=behavior``, which takes only the goal of each leg, finds its own way there and
 resolves conflicts by the BBMRCA rules (Sun, Kleiner and Nebel, "Behavior-based Multi-Robot Collision
 Avoidance"; see docs/ARCHITECTURE.md), with wait messages on ``/fleet/wait_messages``.
@@ -37,6 +38,7 @@ from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
 from msg_schemas.records import (
+    Neighbours,
     PathAuth,
     RecordError,
     RobotStatus,
@@ -75,6 +77,9 @@ class AgentNode(Node):
             "or 'behavior' (BBMRCA: only each leg's goal binds; own path, behaviours, wait messages)")).value
         rate = self.declare_parameter("status_rate_hz", 10.0, _range("status messages per second of ROS time",
                                                                      0.1, 100.0)).value
+        hears = self.declare_parameter("neighbours", "relay", _fixed(
+            "whom the robot hears: 'relay' (the planner's record of the robots near it, on "
+            "/robots/<id>/neighbours) or 'all' (every robot's status on /fleet/robot_status)")).value
         wh_file = self.declare_parameter("warehouse_file", "", _fixed(
             "warehouse YAML (empty: the shipped config/warehouse.yaml)")).value
         kinds_file = self.declare_parameter("kinds_file", "", _fixed(
@@ -90,6 +95,8 @@ class AgentNode(Node):
         problem = robot_id_problem(robot_id)
         if problem:
             raise ValueError(f"parameter id: {problem}" if robot_id else "parameter id: required (or a namespace)")
+        if hears not in ("relay", "all"):
+            raise ValueError(f"parameter neighbours: {hears!r} is not one of relay, all")
         if mode not in COORDINATION:
             raise ValueError(f"parameter coordination: {mode!r} is not one of {', '.join(COORDINATION)}")
         kinds = kinds if kinds is not None else load_kinds(kinds_file or None)
@@ -116,7 +123,10 @@ class AgentNode(Node):
             auth = subscribe(String, topics.timed_path_auth_topic(robot_id), self._on_path_auth,
                              topics.TIMED_PATH_AUTH_QOS)
             self._pairing = PathPairing(self.keys, robot_id, auth.topic_name)
-        subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        if hears == "all":
+            subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        else:
+            subscribe(String, topics.neighbours_topic(robot_id), self._on_neighbours, topics.NEIGHBOURS_QOS)
         self._waits: Publisher | None = None
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
@@ -191,6 +201,15 @@ class AgentNode(Node):
             self.agent.on_status(status)
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _on_neighbours(self, msg: String) -> None:
+        try:
+            record = string_to_record(msg, Neighbours)
+            if record.id != self.robot_id:
+                raise RecordError(f"neighbours.id: {record.id!r} is not this robot")
+            self.agent.on_neighbours(record.robots, self.get_clock().now().nanoseconds / 1e9)
+        except RecordError as exc:
+            self.get_logger().warning(f"neighbours ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_wait_message(self, msg: String) -> None:
         try:

@@ -7,6 +7,8 @@ Times are seconds on one clock (the robot's ROS time): ``now`` is always passed 
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from msg_schemas.records import RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..behavior import BehaviorController, BehaviorParams
@@ -28,7 +30,8 @@ class RobotAgent:
     site will do. It acts only on the planner's word about its own job: an event about another
     job, or a ``failed`` / ``cancelled`` that does not name this robot, is ignored, and with
     ``planner`` set (the planner's node name) so is every event whose ``sender`` is another node.
-    It hears the other robots' statuses (:meth:`on_status`).
+    It hears the other robots' statuses (:meth:`on_status`, each one; or :meth:`on_neighbours`, the
+    planner's relay of those within its safety range).
 
     ``coordination`` (a name of :data:`~.coordination.COORDINATION` or a
     :class:`~.coordination.Coordination`) says how it drives (its :attr:`driver`): ``"central"``,
@@ -113,6 +116,20 @@ class RobotAgent:
         last = self.heard.get(status.id)
         if status.id != self.model.id and (last is None or status.stamp >= last.stamp):
             self.heard[status.id] = status
+
+    def on_neighbours(self, statuses: Iterable[RobotStatus], now: float | None = None) -> None:
+        """The planner's relay of the robots this robot must hear (``fleet/neighbours@1``, see
+        :mod:`.neighbours`): they replace what it heard (a newer status already heard of one of them
+        is kept; robots no longer relayed are forgotten: they are out of range). Its own status and
+        ones stamped more than ``MAX_CLOCK_SKEW_S`` ahead of ``now`` (default: the last tick) are ignored."""
+        clock = now if now is not None else self._last
+        heard: dict[str, RobotStatus] = {}
+        for st in statuses:
+            if st.id == self.model.id or clock is not None and st.stamp > clock + MAX_CLOCK_SKEW_S:
+                continue
+            last = self.heard.get(st.id)
+            heard[st.id] = last if last is not None and last.stamp > st.stamp else st
+        self.heard = heard
 
     def on_wait_message(self, msg: WaitMessageRecord) -> None:
         """A wait message on the topic: taken at the next tick if it is addressed to this robot."""

@@ -26,13 +26,16 @@ from visualization_msgs.msg import MarkerArray
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.fleet.fleet_file import load_fleet
 from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
+from fleet_planner.fleet.coordination import AGENT_BEHAVIOR
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
+from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
 from fleet_planner.ros.signing import Keys
 from fleet_planner.validation import printable
+from fleet_planner.ros.relay import NeighbourPublisher
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import (
@@ -88,6 +91,9 @@ class PlannerNode(Node):
         store_file = self.declare_parameter("job_store", "", ParameterDescriptor(
             description="SQLite file keeping every accepted job across restarts (empty: jobs live in memory "
                         "only); restart with the same file and open jobs carry on", read_only=True)).value
+        relay_period = self.declare_parameter("neighbour_period_s", RELAY_PERIOD_S, _range(
+            "s of ROS time between the neighbours records sent to each robot (/robots/<id>/neighbours)",
+            0.02, 2.0)).value
         skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
             "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
         self._max_age = self.declare_parameter("max_status_age_s", MAX_STATUS_AGE_S, _range(
@@ -130,6 +136,10 @@ class PlannerNode(Node):
         self._tasks = create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         self._timer = self.create_timer(period, self._on_timer)
+        # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py); the lead wires
+        # ``neighbour_relay.watch`` to the execution gate
+        self.neighbour_relay = NeighbourPublisher(
+            self, self.fleet, relay_period, AGENT_BEHAVIOR.comm_range if coordination == "behavior" else 0.0)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
         self.get_logger().info(
             f"planning for warehouse {warehouse.name!r} ({len(warehouse.stations)} stations), {coordination} "
