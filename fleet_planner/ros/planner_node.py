@@ -24,18 +24,18 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
+from fleet_planner.fleet.coordination import AGENT_BEHAVIOR
 from fleet_planner.fleet.fleet_file import load_fleet
 from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
-from fleet_planner.fleet.coordination import AGENT_BEHAVIOR
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.relay import NeighbourPublisher
 from fleet_planner.ros.signing import Keys
 from fleet_planner.validation import printable
-from fleet_planner.ros.relay import NeighbourPublisher
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import (
