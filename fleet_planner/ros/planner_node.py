@@ -29,6 +29,7 @@ from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.operator_services import PlannerOperator
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import (
@@ -112,6 +113,8 @@ class PlannerNode(Node):
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
         create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
+        self.operator = PlannerOperator(self, self.fleet, self._publish)
         self._timer = self.create_timer(period, self._on_timer)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
         self.get_logger().info(
@@ -146,7 +149,7 @@ class PlannerNode(Node):
     def _on_timer(self) -> None:
         now = self._now()
         try:
-            decisions = self.fleet.step(now)
+            decisions = self.operator.step(now)  # the fleet's step, with the operator's part
         except Exception as exc:
             self.get_logger().error(f"planning step failed: {exc!r}\n{traceback.format_exc(limit=-8)}",
                                     throttle_duration_sec=5.0)
