@@ -19,6 +19,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", sorted(glob("config/*.yaml") + glob("config/*.map"))),
     ],
+    package_data={"fleet_planner.ros.console": ["static/*"]},  # the web console's page
     install_requires=["setuptools"],
     zip_safe=True,
     maintainer="fleet_planner maintainers",
@@ -33,6 +34,8 @@ setup(
             "robot_agent = robot_agent.agent_node:main",
             "fleet-demo = fleet_planner.ros.demo:main",
             "fleet-submit = fleet_planner.ros.submit:main",
+            "fleet-op = fleet_planner.ros.operate:main",
+            "fleet-console = fleet_planner.ros.console:main",
         ],
     },
 )

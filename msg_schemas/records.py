@@ -50,8 +50,8 @@ from fleet_planner.validation import (
 )
 
 BEHAVIORS = tuple(b.value for b in Behavior)
-TASK_EVENTS = ("accepted", "rejected", "assigned", "picked", "placed", "done", "failed", "cancelled")
-EVENTS_NEEDING_REASON = ("rejected", "failed")
+TASK_EVENTS = ("accepted", "rejected", "assigned", "picked", "placed", "done", "failed", "cancelled", "late")
+EVENTS_NEEDING_REASON = ("rejected", "failed", "late")
 
 
 #: the largest raw message taken (bytes of UTF-8; a status is about 400, a 1000-robot schedule 60k)
@@ -265,6 +265,9 @@ class Task(Record):
     priority: int = spec(integer(), default=0)
     created: float | None = spec(optional(number()), default=None)
     auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with keys)
+    # when it should be done (s, the planner's ROS time); earliest first among equal priorities,
+    # and a ``late`` event when it passes (fleet_planner.fleet.operator)
+    deadline: float | None = spec(optional(number()), default=None)
 
 
 @dataclass(frozen=True)
@@ -323,6 +326,10 @@ class RobotStatus(Record):
     lateness_s: float = spec(number(lo=0.0), default=0.0)  # how far behind its due position
     # robots coordinating by behaviours (BBMRCA) broadcast their behaviour state: see BEHAVIOR_STATE
     behavior: dict[str, Any] | None = spec(optional(obj(BEHAVIOR_STATE)), default=None)
+    # the operator's hand (fleet_planner.fleet.manual): driven by cmd_vel / stopped by the e-stop
+    # (left out when false)
+    manual: bool | None = spec(optional(boolean), default=None)
+    estop: bool | None = spec(optional(boolean), default=None)
 
 
 @dataclass(frozen=True)
@@ -436,11 +443,65 @@ class Neighbours(Record):
     robots: tuple[RobotStatus, ...] = spec(_V.list_of(_status, max_len=MAX_NEIGHBOURS))
 
 
-RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours)
+#: ``command.command``: what the operator asks the planner (fleet_planner.fleet.operator)
+COMMANDS = ("pause", "resume", "estop", "release", "cancel", "priority", "send")
+#: the fields each command needs besides ``id`` and ``command`` (``robot_id`` is optional for
+#: pause / resume: without it they act on the whole fleet)
+COMMAND_NEEDS: dict[str, tuple[str, ...]] = {
+    "pause": (), "resume": (), "estop": (), "release": (), "cancel": ("task_id",),
+    "priority": ("task_id", "priority"), "send": ("robot_id", "station")}
+_COMMAND_TAKES: dict[str, tuple[str, ...]] = {
+    "pause": ("robot_id",), "resume": ("robot_id",), "estop": (), "release": (), "cancel": ("task_id", "reason"),
+    "priority": ("task_id", "priority"), "send": ("robot_id", "station")}
 
-__all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH",
-           "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES",
-           "MAX_TEXT_CHARS", "RECORDS", "TASK_EVENTS", "Check", "Neighbours", "PathAuth", "Record", "RecordError",
-           "RobotStatus", "Schedule", "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of",
-           "integer", "list_of", "load_json", "nonempty", "number", "obj", "optional", "point", "robot_id_problem",
-           "ros_id", "spec", "text", "unsigned_json"]
+
+@dataclass(frozen=True)
+class Command(Record):
+    """An operator command with arguments, answered by a :class:`CommandReply` with the same ``id``
+    (the argument-less ones also have std_srvs services: docs/ARCHITECTURE.md, "Topics and QoS")."""
+
+    SCHEMA: ClassVar[str] = "fleet/command@1"
+    NAME: ClassVar[str] = "command"
+
+    id: str = spec(nonempty)                   # the request id the reply carries back
+    command: str = spec(choice(COMMANDS))
+    robot_id: str | None = spec(optional(ros_id), default=None)
+    task_id: str | None = spec(optional(nonempty), default=None)
+    priority: int | None = spec(optional(integer()), default=None)
+    station: str | None = spec(optional(nonempty), default=None)
+    reason: str | None = spec(optional(text), default=None)
+
+    def _check_together(self) -> None:
+        for name in COMMAND_NEEDS[self.command]:
+            if getattr(self, name) is None:
+                raise RecordError(f"command.{name}: required for {self.command!r}")
+        for name in ("robot_id", "task_id", "priority", "station", "reason"):
+            if getattr(self, name) is not None and name not in _COMMAND_TAKES[self.command]:
+                raise RecordError(f"command.{name}: {self.command!r} takes no {name}")
+
+
+@dataclass(frozen=True)
+class CommandReply(Record):
+    """The planner's answer to a :class:`Command`: ``ok`` and what happened, or why not (the
+    reason names the field at fault, e.g. ``robot_id: unknown robot 'r9'``)."""
+
+    SCHEMA: ClassVar[str] = "fleet/command_reply@1"
+    NAME: ClassVar[str] = "command_reply"
+
+    id: str = spec(nonempty)
+    ok: bool = spec(boolean)
+    message: str = spec(text)
+    stamp: float = spec(number())
+    command: str | None = spec(optional(choice(COMMANDS)), default=None)
+
+
+RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours,
+                                     Command, CommandReply)
+
+__all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Check", "Command", "CommandReply",
+           "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS", "MAX_ITEMS",
+           "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours",
+           "PathAuth", "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS", "Task",
+           "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json",
+           "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text",
+           "unsigned_json"]

@@ -76,3 +76,28 @@ MARKERS_QOS = LATCHED_QOS
 MAP_QOS = LATCHED_QOS
 WAIT_MESSAGES_QOS = _qos(100)
 NEIGHBOURS_QOS = _qos(10, reliable=False)
+
+# -- the operator (fleet_planner/fleet/operator.py; docs/ARCHITECTURE.md, "Topics and QoS") ------------
+#: ``fleet/command@1`` (commands with arguments) in, ``fleet/command_reply@1`` (same ``id``) out:
+#: reliable and volatile like the tasks and their events
+COMMANDS = "/fleet/commands"
+COMMAND_REPLIES = "/fleet/command_replies"
+COMMANDS_QOS = _qos(100)
+COMMAND_REPLIES_QOS = _qos(100)
+#: std_msgs/Bool, latched: whether the e-stop is engaged (the planner publishes it, every agent holds)
+ESTOPPED = "/fleet/estopped"
+ESTOPPED_QOS = LATCHED_QOS
+#: std_srvs/SetBool services of the planner: pause (true) / resume the fleet; engage (true) / release the e-stop
+PAUSE_FLEET_SERVICE = "/fleet/pause"
+ESTOP_SERVICE = "/fleet/estop"
+#: geometry_msgs/Twist to a robot in manual drive: best effort, so any teleop publisher matches
+CMD_VEL_QOS = _qos(10, reliable=False)
+
+
+def robot_topic(robot_id: str, name: str) -> str:
+    """``/robots/<robot_id>/<name>``: ``pause`` (SetBool, planner), ``manual`` (SetBool, agent),
+    ``cmd_vel`` (Twist, agent); ValueError if the id cannot be part of a topic name."""
+    problem = robot_id_problem(robot_id)
+    if problem:
+        raise ValueError(f"robot id {problem}")
+    return f"/robots/{robot_id}/{name}"

@@ -31,6 +31,7 @@ from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.operator_services import AgentOperator
 from fleet_planner.ros.origin import OriginCheck
 from fleet_planner.ros.signing import Keys, PathPairing
 from fleet_planner.validation import printable
@@ -131,6 +132,7 @@ class AgentNode(Node):
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
             subscribe(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
+        self.operator = AgentOperator(self, self.agent, robot_id)  # manual drive, cmd_vel, e-stop
         self._timer = self.create_timer(1.0 / rate, self._on_timer)
         self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}, "
                                f"{mode} coordination")

@@ -93,17 +93,24 @@ class Sim:
             if rid not in self.mute:
                 self.fm.on_status(st, self.t)
         if self._ticks % round(self.period / self.dt) == 0:
-            d = self.fm.step(self.t)
-            self.notes += d.notes
-            for leg in d.legs:
-                self.legs[leg.robot_id].append(leg)
-                if leg.robot_id not in self.dead | self.mute:
-                    self.agents[leg.robot_id].on_path(leg.relative(), leg.t0, leg.path_id)
-            for ev in d.events:
-                self.events.append(ev)
-                for rid, a in self.agents.items():
-                    if rid not in self.dead | self.mute:
-                        a.on_event(ev)
+            self.deliver(self.step(self.t))
+
+    def step(self, now):
+        """One planning step (test_operator's sim steps the operator instead)."""
+        return self.fm.step(now)
+
+    def deliver(self, d):
+        """Legs, events and notes of one decision, delivered at once."""
+        self.notes += d.notes
+        for leg in d.legs:
+            self.legs[leg.robot_id].append(leg)
+            if leg.robot_id not in self.dead | self.mute:
+                self.agents[leg.robot_id].on_path(leg.relative(), leg.t0, leg.path_id)
+        for ev in d.events:
+            self.events.append(ev)
+            for rid, a in self.agents.items():
+                if rid not in self.dead | self.mute:
+                    a.on_event(ev)
 
     def last(self, task_id):
         evs = [e for e in self.events if e.task_id == task_id]

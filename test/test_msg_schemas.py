@@ -81,7 +81,7 @@ def test_construction_in_code_is_validated_too():
 @pytest.mark.parametrize("cls, path, value, expected", [
     (Task, ["id"], DELETE, "task.id: required field missing"),
     (Task, ["id"], None, "task.id: must be a non-empty string (got null)"),
-    (Task, ["deadline"], 3, "task.deadline: unknown field"),
+    (Task, ["due"], 3, "task.due: unknown field"),
     (Task, ["payload_kg"], math.nan, "task.payload_kg: must be a finite number (got NaN)"),
     (Task, ["payload_kg"], math.inf, "task.payload_kg: must be a finite number (got Infinity)"),
     (Task, ["payload_kg"], True, "task.payload_kg: must be a finite number (got true)"),

@@ -18,6 +18,8 @@ from msg_schemas.records import (
     MAX_REASON_CHARS,
     MAX_RECORD_BYTES,
     RECORDS,
+    Command,
+    CommandReply,
     RecordError,
     RobotStatus,
     Task,
@@ -27,7 +29,11 @@ from msg_schemas.records import (
 
 GOOD_ALL = {**{cls.SCHEMA: data for cls, data in GOOD.items()},
             WaitMessageRecord.SCHEMA: {"schema": WaitMessageRecord.SCHEMA, "sender": "r1", "receiver": "r2",
-                                       "waiting": ["r1"], "stamp": 1.0}}
+                                       "waiting": ["r1"], "stamp": 1.0},
+            Command.SCHEMA: {"schema": Command.SCHEMA, "id": "c1", "command": "send", "robot_id": "r1",
+                             "station": "chute_1"},
+            CommandReply.SCHEMA: {"schema": CommandReply.SCHEMA, "id": "c1", "ok": False, "stamp": 1.0,
+                                  "message": "robot_id: unknown robot 'r9'", "command": "send"}}
 BY_SCHEMA = {cls.SCHEMA: cls for cls in RECORDS}
 
 # text that includes lone surrogates and control characters (hypothesis' default text has neither)

@@ -17,6 +17,7 @@ from ..robots import RobotModel
 from ..warehouse import Warehouse
 from .coordination import AGENT_BEHAVIOR, Coordination, get_coordination
 from .legs import MAX_CLOCK_SKEW_S, station_at
+from .manual import OperatorHand
 
 
 class RobotAgent:
@@ -57,6 +58,7 @@ class RobotAgent:
         self._acting: str | None = None
         self._last: float | None = None
         self.planner = planner
+        self.hand = OperatorHand(model, warehouse)  # e-stop and manual drive (.manual)
 
     @property
     def coordination(self) -> str:
@@ -103,7 +105,7 @@ class RobotAgent:
             return False
         if (event.event in ("failed", "cancelled") and event.robot_id == me
                 or event.event == "assigned" and event.robot_id != me):
-            self.model.task_id, self.loaded = None, False
+            self.model.task_id, self.loaded, self._acting = None, False, None
             return True
         return False
 
@@ -142,13 +144,17 @@ class RobotAgent:
 
     def on_path(self, path: TimedPath, t0: float, path_id: int) -> None:
         """Follow a leg whose times count from ``t0``; ValueError if it cannot (see RobotModel.follow).
-        Under behaviour coordination only its goal counts: ValueError if there is no way there."""
+        Under behaviour coordination only its goal counts: ValueError if there is no way there.
+        In manual drive legs are ignored (the planner sends none; a late one must not take over)."""
+        if self.hand.manual:
+            return
         self.driver.follow(path, t0, path_id, self._last)
 
     def tick(self, now: float) -> RobotStatus:
         """Advance to ``now``, start what is due where the robot stands, and report."""
         m = self.model
-        if self._last is not None and now > self._last:
+        if self._last is not None and now > self._last and not self.hand.drive(self._last, now - self._last,
+                                                                                self.heard):
             self.driver.drive(self._last, now - self._last, self.heard)
         if self._last is None or now > self._last:
             self._last = now
@@ -158,10 +164,10 @@ class RobotAgent:
             else:
                 self.loaded, m.task_id = False, None
             self._acting = None
-        if m.mode == "idle" and m.speed == 0.0 and m.progress >= 1.0:
+        if m.mode == "idle" and m.speed == 0.0 and m.progress >= 1.0 and not (self.hand.manual or self.hand.estopped):
             self._act(now)
         state = self.driver.behavior_state()
-        return RobotStatus(**m.status(now), behavior=state)
+        return RobotStatus(**m.status(now), behavior=state, **self.hand.status_fields())
 
     # -- where a leg ends ---------------------------------------------------------------------------
     def _act(self, now: float) -> None:

@@ -22,7 +22,7 @@ from typing import cast
 from msg_schemas.records import Task
 
 #: the states a job is finished in (never reloaded)
-CLOSED = ("done", "failed")
+CLOSED = ("done", "failed", "cancelled")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
@@ -132,6 +132,22 @@ class JobStore:
             raise
         db.execute("COMMIT")
 
+    def replace_task(self, task: Task, event: str, stamp: float, reason: str | None = None) -> None:
+        """Record a changed task of a known job (the operator changed its priority), with the change."""
+        db = self._db
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            cur = db.execute("UPDATE jobs SET task = ?, updated = ? WHERE id = ?", (task.to_json(), stamp, task.id))
+            if cur.rowcount != 1:
+                raise KeyError(f"job {task.id!r} is not in the store")
+            db.execute("INSERT INTO transitions (job, event, state, robot, picked, stamp, reason) "
+                       "SELECT id, ?, state, robot, picked, ?, ? FROM jobs WHERE id = ?",
+                       (event, stamp, reason, task.id))
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
+        db.execute("COMMIT")
+
     # -- reads ---------------------------------------------------------------------------------
     def get(self, job_id: str) -> StoredJob | None:
         row = self._db.execute("SELECT task, seq, state, robot, picked FROM jobs WHERE id = ?", (job_id,)).fetchone()
@@ -140,7 +156,7 @@ class JobStore:
     def open_jobs(self) -> list[StoredJob]:
         """The jobs not done or failed, in submission order."""
         rows = self._db.execute("SELECT task, seq, state, robot, picked FROM jobs "
-                                "WHERE state NOT IN ('done', 'failed') ORDER BY seq").fetchall()
+                                "WHERE state NOT IN ('done', 'failed', 'cancelled') ORDER BY seq").fetchall()
         return [_job(row) for row in rows]
 
     def next_seq(self) -> int:

@@ -109,6 +109,7 @@ class FleetManager:
         self._strangers: set[str] = set()   # ids off the roster already warned about
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
         self._seq = 0
+        self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
         if store is not None:
             self._reload(store)
 
@@ -309,10 +310,11 @@ class FleetManager:
                 self._hold(r, now, d)
                 r.stop = False
         self._arrivals(now, d)
-        self._find_late(d)
-        self._replan(now, d)
-        self._allocate(now, d)
-        self._housekeeping(now, d)
+        if not self.halted:
+            self._find_late(d)
+            self._replan(now, d)
+            self._allocate(now, d)
+            self._housekeeping(now, d)
         if d.legs:
             self._plan_id += 1
         return d
@@ -390,7 +392,8 @@ class FleetManager:
         """Plan the legs of robots that have somewhere to go: those that just picked first (they
         hold a chute), then those re-planning. A robot whose new leg is not yet acknowledged waits."""
         waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
-                   and not r.immobile and r.online and (r.leg is None or r.status.path_id == r.leg.path_id)]
+                   and not r.immobile and r.online and not r.paused and not r.manual
+                   and (r.leg is None or r.status.path_id == r.leg.path_id)]
         waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
         for r, target in waiting:
             if self._plan_leg(r, target, now, d) is not None:
@@ -423,8 +426,9 @@ class FleetManager:
         return marked
 
     def _allocate(self, now: float, d: Decisions) -> None:
-        queued = sorted((j for j in self.jobs.values() if j.state == "queued"),
-                        key=lambda j: (-j.task.priority, j.seq))
+        queued = sorted((j for j in self.jobs.values() if j.state == "queued"),  # earliest deadline among equals
+                        key=lambda j: (-j.task.priority, math.inf if j.task.deadline is None else j.task.deadline,
+                                       j.seq))
         for job in queued:
             pose = job.pick.pose
             if self._reserved(pose):

@@ -14,6 +14,10 @@ from ..robots import RobotKind
 from ..warehouse import Station
 from .legs import Leg
 
+#: a robot in manual drive is planned around as a disc this much (m) larger than it is; the
+#: operator's module re-plans the others around it whenever it has moved this far (.operator)
+MANUAL_GROWTH_M = 0.5
+
 
 def can_do(kind: RobotKind, task: Task) -> bool:
     """The kind has every capability the task needs and carries its payload."""
@@ -37,7 +41,7 @@ class Job:
     pick: Station
     place: Station
     seq: int                 # order of submission (ties between equal priorities)
-    state: str = "queued"    # queued | active | done | failed
+    state: str = "queued"    # queued | active | done | failed | cancelled
     robot: str | None = None
     picked: bool = False
 
@@ -62,6 +66,8 @@ class FleetRobot:
     last_path_id: int = -1
     trouble: str = ""                 # why its last leg could not be planned (noted once)
     stop: bool = False                # back online: stop it wherever it is heading
+    paused: bool = False              # the operator paused it: it holds, others plan around it (.operator)
+    manual: bool = False              # driven by the operator's cmd_vel: a moving obstacle (.operator)
 
     @property
     def id(self) -> str:
@@ -79,7 +85,7 @@ class FleetRobot:
     def free(self) -> bool:
         """Online, able to move, with nothing to do and not in the middle of a pick or place."""
         return (self.online and not self.immobile and self.target is None and self.job is None
-                and self.status.mode not in ("picking", "placing", "error"))
+                and not self.paused and not self.manual and self.status.mode not in ("picking", "placing", "error"))
 
     @property
     def on_leg(self) -> bool:
@@ -89,6 +95,8 @@ class FleetRobot:
 
     def trajectory(self) -> TimedPath:
         """Where it will be: its leg, or standing where its status says for ever."""
-        if self.leg is not None and not self.immobile:
+        if self.leg is not None and not self.immobile and not self.manual:
             return self.leg.path
-        return TimedPath(self.id, self.radius, np.array([[self.status.x, self.status.y, 0.0]]))
+        # driven by hand: where it is, grown by what it may drive before the others re-plan around it
+        radius = self.radius + (MANUAL_GROWTH_M if self.manual else 0.0)
+        return TimedPath(self.id, radius, np.array([[self.status.x, self.status.y, 0.0]]))

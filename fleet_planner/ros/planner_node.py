@@ -33,6 +33,7 @@ from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
+from fleet_planner.ros.operator_services import PlannerOperator
 from fleet_planner.ros.relay import NeighbourPublisher
 from fleet_planner.ros.signing import Keys
 from fleet_planner.validation import printable
@@ -135,6 +136,8 @@ class PlannerNode(Node):
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
         self._tasks = create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
+        self.operator = PlannerOperator(self, self.fleet, self._publish)
         self._timer = self.create_timer(period, self._on_timer)
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py); the lead wires
         # ``neighbour_relay.watch`` to the execution gate
@@ -190,7 +193,7 @@ class PlannerNode(Node):
     def _on_timer(self) -> None:
         now = self._now()
         try:
-            decisions = self.fleet.step(now)
+            decisions = self.operator.step(now)  # the fleet's step, with the operator's part
         except Exception as exc:
             self.get_logger().error(f"planning step failed: {exc!r}\n{traceback.format_exc(limit=-8)}",
                                     throttle_duration_sec=5.0)

@@ -101,6 +101,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="a capability the robot needs (repeat for several)")
     p.add_argument("--payload", type=float, default=0.0, help="kg (default 0)")
     p.add_argument("--priority", type=int, default=0, help="higher goes first (default 0)")
+    p.add_argument("--deadline", type=float, help="when it should be done (s, the planner's ROS time); "
+                   "earliest first among equal priorities, a 'late' event when it passes")
     p.add_argument("--id", help="task id (default: a fresh one)")
     p.add_argument("--timeout", type=float, default=60.0, help="wall seconds to wait for the end (default 60)")
     p.add_argument("--key", default="", metavar="FILE", help="key file: sign the task with its first key")
@@ -144,7 +146,8 @@ def main(args: list[str] | None = None) -> None:
     opts = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     try:
         task = Task(id=opts.id or f"job_{uuid.uuid4().hex[:8]}", pick=opts.pick, place=opts.place,
-                    needs=tuple(opts.needs), payload_kg=opts.payload, priority=opts.priority)
+                    needs=tuple(opts.needs), payload_kg=opts.payload, priority=opts.priority,
+                    deadline=opts.deadline)
         keys = Keys(opts.key, opts.trust)
     except (RecordError, ValueError) as exc:
         _parser().error(str(exc))
