@@ -32,6 +32,7 @@ SCHEDULE = "/fleet/schedule"
 MARKERS = "/fleet/markers"
 MAP = "/map"
 WAIT_MESSAGES = "/fleet/wait_messages"
+OBSTACLES = "/fleet/obstacles"  # fleet/obstacle@1: people, vehicles, pallets (fleet_planner/fleet/obstacles.py)
 
 
 def timed_path_topic(robot_id: str) -> str:
@@ -58,3 +59,4 @@ SCHEDULE_QOS = LATCHED_QOS
 MARKERS_QOS = LATCHED_QOS
 MAP_QOS = LATCHED_QOS
 WAIT_MESSAGES_QOS = _qos(100)
+OBSTACLES_QOS = _qos(100)  # reliable: a pallet reported once must arrive; a tracker repeats the rest

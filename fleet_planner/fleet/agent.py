@@ -7,7 +7,7 @@ Times are seconds on one clock (the robot's ROS time): ``now`` is always passed 
 """
 from __future__ import annotations
 
-from msg_schemas.records import RobotStatus, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import ObstacleRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..behavior import BehaviorController, BehaviorParams
 from ..model import TimedPath
@@ -15,6 +15,7 @@ from ..robots import RobotModel
 from ..warehouse import Warehouse
 from .coordination import AGENT_BEHAVIOR, Coordination, get_coordination
 from .legs import MAX_CLOCK_SKEW_S, station_at
+from .obstacles import ObstacleMap
 
 
 class RobotAgent:
@@ -28,7 +29,8 @@ class RobotAgent:
     site will do. It acts only on the planner's word about its own job: an event about another
     job, or a ``failed`` / ``cancelled`` that does not name this robot, is ignored, and with
     ``planner`` set (the planner's node name) so is every event whose ``sender`` is another node.
-    It hears the other robots' statuses (:meth:`on_status`).
+    It hears the other robots' statuses (:meth:`on_status`) and the obstacles of the intelligent space
+    (:meth:`on_obstacle`): its safety net stops for both.
 
     ``coordination`` (a name of :data:`~.coordination.COORDINATION` or a
     :class:`~.coordination.Coordination`) says how it drives (its :attr:`driver`): ``"central"``,
@@ -51,6 +53,8 @@ class RobotAgent:
         self.loaded = False
         self.heard: dict[str, RobotStatus] = {}   # the other robots' last statuses
         self.driver = self.strategy.driver(model, warehouse, params)
+        self.obstacles = ObstacleMap(max_clock_skew_s=MAX_CLOCK_SKEW_S)   # what the intelligent space reports
+        self.driver.obstacles = self.obstacles
         self._acting: str | None = None
         self._last: float | None = None
         self.planner = planner
@@ -114,6 +118,12 @@ class RobotAgent:
         if status.id != self.model.id and (last is None or status.stamp >= last.stamp):
             self.heard[status.id] = status
 
+    def on_obstacle(self, ob: ObstacleRecord, now: float | None = None) -> None:
+        """An obstacle on the wire (see :class:`~.obstacles.ObstacleMap`), for the safety net; ValueError
+        (naming the field) for one stamped too far ahead of ``now`` (by default the last tick)."""
+        clock = now if now is not None else self._last
+        self.obstacles.update(ob, clock if clock is not None else ob.stamp)
+
     def on_wait_message(self, msg: WaitMessageRecord) -> None:
         """A wait message on the topic: taken at the next tick if it is addressed to this robot."""
         if msg.receiver == self.model.id:
@@ -131,6 +141,7 @@ class RobotAgent:
     def tick(self, now: float) -> RobotStatus:
         """Advance to ``now``, start what is due where the robot stands, and report."""
         m = self.model
+        self.obstacles.expire(now)
         if self._last is not None and now > self._last:
             self.driver.drive(self._last, now - self._last, self.heard)
         if self._last is None or now > self._last:
