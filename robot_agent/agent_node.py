@@ -32,7 +32,15 @@ from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
-from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent, WaitMessageRecord, robot_id_problem
+from msg_schemas.records import (
+    ObstacleRecord,
+    RecordError,
+    RobotStatus,
+    Task,
+    TaskEvent,
+    WaitMessageRecord,
+    robot_id_problem,
+)
 
 
 def _range(description: str, lo: float, hi: float) -> ParameterDescriptor:
@@ -90,6 +98,7 @@ class AgentNode(Node):
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        subscribe(String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)  # for the safety net
         self._waits: Publisher | None = None
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
@@ -124,6 +133,12 @@ class AgentNode(Node):
             self.agent.on_status(string_to_record(msg, RobotStatus))
         except RecordError as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _on_obstacle(self, msg: String) -> None:
+        try:
+            self.agent.on_obstacle(string_to_record(msg, ObstacleRecord), self.get_clock().now().nanoseconds / 1e9)
+        except (RecordError, ValueError) as exc:
+            self.get_logger().warning(f"obstacle ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_wait_message(self, msg: String) -> None:
         try:
