@@ -495,13 +495,51 @@ class CommandReply(Record):
     command: str | None = spec(optional(choice(COMMANDS)), default=None)
 
 
+#: what the intelligent space may report as an obstacle (``fleet/obstacle@1``, field ``kind``)
+OBSTACLE_KINDS = ("person", "vehicle", "pallet", "robot", "other")
+#: the fastest obstacle taken (m/s): anything faster is a tracking error, not a forklift
+MAX_OBSTACLE_SPEED = 20.0
+#: the largest obstacle disc taken (m)
+MAX_OBSTACLE_RADIUS = 10.0
+
+
+@dataclass(frozen=True)
+class ObstacleRecord(Record):
+    """Something in the warehouse that is not a robot of the fleet, as the intelligent space sees it
+    (You and Ji, section 2.1: "all the static and moving obstacles' positions"): a disc of ``radius``
+    at ``(x, y)`` moving at ``(vx, vy)`` (m, m/s, map frame) at ``stamp`` (s, ROS time).
+
+    A record supersedes the last one with the same ``id``. ``persistent``: it stays until a record
+    with ``cleared: true`` for its id (a dropped pallet reported once); otherwise it expires when no
+    newer record came for a while (a person the tracker lost). ``cleared``: it is gone."""
+
+    SCHEMA: ClassVar[str] = "fleet/obstacle@1"
+    NAME: ClassVar[str] = "obstacle"
+
+    id: str = spec(nonempty)
+    kind: str = spec(choice(OBSTACLE_KINDS))
+    x: float = spec(number())
+    y: float = spec(number())
+    radius: float = spec(number(0.0, MAX_OBSTACLE_RADIUS, above=0.0))
+    stamp: float = spec(number())
+    vx: float = spec(number(-MAX_OBSTACLE_SPEED, MAX_OBSTACLE_SPEED), default=0.0)
+    vy: float = spec(number(-MAX_OBSTACLE_SPEED, MAX_OBSTACLE_SPEED), default=0.0)
+    persistent: bool = spec(boolean, default=False)
+    cleared: bool = spec(boolean, default=False)
+
+    def _check_together(self) -> None:
+        if self.vx * self.vx + self.vy * self.vy > MAX_OBSTACLE_SPEED ** 2:
+            raise RecordError(f"obstacle.vx: speed {(self.vx ** 2 + self.vy ** 2) ** 0.5:g} m/s "
+                              f"(at most {MAX_OBSTACLE_SPEED:g})")
+
+
 RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours,
-                                     Command, CommandReply)
+                                     Command, CommandReply, ObstacleRecord)
 
 __all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Check", "Command", "CommandReply",
            "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS", "MAX_ITEMS",
-           "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours",
-           "PathAuth", "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS", "Task",
-           "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json",
-           "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text",
-           "unsigned_json"]
+           "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS", "MAX_OBSTACLE_SPEED", "MAX_REASON_CHARS",
+           "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours", "OBSTACLE_KINDS", "ObstacleRecord", "PathAuth",
+           "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS", "Task", "TaskEvent",
+           "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json", "nonempty",
+           "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text", "unsigned_json"]

@@ -34,6 +34,7 @@ SCHEDULE = "/fleet/schedule"
 MARKERS = "/fleet/markers"
 MAP = "/map"
 WAIT_MESSAGES = "/fleet/wait_messages"
+OBSTACLES = "/fleet/obstacles"  # fleet/obstacle@1: people, vehicles, pallets (fleet_planner/fleet/obstacles.py)
 
 
 def timed_path_topic(robot_id: str) -> str:
@@ -101,3 +102,4 @@ def robot_topic(robot_id: str, name: str) -> str:
     if problem:
         raise ValueError(f"robot id {problem}")
     return f"/robots/{robot_id}/{name}"
+OBSTACLES_QOS = _qos(100)  # reliable: a pallet reported once must arrive; a tracker repeats the rest

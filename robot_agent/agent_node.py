@@ -40,6 +40,7 @@ from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
 from msg_schemas.records import (
     Neighbours,
+    ObstacleRecord,
     PathAuth,
     RecordError,
     RobotStatus,
@@ -128,6 +129,7 @@ class AgentNode(Node):
             subscribe(String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         else:
             subscribe(String, topics.neighbours_topic(robot_id), self._on_neighbours, topics.NEIGHBOURS_QOS)
+        subscribe(String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)  # for the safety net
         self._waits: Publisher | None = None
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
@@ -212,6 +214,12 @@ class AgentNode(Node):
             self.agent.on_neighbours(record.robots, self.get_clock().now().nanoseconds / 1e9)
         except RecordError as exc:
             self.get_logger().warning(f"neighbours ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _on_obstacle(self, msg: String) -> None:
+        try:
+            self.agent.on_obstacle(string_to_record(msg, ObstacleRecord), self.get_clock().now().nanoseconds / 1e9)
+        except (RecordError, ValueError) as exc:
+            self.get_logger().warning(f"obstacle ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_wait_message(self, msg: String) -> None:
         try:

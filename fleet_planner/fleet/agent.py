@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from msg_schemas.records import RobotStatus, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import ObstacleRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..behavior import BehaviorController, BehaviorParams
 from ..model import TimedPath
@@ -18,6 +18,7 @@ from ..warehouse import Warehouse
 from .coordination import AGENT_BEHAVIOR, Coordination, get_coordination
 from .legs import MAX_CLOCK_SKEW_S, station_at
 from .manual import OperatorHand
+from .obstacles import ObstacleMap
 
 
 class RobotAgent:
@@ -32,7 +33,8 @@ class RobotAgent:
     job, or a ``failed`` / ``cancelled`` that does not name this robot, is ignored, and with
     ``planner`` set (the planner's node name) so is every event whose ``sender`` is another node.
     It hears the other robots' statuses (:meth:`on_status`, each one; or :meth:`on_neighbours`, the
-    planner's relay of those within its safety range).
+    planner's relay of those within its safety range) and the obstacles of the intelligent space
+    (:meth:`on_obstacle`): its safety net stops for both.
 
     ``coordination`` (a name of :data:`~.coordination.COORDINATION` or a
     :class:`~.coordination.Coordination`) says how it drives (its :attr:`driver`): ``"central"``,
@@ -55,6 +57,8 @@ class RobotAgent:
         self.loaded = False
         self.heard: dict[str, RobotStatus] = {}   # the other robots' last statuses
         self.driver = self.strategy.driver(model, warehouse, params)
+        self.obstacles = ObstacleMap(max_clock_skew_s=MAX_CLOCK_SKEW_S)   # what the intelligent space reports
+        self.driver.obstacles = self.obstacles
         self._acting: str | None = None
         self._last: float | None = None
         self.planner = planner
@@ -132,6 +136,11 @@ class RobotAgent:
             last = self.heard.get(st.id)
             heard[st.id] = last if last is not None and last.stamp > st.stamp else st
         self.heard = heard
+    def on_obstacle(self, ob: ObstacleRecord, now: float | None = None) -> None:
+        """An obstacle on the wire (see :class:`~.obstacles.ObstacleMap`), for the safety net; ValueError
+        (naming the field) for one stamped too far ahead of ``now`` (by default the last tick)."""
+        clock = now if now is not None else self._last
+        self.obstacles.update(ob, clock if clock is not None else ob.stamp)
 
     def on_wait_message(self, msg: WaitMessageRecord) -> None:
         """A wait message on the topic: taken at the next tick if it is addressed to this robot."""
@@ -153,6 +162,7 @@ class RobotAgent:
     def tick(self, now: float) -> RobotStatus:
         """Advance to ``now``, start what is due where the robot stands, and report."""
         m = self.model
+        self.obstacles.expire(now)
         if self._last is not None and now > self._last and not self.hand.drive(self._last, now - self._last,
                                                                                 self.heard):
             self.driver.drive(self._last, now - self._last, self.heard)

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -48,6 +48,7 @@ from ..planners import Planner
 from ..robots import RobotModel
 from ..warehouse import Warehouse
 from .legs import CONTROL_PERIOD_S, station_at
+from .obstacles import ObstacleMap
 from .state import FleetRobot, Target
 from .wire import behavior_state, view_of_status
 
@@ -84,6 +85,8 @@ class Driver(ABC):
     waits_for: str | None = None
     #: its behaviour controller (behaviour coordination), else None
     controller: BehaviorController | None = None
+    #: the obstacles the robot hears (its agent's), for its safety net
+    obstacles: ObstacleMap | None = None
 
     @abstractmethod
     def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
@@ -114,6 +117,8 @@ class Coordination(ABC):
     name: ClassVar[str]
     #: the robots talk over the wait-message topic
     exchanges_wait_messages: ClassVar[bool] = False
+    #: legs are planned around the obstacles of the intelligent space (and re-planned when one threatens them)
+    plans_around_obstacles: ClassVar[bool] = False
 
     # -- the planner's end ------------------------------------------------------------------------
     @abstractmethod
@@ -122,9 +127,11 @@ class Coordination(ABC):
 
     @abstractmethod
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
-                 planner: Planner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+                 planner: Planner, speed: float, fleet: Iterable[FleetRobot],
+                 obstacles: Sequence[TimedPath] = ()) -> TimedPath:
         """A leg for ``robot`` from ``start`` at ``t0`` to ``target`` at ``speed`` (``fleet``: every
-        robot, ``robot`` included); :class:`LegNotPlanned` if there is none now."""
+        robot, ``robot`` included; ``obstacles``: the predicted obstacles as trajectories, see
+        :mod:`.obstacles`); :class:`LegNotPlanned` if there is none now."""
 
     @abstractmethod
     def is_late(self, robot: FleetRobot, tolerance_s: float) -> bool:
@@ -149,6 +156,7 @@ class CentralCoordination(Coordination):
     as timed, with a safety net (:class:`CentralDriver`)."""
 
     name = "central"
+    plans_around_obstacles = True
 
     def start_of(self, robot: FleetRobot, t0: float) -> Point:
         """Where it stands, or, driving its leg, a little further along it at the speed its status
@@ -165,12 +173,14 @@ class CentralCoordination(Coordination):
         return point_at_arc(wp[:, :2], arc, s)
 
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
-                 planner: Planner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
-        """Planned with ``planner`` around the trajectories of all other robots."""
+                 planner: Planner, speed: float, fleet: Iterable[FleetRobot],
+                 obstacles: Sequence[TimedPath] = ()) -> TimedPath:
+        """Planned with ``planner`` around the trajectories of all other robots and the obstacles
+        (participants above every robot)."""
         kind = robot.kind
         spec = RobotSpec(robot.id, robot.radius, speed, start, target.pose, kind.name,
                          kind.max_accel if math.isfinite(kind.max_accel) else None)
-        others = [o.trajectory() for o in fleet if o is not robot]
+        others = [o.trajectory() for o in fleet if o is not robot] + list(obstacles)
         try:
             return planner.plan_incremental(grid, [spec], others, t0)[0]
         except PlanningError as exc:
@@ -218,7 +228,8 @@ class CentralDriver(Driver):
         """Whether the robot must hold this step rather than drive into another robot: one whose
         reported disc, grown by :data:`NET_MARGIN_M` and swept along the way it drives from its
         report to the end of the step (at its reported velocity), lies in the robot's critical
-        area reaching as far as it may drive in the step (:func:`~fleet_planner.behavior.safety_stop`).
+        area reaching as far as it may drive in the step (:func:`~fleet_planner.behavior.safety_stop`);
+        the obstacles it hears (:attr:`Driver.obstacles`) likewise, swept along their velocity.
         Robots passing by at their planned distance are not in it: the net stays out of the plan's
         way and only stops a robot that would otherwise drive into one (which the planner then
         re-plans when it gets late)."""
@@ -236,6 +247,11 @@ class CentralDriver(Driver):
             ahead_s = ahead_s if 0.0 <= ahead_s <= STALE_S else 0.0   # a silent robot stands
             sweep[st.id] = (st.vx * ahead_s, st.vy * ahead_s)
             others.append(RobotView(st.id, (st.x, st.y), st.radius))
+        if self.obstacles is not None:  # people, vehicles, pallets: stopped for like robots
+            for oid, (ox, oy), radius, (dx, dy) in self.obstacles.net_discs(t, dt, STALE_S):
+                if math.hypot(ox - m.x, oy - m.y) <= k.radius + radius + step + math.hypot(dx, dy):
+                    sweep[oid] = (dx, dy)
+                    others.append(RobotView(oid, (ox, oy), radius))
         blocker = safety_stop(RobotView(m.id, (m.x, m.y), k.radius, next_waypoint=ahead), others, step,
                               NET_MARGIN_M, sweep)
         self.waits_for = blocker.id if blocker is not None else None
@@ -260,7 +276,8 @@ class BehaviorCoordination(Coordination):
         return robot.status.x, robot.status.y
 
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
-                 planner: Planner, speed: float, fleet: Iterable[FleetRobot]) -> TimedPath:
+                 planner: Planner, speed: float, fleet: Iterable[FleetRobot],
+                 obstacles: Sequence[TimedPath] = ()) -> TimedPath:
         """The robot's shortest path on the map, around nobody, timed at ``speed`` from ``t0``. Only
         its goal binds the robot, which plans its own way there."""
         points = self._finder(grid, robot.radius).find(start, target.pose)

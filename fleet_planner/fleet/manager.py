@@ -40,6 +40,7 @@ import numpy as np
 from msg_schemas.records import (
     MAX_NAME_CHARS,
     MAX_RECORD_BYTES,
+    ObstacleRecord,
     RecordError,
     RobotStatus,
     Schedule,
@@ -56,6 +57,7 @@ from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
 from .jobstore import DuplicateJob, JobStore
 from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
+from .obstacles import ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Target, can_do
 
 #: unknown robot ids (off the roster) warned about one by one; beyond that, silently ignored
@@ -78,7 +80,7 @@ class FleetManager:
                  params: DispatchParams | None = None, parking: Sequence[Point] = (),
                  coordination: str | Coordination = "central", planner: Planner | None = None,
                  store: JobStore | None = None, roster: Iterable[str] | None = None,
-                 max_clock_skew_s: float = MAX_CLOCK_SKEW_S):
+                 max_clock_skew_s: float = MAX_CLOCK_SKEW_S, obstacle_params: ObstacleParams | None = None):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
         self.strategy = get_coordination(coordination)
@@ -105,6 +107,8 @@ class FleetManager:
         if not 0.0 <= max_clock_skew_s <= 3600.0:
             raise ValueError(f"max_clock_skew_s: must be a number in [0, 3600] (got {max_clock_skew_s!r})")
         self.max_clock_skew_s = float(max_clock_skew_s)
+        #: the obstacles of the intelligent space: participants above every robot (fleet/obstacles.py)
+        self.obstacles = ObstacleMap(obstacle_params, self.max_clock_skew_s)
         self.roster = None if roster is None else frozenset(roster)
         self._strangers: set[str] = set()   # ids off the roster already warned about
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
@@ -256,6 +260,34 @@ class FleetManager:
             return
         self._note_arrival(r, now)
 
+    def on_obstacle(self, ob: ObstacleRecord, now: float) -> None:
+        """Take in an obstacle of the intelligent space (``now``: when it arrived); ValueError (naming
+        the field) for one stamped more than ``max_clock_skew_s`` ahead of ``now``."""
+        note = self.obstacles.update(ob, now)
+        if note:
+            self._notes.append(note)
+
+    def _watch_obstacles(self, now: float, d: Decisions) -> None:
+        """Obstacles gone (cleared or expired): the legs re-planned for them re-plan again; legs an
+        obstacle now threatens re-plan around it (or the robot holds, where none can be planned)."""
+        for ob in self.obstacles.expire(now):
+            if not ob.persistent and now - ob.stamp > self.obstacles.params.stale_s:  # else: cleared, noted
+                d.notes.append(f"obstacle {ob.id} ({ob.kind}) expired: nothing heard for {now - ob.stamp:.1f} s")
+            for rid in self.obstacles.take_affected(ob.id):
+                r = self.robots.get(rid)  # one driving on re-plans only if its leg can start where it will be
+                if (r is not None and r.target is not None and r.on_leg and not r.immobile
+                        and math.hypot(r.status.vx, r.status.vy) * self.params.lead_s < r.radius / 2):
+                    r.replan = True
+        if not self.strategy.plans_around_obstacles or not len(self.obstacles):
+            return
+        driving = [(r.id, r.leg.path, r.radius) for r in self.robots.values()
+                   if r.leg is not None and r.target is not None and r.on_leg and r.online and not r.immobile
+                   and not r.replan]
+        for rid, oid in self.obstacles.threats(driving, now, self.margin).items():
+            r = self.robots[rid]
+            r.replan = r.conflict = True   # a robot with no leg now holds (_replan)
+            d.notes.append(f"robot {rid} re-plans around obstacle {oid}")
+
     def _adopt(self, r: FleetRobot) -> None:
         """After a restart: a robot whose status names a reloaded job it picked the goods of takes
         it up again and heads for the storing site (the goods are not picked again)."""
@@ -301,6 +333,7 @@ class FleetManager:
         d = Decisions(notes=self._notes)
         self._notes = []
         self._find_immobile(now, d)
+        self._watch_obstacles(now, d)
         if self.store is not None:
             for r in self.robots.values():
                 self._adopt(r)
@@ -493,7 +526,7 @@ class FleetManager:
             try:
                 path = self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
                                               speed=r.kind.max_speed * self.params.speed_factor,
-                                              fleet=self.robots.values())
+                                              fleet=self.robots.values(), obstacles=self.obstacles.trajectories(now))
             except LegNotPlanned as exc:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
@@ -513,7 +546,12 @@ class FleetManager:
         d.legs.append(leg)
 
     def _next_path_id(self, r: FleetRobot, now: float) -> int:
-        return max(round((now + self.params.lead_s) * 1e9), r.last_path_id + 1)
+        lead = self.params.lead_s
+        if r.on_leg and math.hypot(r.status.vx, r.status.vy) * lead > r.radius / 2:
+            # re-planned while it drives on: a leg starting lead_s ahead would start further along
+            # its way than its radius, and the robot refuses a leg that starts beyond it
+            lead = 0.0
+        return max(round((now + lead) * 1e9), r.last_path_id + 1)
 
     def _occupant(self, pose: Point, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:
         """A robot standing on, or bound for, a disc of ``radius`` at ``pose``."""

@@ -1,10 +1,12 @@
 """The central planner node: a thin adapter between the fleet topics and :class:`FleetManager`.
 
-Subscribes ``/fleet/tasks`` and ``/fleet/robot_status``; on a timer (ROS time) asks the fleet
-manager what changes and publishes each robot's new timed path (``/robots/<id>/timed_path``, one
-stamp per pose), the task events, the schedule, RViz markers, and once the map. No single message
-can stop it: a bad task is answered with a ``rejected`` event naming the problem, a bad status
-with a logged warning.
+Subscribes ``/fleet/tasks``, ``/fleet/robot_status`` and ``/fleet/obstacles`` (the intelligent
+space's people, vehicles and pallets, planned around as participants above every robot); on a
+timer (ROS time) asks the fleet manager what changes and publishes each robot's new timed path
+(``/robots/<id>/timed_path``, one stamp per pose), the task events, the schedule, RViz markers
+(obstacles with their predictions too), and once the map. No single message can stop it: a bad
+task is answered with a ``rejected`` event naming the problem, a bad status or obstacle with a
+logged warning.
 
     ros2 run fleet_planner planner --ros-args --params-file config/planner_params.yaml
 """
@@ -30,6 +32,7 @@ from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
+from fleet_planner.fleet.obstacles import ObstacleParams
 from fleet_planner.robots import RobotKind, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.entry import run_node
@@ -47,7 +50,7 @@ from msg_schemas.convert import (
     string_to_record,
     timed_path_to_msg,
 )
-from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent
+from msg_schemas.records import ObstacleRecord, RecordError, RobotStatus, Task, TaskEvent
 
 #: parameters that shape planned legs and cannot change while the node runs
 _FIXED = ("speed_factor", "safety_margin")
@@ -60,6 +63,12 @@ _HELP = {
     "low_battery": "battery fraction below which a free robot goes to a charger",
     "min_task_battery": "battery fraction a robot needs to take a job",
     "idle_s": "s a free robot waits before it goes to a charger",
+}
+
+_OBSTACLE_HELP = {
+    "horizon_s": "s a moving obstacle is predicted ahead (constant velocity)",
+    "growth": "m its predicted disc grows per second of prediction",
+    "stale_s": "s after its last record an obstacle that is not persistent is forgotten",
 }
 
 
@@ -108,6 +117,10 @@ class PlannerNode(Node):
                          self.declare_parameter("auth_trust_file", "", ParameterDescriptor(
             description="key file of the clients: with it, only tasks signed by one of its keys are taken "
                         "(empty: any task)", read_only=True)).value)
+        # obstacles of the intelligent space (fleet/obstacles.py): how they are predicted and forgotten
+        ob_defaults = ObstacleParams()
+        ob_values = {f.name: self.declare_parameter(f"obstacle_{f.name}", float(getattr(ob_defaults, f.name)), _range(
+            _OBSTACLE_HELP[f.name], *ObstacleParams.RANGES[f.name])).value for f in fields(ObstacleParams)}
         defaults = DispatchParams()
         values = {}
         for f in fields(DispatchParams):
@@ -125,7 +138,7 @@ class PlannerNode(Node):
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
                                   [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
                                   store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew,
-                                  roster=roster)
+                                  roster=roster, obstacle_params=ObstacleParams(**ob_values))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
@@ -138,6 +151,7 @@ class PlannerNode(Node):
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
         # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
         self.operator = PlannerOperator(self, self.fleet, self._publish)
+        create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
         self._timer = self.create_timer(period, self._on_timer)
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py); the lead wires
         # ``neighbour_relay.watch`` to the execution gate
@@ -190,6 +204,14 @@ class PlannerNode(Node):
         except Exception as exc:
             self.get_logger().error(f"robot status {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
 
+    def _on_obstacle(self, msg: String) -> None:
+        try:
+            self.fleet.on_obstacle(string_to_record(msg, ObstacleRecord), self._now())
+        except (RecordError, ValueError) as exc:
+            self.get_logger().warning(f"obstacle ignored: {exc}", throttle_duration_sec=5.0)
+        except Exception as exc:
+            self.get_logger().error(f"obstacle {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
+
     def _on_timer(self) -> None:
         now = self._now()
         try:
@@ -229,7 +251,8 @@ class PlannerNode(Node):
         self._publish_events(d.events)
         if d.legs:
             self._schedule.publish(record_to_string(self.fleet.schedule(now)))
-        self._markers.publish(plan_markers(self.fleet.trajectories(), self.fleet.statuses(), self.frame_id, now))
+        self._markers.publish(plan_markers(self.fleet.trajectories() + self.fleet.obstacles.trajectories(now),
+                                           self.fleet.statuses(), self.frame_id, now))
 
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:

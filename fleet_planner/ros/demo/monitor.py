@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 from rclpy.executors import Executor
 from rclpy.node import Node
 from std_msgs.msg import String
@@ -17,7 +18,7 @@ from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.submit import planner_matched
 from msg_schemas import topics
 from msg_schemas.convert import string_to_record
-from msg_schemas.records import RecordError, RobotStatus, Task, TaskEvent
+from msg_schemas.records import ObstacleRecord, RecordError, RobotStatus, Task, TaskEvent
 
 
 class FleetMonitor(Node):
@@ -36,6 +37,10 @@ class FleetMonitor(Node):
         self._events = create_draining_subscription(self, String, topics.TASK_EVENTS, self._on_event,
                                                     topics.TASK_EVENTS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        # the obstacles the intelligent space reports (people...): positions (x, y, stamp) by id
+        self.obstacle_tracks: dict[str, list[tuple[float, float, float]]] = {}
+        self.obstacle_radius: dict[str, float] = {}
+        create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
@@ -64,6 +69,37 @@ class FleetMonitor(Node):
         self.status[st.id] = st
         self.radius[st.id] = st.radius
         self.tracks.setdefault(st.id, []).append((st.x, st.y, st.stamp))
+
+    def _on_obstacle(self, msg: String) -> None:
+        try:
+            ob = string_to_record(msg, ObstacleRecord)
+        except RecordError as exc:
+            self.get_logger().warning(f"obstacle ignored: {exc}", throttle_duration_sec=5.0)
+            return
+        if not ob.cleared:
+            self.obstacle_radius[ob.id] = ob.radius
+            self.obstacle_tracks.setdefault(ob.id, []).append((ob.x, ob.y, ob.stamp))
+
+    def obstacle_trajectories(self) -> list[TimedPath]:
+        """Each obstacle's reported positions as a timed path (straight between records)."""
+        return [samples_to_path(oid, self.obstacle_radius[oid], track) for oid, track in self.obstacle_tracks.items()]
+
+    def obstacle_separation(self) -> tuple[float, str | None, str | None, float | None]:
+        """Smallest distance minus the sum of radii between a robot and an obstacle, over every
+        reported time (each obstacle counted only while it was reported)."""
+        best: tuple[float, str | None, str | None, float | None] = (float("inf"), None, None, None)
+        robots = self.trajectories()
+        for ob in self.obstacle_trajectories():
+            t0, t1 = ob.waypoints[0, 2], ob.waypoints[-1, 2]
+            for r in robots:
+                wp = r.waypoints
+                inside = wp[(wp[:, 2] > t0) & (wp[:, 2] < t1)]
+                ends = np.array([[*r.position(t0), t0], [*r.position(t1), t1]])
+                during = TimedPath(r.robot_id, r.radius, np.vstack([ends[:1], inside, ends[1:]]))
+                gap = min_separation([during, ob])
+                if gap[0] < best[0]:
+                    best = gap
+        return best
 
     def events_of(self, task_id: str) -> list[TaskEvent]:
         return [e for e in self.events if e.task_id == task_id]

@@ -1,0 +1,211 @@
+"""Obstacles from the intelligent space (You & Ji, "Design of a Multi-robot Bin Packing System in an
+Automatic Warehouse", section 2.1: the space gives the central planner "all the static and moving
+obstacles' positions"): people, foreign vehicles, dropped pallets, as ``fleet/obstacle@1`` records
+(:class:`~msg_schemas.records.ObstacleRecord`). Pure (no rclpy); used on both ends of the fleet.
+
+:class:`ObstacleMap` keeps the obstacles now known, by id (a record supersedes the last of its
+id; ``cleared`` removes it; one that is not ``persistent`` expires ``stale_s`` after its last
+record), and turns them into what the planner and the robots need:
+
+* **the planner's fixed trajectories** (:meth:`ObstacleMap.trajectories`): each obstacle is a
+  participant above every robot in the (M,D) network: it goes into the ``fixed`` trajectories of
+  :meth:`~fleet_planner.planners.Planner.plan_incremental`, so legs are delayed, held or re-routed
+  around it. A moving obstacle is predicted at constant velocity over ``horizon_s`` and its disc
+  grows by ``growth`` m per second of prediction (it may turn, speed up or stop). The planner
+  interface takes one radius per trajectory and parks every fixed trajectory on its last waypoint
+  for ever, so the prediction goes in as one straight trajectory from where the obstacle is now to
+  where it will be at the horizon, with the disc it has at the horizon (the grown disc's upper
+  bound over the whole horizon: conservative), parked there. A static obstacle (slower than
+  :data:`STILL_MPS`) stands where it is for ever: its cells are blocked until it is cleared.
+* **which legs an obstacle now threatens** (:meth:`ObstacleMap.threats`): a leg whose disc comes
+  closer than the sum of radii plus the margin to the obstacle's predicted disc (grown exactly
+  with the prediction time) within the horizon, or, for a static obstacle, anywhere on the rest of
+  the leg. The manager re-plans such legs (or holds the robot where no leg can be planned); when an
+  obstacle goes (cleared or expired), the legs that were re-planned for it are re-planned again,
+  so that robots sent round it may take the direct way.
+* **the robots' safety net** (:meth:`ObstacleMap.net_discs`): each obstacle as a disc swept along
+  its velocity to the end of the control step, for the critical-area check of a central robot
+  (:func:`~fleet_planner.behavior.safety_stop`).
+
+Times are seconds on one clock (ROS time): ``now`` is always passed in.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from msg_schemas.records import ObstacleRecord
+
+from ..geometry import polyline_passes_near
+from ..model import Point, TimedPath
+
+#: an obstacle slower than this (m/s) is static: it stands where it is
+STILL_MPS = 0.05
+#: the threat check samples the prediction this often (s); what two discs may close in between
+#: (at most their closing speed times half of it, a few centimetres) is within the planner's margin
+SAMPLE_S = 0.05
+#: at most this many obstacles are kept (the oldest record goes first)
+MAX_OBSTACLES = 1000
+#: the prefix of an obstacle's id in the planner's fixed trajectories and the robots' safety net
+PREFIX = "obstacle:"
+
+
+@dataclass(frozen=True)
+class ObstacleParams:
+    """How obstacles are predicted and forgotten (seconds, metres)."""
+
+    horizon_s: float = 4.0   # a moving obstacle is predicted this far ahead (constant velocity)
+    growth: float = 0.15     # m its disc grows per second of prediction
+    stale_s: float = 1.5     # an obstacle that is not persistent is gone this long after its last record
+
+    RANGES = {"horizon_s": (0.0, 60.0), "growth": (0.0, 5.0), "stale_s": (0.05, 3600.0)}
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            lo, hi = self.RANGES[f.name]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+                raise ValueError(f"{f.name}: must be a number in [{lo:g}, {hi:g}] (got {value!r})")
+
+
+def is_static(ob: ObstacleRecord) -> bool:
+    return math.hypot(ob.vx, ob.vy) < STILL_MPS
+
+
+class ObstacleMap:
+    """The obstacles known now, by id, and what follows from them (see the module docstring).
+    ``max_clock_skew_s``: a record stamped further ahead of ``now`` is refused."""
+
+    def __init__(self, params: ObstacleParams | None = None, max_clock_skew_s: float = 2.0):
+        self.params = params or ObstacleParams()
+        self.max_clock_skew_s = float(max_clock_skew_s)
+        self.obstacles: dict[str, ObstacleRecord] = {}
+        #: per obstacle id, the robots whose legs were re-planned for it (re-planned again when it goes)
+        self.affected: dict[str, set[str]] = {}
+        self._removed: list[ObstacleRecord] = []   # cleared since the last expire()
+
+    def __len__(self) -> int:
+        return len(self.obstacles)
+
+    def __iter__(self) -> Iterator[ObstacleRecord]:
+        return iter(self.obstacles.values())
+
+    # -- input ------------------------------------------------------------------------------------
+    def update(self, ob: ObstacleRecord, now: float) -> str | None:
+        """Take a record; returns a note when it changes what is known (an obstacle appears or is
+        cleared), None for an update or an old record. ValueError (naming the field) for a record
+        stamped more than ``max_clock_skew_s`` ahead of ``now``."""
+        if ob.stamp > now + self.max_clock_skew_s:
+            raise ValueError(f"obstacle.stamp: {ob.id!r} is stamped {ob.stamp - now:.3g} s ahead of the clock "
+                             f"(at most {self.max_clock_skew_s:g} s)")
+        last = self.obstacles.get(ob.id)
+        if last is not None and ob.stamp < last.stamp:
+            return None  # overtaken by a newer record
+        if ob.cleared:
+            if last is None:
+                return None
+            del self.obstacles[ob.id]
+            self._removed.append(last)
+            return f"obstacle {ob.id} ({last.kind}) cleared"
+        if not ob.persistent and now - ob.stamp > self.params.stale_s:
+            return None  # already stale: it says nothing about now
+        if last is None and len(self.obstacles) >= MAX_OBSTACLES:
+            oldest = min(self.obstacles.values(), key=lambda o: o.stamp)
+            del self.obstacles[oldest.id]
+        self.obstacles[ob.id] = ob
+        if last is None:
+            return (f"obstacle {ob.id} ({ob.kind}, radius {ob.radius:g} m) at ({ob.x:.2f}, {ob.y:.2f})"
+                    + (" static" if is_static(ob) else f" moving at {math.hypot(ob.vx, ob.vy):.2f} m/s"))
+        return None
+
+    def expire(self, now: float) -> list[ObstacleRecord]:
+        """Forget the obstacles that are not persistent and had no record for ``stale_s``; returned
+        with those cleared since the last call: every obstacle gone since then."""
+        stale = [o for o in self.obstacles.values() if not o.persistent and now - o.stamp > self.params.stale_s]
+        for o in stale:
+            del self.obstacles[o.id]
+        gone, self._removed = self._removed + stale, []
+        return gone
+
+    def take_affected(self, obstacle_id: str) -> set[str]:
+        """The robots re-planned for an obstacle that is gone (forgotten here)."""
+        return self.affected.pop(obstacle_id, set())
+
+    # -- prediction ---------------------------------------------------------------------------------
+    def position(self, ob: ObstacleRecord, t: float) -> Point:
+        """Where ``ob`` is predicted at ``t`` (constant velocity from its stamp)."""
+        ahead = max(0.0, t - ob.stamp)
+        return ob.x + ob.vx * ahead, ob.y + ob.vy * ahead
+
+    def trajectories(self, now: float) -> list[TimedPath]:
+        """Every obstacle as a fixed trajectory for the planner, from ``now`` (see the module docstring)."""
+        out = []
+        for ob in self.obstacles.values():
+            name = PREFIX + ob.id
+            if is_static(ob):
+                out.append(TimedPath(name, ob.radius, np.array([[ob.x, ob.y, now]])))
+                continue
+            end = now + self.params.horizon_s
+            ahead = max(0.0, end - ob.stamp)
+            radius = ob.radius + self.params.growth * ahead
+            (x0, y0), (x1, y1) = self.position(ob, now), self.position(ob, end)
+            if end <= now or math.hypot(x1 - x0, y1 - y0) < 1e-9:
+                out.append(TimedPath(name, radius, np.array([[x1, y1, now]])))
+            else:
+                out.append(TimedPath(name, radius, np.array([[x0, y0, now], [x1, y1, end]])))
+        return out
+
+    def threats(self, legs: Iterable[tuple[str, TimedPath, float]], now: float, margin: float) -> dict[str, str]:
+        """For legs ``(robot id, timed path in absolute time, radius)``, those an obstacle threatens
+        from ``now`` on: robot id -> obstacle id (the first found). The robot is noted as affected
+        by that obstacle (:meth:`take_affected`)."""
+        if not self.obstacles:
+            return {}
+        moving = [o for o in self.obstacles.values() if not is_static(o)]
+        static = [o for o in self.obstacles.values() if is_static(o)]
+        h = self.params.horizon_s
+        ts = np.append(np.arange(now, now + h, SAMPLE_S), now + h)
+        if moving:
+            stamps = np.array([o.stamp for o in moving])
+            ahead = np.clip(ts[None, :] - stamps[:, None], 0.0, None)   # (K, T): prediction time
+            ox = np.array([o.x for o in moving])[:, None] + np.array([o.vx for o in moving])[:, None] * ahead
+            oy = np.array([o.y for o in moving])[:, None] + np.array([o.vy for o in moving])[:, None] * ahead
+            reach = np.array([o.radius for o in moving])[:, None] + self.params.growth * ahead
+        out: dict[str, str] = {}
+        for rid, path, radius in legs:
+            wp = path.waypoints
+            hit = None
+            for o in static:
+                ahead_pts = wp[wp[:, 2] > now, :2]
+                pts = np.vstack([path.position(now), ahead_pts]) if len(ahead_pts) else np.array([path.position(now)])
+                if polyline_passes_near(pts, (o.x, o.y), radius + o.radius + margin):
+                    hit = o.id
+                    break
+            if hit is None and moving:
+                if len(wp) == 1:
+                    rx, ry = np.full_like(ts, wp[0, 0]), np.full_like(ts, wp[0, 1])
+                else:
+                    rx, ry = np.interp(ts, wp[:, 2], wp[:, 0]), np.interp(ts, wp[:, 2], wp[:, 1])
+                close = np.hypot(ox - rx[None, :], oy - ry[None, :]) < reach + radius + margin
+                rows = np.nonzero(close.any(axis=1))[0]
+                if len(rows):
+                    hit = moving[int(rows[0])].id
+            if hit is not None:
+                out[rid] = hit
+                self.affected.setdefault(hit, set()).add(rid)
+        return out
+
+    # -- the robots' safety net ---------------------------------------------------------------------
+    def net_discs(self, t: float, dt: float, stale_s: float) -> list[tuple[str, Point, float, tuple[float, float]]]:
+        """Every obstacle as ``(id, position, radius, sweep)`` for a robot's safety net from ``t`` to
+        ``t + dt``: where it was reported, and how far it may move by the end of the step at its
+        velocity (a record older than ``stale_s``: it may be anywhere it could have walked since,
+        so it is swept that far, at most ``stale_s`` of walking)."""
+        out = []
+        for ob in self.obstacles.values():
+            ahead = min(max(0.0, t + dt - ob.stamp), stale_s)
+            out.append((PREFIX + ob.id, (ob.x, ob.y), ob.radius, (ob.vx * ahead, ob.vy * ahead)))
+        return out
