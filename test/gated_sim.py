@@ -21,7 +21,7 @@ class GatedSim(Sim):
         for rid, a in list(self.agents.items()):
             self.agents[rid] = RobotAgent(a.model, self.wh, gated=gated)
         self.slow = list(slow)
-        self.gates_sent = 0
+        self.gates_sent = self.links_sent = 0
 
     def _tick(self):
         self._ticks += 1
@@ -47,6 +47,7 @@ class GatedSim(Sim):
             self.notes += d.notes
             for rec in d.gates:  # before the legs, as the planner node publishes them
                 self.gates_sent += 1
+                self.links_sent += len(rec.links)
                 if rec.robot_id in self.agents and rec.robot_id not in self.dead | self.mute:
                     self.agents[rec.robot_id].on_gate(rec)
             for leg in d.legs:
