@@ -318,6 +318,8 @@ class RobotStatus(Record):
     # robot could not take (the planner re-plans it rather than assume the robot drives it)
     travelled_m: float | None = spec(optional(number(lo=0.0)), default=None)
     rejected_path_id: int | None = spec(optional(integer(lo=0)), default=None)
+    # whether it carries the goods of task_id (the robot's word that a pick or place is done)
+    loaded: bool | None = spec(optional(boolean), default=None)
 
 
 @dataclass(frozen=True)

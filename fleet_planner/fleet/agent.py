@@ -184,7 +184,7 @@ class RobotAgent:
             self._act(now)
         state = self.driver.behavior_state()
         return RobotStatus(**m.status(now), behavior=state, travelled_m=m.travelled if m.path is not None else None,
-                           rejected_path_id=self.rejected)
+                           rejected_path_id=self.rejected, loaded=self.loaded)
 
     # -- where a leg ends ---------------------------------------------------------------------------
     def _act(self, now: float) -> None:

@@ -257,7 +257,7 @@ class FleetManager:
         """After a restart: a robot whose status names a reloaded job it picked the goods of takes
         it up again and heads for the storing site (the goods are not picked again)."""
         job = self.jobs.get(r.status.task_id) if r.status.task_id is not None else None
-        if (job is None or r.job is not None or job.robot != r.id or not job.picked
+        if (job is None or r.job is not None or job.robot != r.id or not job.picked or r.status.loaded is False
                 or job.state != "active" or any(o.job == job.task.id for o in self.robots.values())):
             return
         r.job = job.task.id
@@ -365,7 +365,8 @@ class FleetManager:
     def _arrivals(self, now: float, d: Decisions) -> None:
         """Robots at the end of their legs: a pick or place done moves the job on, and done means
         the robot reported it: a status showed it picking / placing there and a later one shows it
-        no longer at it (the clock alone never finishes one); any other target is simply reached."""
+        no longer at it, with the goods on board after a pick and off it after a place where the
+        status says (``loaded``); the clock alone never finishes one. Any other target is simply reached."""
         for r in self.robots.values():
             if r.arrived_at is None or r.target is None or not r.online:
                 continue
@@ -373,6 +374,8 @@ class FleetManager:
             if target.purpose in ACTING:
                 if r.status.mode == ACTING[target.purpose] or not r.saw_action:
                     continue
+                if r.status.loaded is not None and r.status.loaded != (target.purpose == "pick"):
+                    continue  # it says the goods are not (or still) on board: not done, whatever the clock
                 self._action_done(r, target, now, d)
             else:
                 r.target, r.idle_since = None, now
