@@ -75,8 +75,8 @@ def main() -> None:
     print("| fleet | seed | mode | all done | completion (sim s) | closest gap (m) | late re-plans | CPU s |")
     print("|---|---|---|---|---|---|---|---|")
     for fleet, seed, mode, done, end, gap, replans, cpu in rows:
-        shown = f"{end:.1f}" if done else "-"
-        print(f"| {fleet} | {seed} | {mode} | {'yes' if done else 'NO'} | {shown} | {gap:.3f} | {replans} | {cpu:.1f} |")
+        shown, ok = (f"{end:.1f}", "yes") if done else ("-", "NO")
+        print(f"| {fleet} | {seed} | {mode} | {ok} | {shown} | {gap:.3f} | {replans} | {cpu:.1f} |")
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from msg_schemas.records import (
     MAX_REASON_CHARS,
     MAX_RECORD_BYTES,
     RECORDS,
+    GateRecord,
     RecordError,
     RobotStatus,
     Task,
@@ -27,7 +28,10 @@ from msg_schemas.records import (
 
 GOOD_ALL = {**{cls.SCHEMA: data for cls, data in GOOD.items()},
             WaitMessageRecord.SCHEMA: {"schema": WaitMessageRecord.SCHEMA, "sender": "r1", "receiver": "r2",
-                                       "waiting": ["r1"], "stamp": 1.0}}
+                                       "waiting": ["r1"], "stamp": 1.0},
+            GateRecord.SCHEMA: {"schema": GateRecord.SCHEMA, "robot_id": "r1", "path_id": 7, "seq": 2, "stamp": 1.0,
+                                "links": [{"robot": "r2", "path_id": 5, "exit": 3.5, "entry": 1.25}],
+                                "watch": {"r2": 5}}}
 BY_SCHEMA = {cls.SCHEMA: cls for cls in RECORDS}
 
 # text that includes lone surrogates and control characters (hypothesis' default text has neither)

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -71,9 +72,10 @@ class Link:
         return {"robot": self.robot, "path_id": self.path_id, "exit": self.exit, "entry": self.entry}
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, object]) -> Link:
+    def from_dict(cls, d: Mapping[str, Any]) -> Link:
+        """A link of a (validated) gate record."""
         ex = d["exit"]
-        return cls(str(d["robot"]), int(d["path_id"]), None if ex is None else float(ex), float(d["entry"]))  # type: ignore[arg-type]
+        return cls(str(d["robot"]), int(d["path_id"]), None if ex is None else float(ex), float(d["entry"]))
 
 
 def links_of(record: GateRecord) -> list[Link]:
