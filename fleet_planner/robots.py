@@ -243,6 +243,11 @@ class RobotModel:
         total = float(self._S[-1])
         return 1.0 if total <= 0 else min(1.0, self._s / total)
 
+    @property
+    def travelled(self) -> float:
+        """Length (m) driven along the current timed path (0 without one)."""
+        return float(self._s)
+
     def ahead(self) -> Point | None:
         """The next waypoint of the timed path beyond the robot (where it drives next), or None at
         its end or without one."""

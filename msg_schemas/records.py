@@ -330,6 +330,13 @@ class RobotStatus(Record):
     # (left out when false)
     manual: bool | None = spec(optional(boolean), default=None)
     estop: bool | None = spec(optional(boolean), default=None)
+    # added later (optional, so statuses without them still parse): the length (m) driven along
+    # path_id, which gated robots watch (fleet_planner/fleet/gate.py), and the last timed path the
+    # robot could not take (the planner re-plans it rather than assume the robot drives it)
+    travelled_m: float | None = spec(optional(number(lo=0.0)), default=None)
+    rejected_path_id: int | None = spec(optional(integer(lo=0)), default=None)
+    # whether it carries the goods of task_id (the robot's word that a pick or place is done)
+    loaded: bool | None = spec(optional(boolean), default=None)
 
 
 @dataclass(frozen=True)
@@ -533,13 +540,45 @@ class ObstacleRecord(Record):
                               f"(at most {MAX_OBSTACLE_SPEED:g})")
 
 
+#: one link of a gate record: ``robot`` passes the region first on its path ``path_id``; the robot
+#: the record is for does not drive beyond ``entry`` (m along its own path) before ``robot`` reports
+#: more than ``exit`` (m along ``path_id``; null: it never leaves on that path) or a later path
+GATE_LINK: dict[str, Check] = {"robot": ros_id, "path_id": integer(lo=0), "exit": optional(number(lo=0.0)),
+                               "entry": number(lo=0.0)}
+
+
+@dataclass(frozen=True)
+class GateRecord(Record):
+    """The precedence links a robot must respect on its timed path ``path_id`` (the (M,D)
+    network's collision regions, as in an Action Dependency Graph; fleet_planner/fleet/gate.py).
+    Latched per robot and re-sent whole, with a higher ``seq``, when it grows. ``watch`` maps each
+    robot the links name to the latest path of that robot they were checked against: a robot
+    reporting a later path than its ``watch`` entry is unknown progress (wait)."""
+
+    SCHEMA: ClassVar[str] = "fleet/gate@1"
+    NAME: ClassVar[str] = "gate"
+
+    robot_id: str = spec(ros_id)
+    path_id: int = spec(integer(lo=0))
+    seq: int = spec(integer(lo=0))
+    stamp: float = spec(number())
+    links: tuple[dict[str, Any], ...] = spec(list_of(obj(GATE_LINK)), default=())
+    watch: dict[str, int] | None = spec(optional(dict_of(integer(lo=0))), default=None)
+
+    def _check_together(self) -> None:
+        for n, link in enumerate(self.links):
+            if link["robot"] == self.robot_id:
+                raise RecordError(f"gate.links[{n}].robot: a robot does not wait for itself ({self.robot_id!r})")
+
+
 RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours,
-                                     Command, CommandReply, ObstacleRecord)
+                                     Command, CommandReply, ObstacleRecord, GateRecord)
 
 __all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Check", "Command", "CommandReply",
-           "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS", "MAX_ITEMS",
-           "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS", "MAX_OBSTACLE_SPEED", "MAX_REASON_CHARS",
-           "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours", "OBSTACLE_KINDS", "ObstacleRecord", "PathAuth",
-           "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS", "Task", "TaskEvent",
-           "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json", "nonempty",
-           "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text", "unsigned_json"]
+           "EVENTS_NEEDING_REASON", "GATE_LINK", "GateRecord", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS",
+           "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS", "MAX_OBSTACLE_SPEED",
+           "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours", "OBSTACLE_KINDS", "ObstacleRecord",
+           "PathAuth", "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS", "Task",
+           "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json",
+           "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text",
+           "unsigned_json"]

@@ -18,7 +18,7 @@ QoS choices:
 * ``WAIT_MESSAGES`` (behaviour coordination): reliable, volatile, depth 100. A waiting robot
   repeats its message every couple of seconds, but a wait cycle is only found when a message
   gets all the way round it, so none should be lost on the way.
-* Latched state (``/robots/<id>/timed_path``, ``SCHEDULE``, ``MARKERS``, ``MAP``): reliable,
+* Latched state (``/robots/<id>/timed_path``, ``/robots/<id>/gate``, ``SCHEDULE``, ``MARKERS``, ``MAP``): reliable,
   transient local, depth 1: a late subscriber gets the current value at once.
 """
 from __future__ import annotations
@@ -59,6 +59,11 @@ def neighbours_topic(robot_id: str) -> str:
     return f"/robots/{robot_id}/neighbours"
 
 
+def gate_topic(robot_id: str) -> str:
+    """``/robots/<robot_id>/gate``: the robot's precedence links (``fleet/gate@1``, latched)."""
+    return timed_path_topic(robot_id).rsplit("/", 1)[0] + "/gate"
+
+
 def _qos(depth: int, reliable: bool = True, latched: bool = False) -> QoSProfile:
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=depth,
@@ -72,6 +77,7 @@ ROBOT_STATUS_QOS = _qos(100, reliable=False)
 LATCHED_QOS = _qos(1, latched=True)
 TIMED_PATH_QOS = LATCHED_QOS
 TIMED_PATH_AUTH_QOS = LATCHED_QOS
+GATE_QOS = LATCHED_QOS
 SCHEDULE_QOS = LATCHED_QOS
 MARKERS_QOS = LATCHED_QOS
 MAP_QOS = LATCHED_QOS

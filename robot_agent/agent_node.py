@@ -20,8 +20,9 @@ from functools import partial
 from typing import Any
 
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from std_msgs.msg import String
 
@@ -39,6 +40,7 @@ from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
 from msg_schemas.records import (
+    GateRecord,
     Neighbours,
     ObstacleRecord,
     PathAuth,
@@ -92,6 +94,12 @@ class AgentNode(Node):
         trust_file = self.declare_parameter("auth_trust_file", "", _fixed(
             "key file of the planner (fleet_planner/auth.py): with it, only task events and timed paths signed "
             "by one of its keys are taken, from any node (empty: only from the planner node, unsigned)")).value
+        gated = self.declare_parameter("gated", True, _fixed(
+            "central: never enter a collision region before the robot ranked above has left it (by the "
+            "planner's gate records on /robots/<id>/gate and the others' statuses); false: the clock alone")).value
+        scale = self.declare_parameter("speed_scale", 1.0, ParameterDescriptor(
+            description="fraction of the top speed the robot may drive at (a speed limit; 0 halts it)",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0)])).value
 
         robot_id = robot_id or self.get_namespace().rstrip("/").rsplit("/", 1)[-1]
         problem = robot_id_problem(robot_id)
@@ -108,16 +116,20 @@ class AgentNode(Node):
         chargers = [s.pose for s in warehouse.stations_of("charger")]
         model = RobotModel(robot_id, kinds[kind], x, y, yaw, battery, chargers)
         self.planner = OriginCheck.qualify(self, planner)
-        self.agent = RobotAgent(model, warehouse, mode, planner=self.planner)
+        self.agent = RobotAgent(model, warehouse, mode, planner=self.planner, gated=bool(gated))
+        self.agent.speed_scale = float(scale)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.robot_id = robot_id
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
         # every waiting message at each wake-up: the whole fleet's statuses keep coming (see drain.py)
         subscribe = partial(create_draining_subscription, self)
         paths = subscribe(Path, topics.timed_path_topic(robot_id), self._on_path, topics.TIMED_PATH_QOS)
+        gates = subscribe(String, topics.gate_topic(robot_id), self._on_gate, topics.GATE_QOS)
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
+        self._gate_origin = OriginCheck(self, gates, planner)
         self.keys = Keys(trust_file=trust_file)
         self._events_topic = events.topic_name
         self._pairing: PathPairing | None = None
@@ -175,6 +187,26 @@ class AgentNode(Node):
             self.agent.on_path(path, t0_ns / 1e9, t0_ns)
         except (RecordError, ValueError) as exc:
             self.get_logger().error(printable(f"timed path ignored: {exc}", 300), throttle_duration_sec=1.0)
+
+    def _on_gate(self, msg: String) -> None:
+        problem = self._gate_origin.problem()
+        if problem:
+            self.get_logger().error(printable(f"gate record ignored: not from the planner: {problem}", 300),
+                                    throttle_duration_sec=1.0)
+            return
+        try:
+            self.agent.on_gate(string_to_record(msg, GateRecord))
+        except RecordError as exc:
+            self.get_logger().warning(f"gate record ignored: {exc}", throttle_duration_sec=5.0)
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for p in params:
+            if p.name == "speed_scale":
+                try:
+                    self.agent.speed_scale = float(p.value)
+                except (TypeError, ValueError) as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
 
     def _on_task(self, msg: String) -> None:
         try:

@@ -87,3 +87,34 @@ def test_a_pick_is_done_only_when_the_robot_reports_it():
     robot._act = act  # now it picks: reported, so done
     assert sim.run_until(lambda: sim.last("J1") == "picked", limit=30)
     assert sim.run_until(lambda: sim.last("J1") == "done", limit=120)
+
+
+def test_a_pick_the_robot_reports_without_the_goods_on_board_is_not_done():
+    sim = Sim([("r1", "cargo", *CHARGERS[0], 1.0)])
+    sim.submit(task("J1", "chute_1", "B01-01"))
+    robot = sim.agents["r1"]
+    tick, missed = robot.tick, []
+
+    def tick_missing_the_first_pick(now):
+        st = tick(now)
+        if robot.loaded and not missed:  # the first pick ends without the goods: it reports so
+            missed.append(now)
+            robot.loaded = False
+            st = robot.tick(now)
+        return st
+    robot.tick = tick_missing_the_first_pick
+    assert sim.run_until(lambda: sim.last("J1") == "picked", limit=200)
+    assert missed and robot.loaded  # "picked" came only once it said it carries them (its second pick)
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=200)
+
+
+def test_a_robot_that_dies_in_the_middle_of_a_pick_counts_no_pick_and_its_job_is_queued_again():
+    sim = Sim(four_robots(), offline_timeout_s=2.0)
+    sim.submit(task("J1", "chute_2", "B04-01"))
+    assert sim.run_until(lambda: any(a.model.mode == "picking" for a in sim.agents.values()))
+    first = next(rid for rid, a in sim.agents.items() if a.model.mode == "picking")
+    sim.dead.add(first)  # it dies while picking, however long the pick was due to take
+    sim.run_until(lambda: False, limit=30)
+    assert "picked" not in [e.event for e in sim.events if e.task_id == "J1"]
+    assert sim.fm.jobs["J1"].state == "queued" and not sim.fm.jobs["J1"].picked  # the goods are still at the chute
+    assert any("J1 is queued again" in n for n in sim.notes)

@@ -20,6 +20,7 @@ from msg_schemas.records import (
     RECORDS,
     Command,
     CommandReply,
+    GateRecord,
     RecordError,
     RobotStatus,
     Task,
@@ -33,7 +34,10 @@ GOOD_ALL = {**{cls.SCHEMA: data for cls, data in GOOD.items()},
             Command.SCHEMA: {"schema": Command.SCHEMA, "id": "c1", "command": "send", "robot_id": "r1",
                              "station": "chute_1"},
             CommandReply.SCHEMA: {"schema": CommandReply.SCHEMA, "id": "c1", "ok": False, "stamp": 1.0,
-                                  "message": "robot_id: unknown robot 'r9'", "command": "send"}}
+                                  "message": "robot_id: unknown robot 'r9'", "command": "send"},
+            GateRecord.SCHEMA: {"schema": GateRecord.SCHEMA, "robot_id": "r1", "path_id": 7, "seq": 2, "stamp": 1.0,
+                                "links": [{"robot": "r2", "path_id": 5, "exit": 3.5, "entry": 1.25}],
+                                "watch": {"r2": 5}}}
 BY_SCHEMA = {cls.SCHEMA: cls for cls in RECORDS}
 
 # text that includes lone surrogates and control characters (hypothesis' default text has neither)

@@ -8,8 +8,9 @@ Times are seconds on one clock (the robot's ROS time): ``now`` is always passed 
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import replace
 
-from msg_schemas.records import ObstacleRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import GateRecord, ObstacleRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..behavior import BehaviorController, BehaviorParams
 from ..model import TimedPath
@@ -44,25 +45,48 @@ class RobotAgent:
     robot at a time), on its own path at its own speed with a :class:`BehaviorController`, from the
     other robots' statuses and the wait messages addressed to it (:meth:`on_wait_message`; the ones
     it sends come from :meth:`take_wait_messages`); its statuses then carry its behaviour state.
+
+    ``gated`` (central coordination): it never drives into a collision region before the robot
+    ranked above it there reported leaving it (:mod:`.gate`; its records come in by
+    :meth:`on_gate`), whatever the clock says; without a record for its current leg it waits.
+    Its statuses carry the path it follows and how far it drove along it (``travelled_m``), and the
+    last leg it could not take (``rejected_path_id``; it stops where it is until the next one).
+    :attr:`speed_scale` slows it down (a speed limit: 0 halts it).
     """
 
     KEEP_TASKS = 10_000  # task details remembered
 
     def __init__(self, model: RobotModel, warehouse: Warehouse, coordination: str | Coordination = "central",
-                 params: BehaviorParams = AGENT_BEHAVIOR, planner: str | None = None):
+                 params: BehaviorParams = AGENT_BEHAVIOR, planner: str | None = None, gated: bool = False):
         self.strategy = get_coordination(coordination)
         self.model = model
         self.warehouse = warehouse
         self.tasks: dict[str, Task] = {}
         self.loaded = False
         self.heard: dict[str, RobotStatus] = {}   # the other robots' last statuses
-        self.driver = self.strategy.driver(model, warehouse, params)
+        self.driver = self.strategy.driver(model, warehouse, params, gated)
         self.obstacles = ObstacleMap(max_clock_skew_s=MAX_CLOCK_SKEW_S)   # what the intelligent space reports
         self.driver.obstacles = self.obstacles
         self._acting: str | None = None
         self._last: float | None = None
         self.planner = planner
         self.hand = OperatorHand(model, warehouse)  # e-stop and manual drive (.manual)
+        self.rejected: int | None = None          # the last leg it could not take
+        self._kind = model.kind
+        self._scale = 1.0
+
+    @property
+    def speed_scale(self) -> float:
+        """The fraction of its top speed it may drive at (1: no limit, 0: halted)."""
+        return self._scale
+
+    @speed_scale.setter
+    def speed_scale(self, scale: float) -> None:
+        if not 0.0 <= scale <= 1.0:
+            raise ValueError(f"speed_scale: must be in [0, 1] (got {scale!r})")
+        self._scale = float(scale)
+        if scale > 0.0:
+            self.model.kind = replace(self._kind, max_speed=self._kind.max_speed * scale)
 
     @property
     def coordination(self) -> str:
@@ -152,12 +176,23 @@ class RobotAgent:
         return self.driver.take_wait_messages()
 
     def on_path(self, path: TimedPath, t0: float, path_id: int) -> None:
-        """Follow a leg whose times count from ``t0``; ValueError if it cannot (see RobotModel.follow).
+        """Follow a leg whose times count from ``t0``; ValueError if it cannot (see RobotModel.follow):
+        then its statuses name the leg as rejected (and a central robot stops where it is).
         Under behaviour coordination only its goal counts: ValueError if there is no way there.
         In manual drive legs are ignored (the planner sends none; a late one must not take over)."""
         if self.hand.manual:
             return
-        self.driver.follow(path, t0, path_id, self._last)
+        try:
+            self.driver.follow(path, t0, path_id, self._last)
+        except ValueError:
+            self.rejected = path_id
+            self.driver.refused(path_id)
+            raise
+
+    def on_gate(self, record: GateRecord) -> None:
+        """A gate record on the wire: kept if it is for this robot and newer than the one it has."""
+        if record.robot_id == self.model.id:
+            self.driver.on_gate(record)
 
     def tick(self, now: float) -> RobotStatus:
         """Advance to ``now``, start what is due where the robot stands, and report."""
@@ -165,7 +200,10 @@ class RobotAgent:
         self.obstacles.expire(now)
         if self._last is not None and now > self._last and not self.hand.drive(self._last, now - self._last,
                                                                                 self.heard):
-            self.driver.drive(self._last, now - self._last, self.heard)
+            if self._scale > 0.0:
+                self.driver.drive(self._last, now - self._last, self.heard)
+            else:  # halted: it stands (and the clock goes on)
+                m.step(self._last, now - self._last, hold=True)
         if self._last is None or now > self._last:
             self._last = now
         if self._acting is not None and m.busy_until is None:
@@ -177,7 +215,8 @@ class RobotAgent:
         if m.mode == "idle" and m.speed == 0.0 and m.progress >= 1.0 and not (self.hand.manual or self.hand.estopped):
             self._act(now)
         state = self.driver.behavior_state()
-        return RobotStatus(**m.status(now), behavior=state, **self.hand.status_fields())
+        return RobotStatus(**m.status(now), behavior=state, travelled_m=m.travelled if m.path is not None else None,
+                           rejected_path_id=self.rejected, loaded=self.loaded, **self.hand.status_fields())
 
     # -- where a leg ends ---------------------------------------------------------------------------
     def _act(self, now: float) -> None:

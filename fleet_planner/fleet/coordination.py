@@ -37,16 +37,17 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from msg_schemas.records import RobotStatus, WaitMessageRecord
+from msg_schemas.records import GateRecord, RobotStatus, WaitMessageRecord
 
 from ..behavior import BehaviorController, BehaviorParams, RobotView, WaitMessage, safety_stop
-from ..geometry import point_at_arc, polyline_passes_near
+from ..geometry import point_at_arc, polyline_passes_near, segment_point_distance
 from ..grid import GridMap
 from ..model import PlanningError, Point, RobotSpec, TimedPath, timed_path_from_polyline
 from ..paths import PathFinder
 from ..planners import Planner
 from ..robots import RobotModel
 from ..warehouse import Warehouse
+from .gate import blockers, gate_limit
 from .legs import CONTROL_PERIOD_S, station_at
 from .obstacles import ObstacleMap
 from .state import FleetRobot, Target
@@ -109,6 +110,12 @@ class Driver(ABC):
     def take_wait_messages(self) -> list[WaitMessageRecord]:
         """The wait messages the robot sent since the last call, to publish."""
 
+    def on_gate(self, record: GateRecord) -> None:  # noqa: B027 - a hook most drivers ignore
+        """The robot's gate record (central coordination, :mod:`.gate`); ignored by default."""
+
+    def refused(self, path_id: int) -> None:  # noqa: B027 - a hook most drivers ignore
+        """A leg the robot could not take (it stops where it is, central coordination); ignored by default."""
+
 
 class Coordination(ABC):
     """A coordination mode: what differs between the modes on the planner's end and the robot's."""
@@ -119,6 +126,8 @@ class Coordination(ABC):
     exchanges_wait_messages: ClassVar[bool] = False
     #: legs are planned around the obstacles of the intelligent space (and re-planned when one threatens them)
     plans_around_obstacles: ClassVar[bool] = False
+    #: the planner sends each robot the precedence links of its legs (:mod:`.gate`)
+    sends_gates: ClassVar[bool] = False
 
     # -- the planner's end ------------------------------------------------------------------------
     @abstractmethod
@@ -144,8 +153,9 @@ class Coordination(ABC):
 
     # -- the robot's end --------------------------------------------------------------------------
     @abstractmethod
-    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams) -> Driver:
-        """How the robot of ``model`` drives (``params``: its behaviour layer, where it has one)."""
+    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams, gated: bool = False) -> Driver:
+        """How the robot of ``model`` drives (``params``: its behaviour layer, where it has one;
+        ``gated``: it respects its legs' precedence links, where the mode has them)."""
 
 
 # -------------------------------------------------------------------------------------------------
@@ -157,6 +167,7 @@ class CentralCoordination(Coordination):
 
     name = "central"
     plans_around_obstacles = True
+    sends_gates = True
 
     def start_of(self, robot: FleetRobot, t0: float) -> Point:
         """Where it stands, or, driving its leg, a little further along it at the speed its status
@@ -197,23 +208,57 @@ class CentralCoordination(Coordination):
         pts = np.vstack([path.position(now), ahead]) if len(ahead) else np.array([path.position(now)])
         return polyline_passes_near(pts, point, clearance)
 
-    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams) -> Driver:
-        return CentralDriver(model)
+    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams, gated: bool = False) -> Driver:
+        return CentralDriver(model, gated)
 
 
 class CentralDriver(Driver):
     """A robot driving each leg's timed path, with a safety net: it waits rather than drive into a
-    robot in its critical area (:meth:`must_wait` says how)."""
+    robot in its critical area (:meth:`must_wait` says how). ``gated``: it also never drives
+    beyond what its gate record allows (:meth:`gate_holds`), whatever the clock says; the clock
+    only paces it. A leg it could not take stops it where it is until the next one."""
 
-    def __init__(self, model: RobotModel):
+    def __init__(self, model: RobotModel, gated: bool = False):
         self.model = model
         self.waits_for = None
+        self.gated = gated
+        self.gate: GateRecord | None = None
+        self.stopped = False
 
     def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
         self.model.follow(path, t0, path_id)
+        self.stopped = False
+
+    def refused(self, path_id: int) -> None:
+        self.stopped = True  # the planner no longer keeps the others clear of the old leg's rest
+
+    def on_gate(self, record: GateRecord) -> None:
+        """Keep the newest record (by path, then ``seq``)."""
+        if self.gate is None or (record.path_id, record.seq) >= (self.gate.path_id, self.gate.seq):
+            self.gate = record
 
     def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
-        self.model.step(t, dt, hold=self.must_wait(t, dt, heard))
+        hold = self.must_wait(t, dt, heard)
+        if not hold and (self.stopped or self.gate_holds(dt, heard)):
+            hold = True
+        self.model.step(t, dt, hold=hold)
+
+    def gate_holds(self, dt: float, heard: Mapping[str, RobotStatus]) -> bool:
+        """Whether this step could take the robot beyond where its gate lets it drive (the nearest
+        entry of a region whose robot ranked above has not reported leaving it; the start of a
+        leg whose record has not come)."""
+        m, k = self.model, self.model.kind
+        if not self.gated or m.path is None or m.busy_until is not None or m.progress >= 1.0:
+            return False
+        limit = gate_limit(self.gate, m.path_id, heard)
+        if math.isinf(limit):
+            return False
+        step = min(k.max_speed * (1 + 1e-9), m.speed + k.max_accel * dt) * dt
+        if m.travelled + step <= limit:
+            return False
+        waits = blockers(self.gate, heard, m.travelled + step) if self.gate is not None else []
+        self.waits_for = waits[0] if waits else self.waits_for
+        return True
 
     def behavior_state(self) -> dict[str, Any] | None:
         return None
@@ -252,10 +297,37 @@ class CentralDriver(Driver):
                 if math.hypot(ox - m.x, oy - m.y) <= k.radius + radius + step + math.hypot(dx, dy):
                     sweep[oid] = (dx, dy)
                     others.append(RobotView(oid, (ox, oy), radius))
-        blocker = safety_stop(RobotView(m.id, (m.x, m.y), k.radius, next_waypoint=ahead), others, step,
-                              NET_MARGIN_M, sweep)
+        if self.gated:
+            blocker = self._closing_in(ahead, step, others, sweep)
+        else:
+            blocker = safety_stop(RobotView(m.id, (m.x, m.y), k.radius, next_waypoint=ahead), others, step,
+                                  NET_MARGIN_M, sweep)
         self.waits_for = blocker.id if blocker is not None else None
         return blocker is not None
+
+    def _closing_in(self, ahead: Point, step: float, others: list[RobotView],
+                    sweep: Mapping[str, tuple[float, float]]) -> RobotView | None:
+        """The safety net of a gated robot: the closest robot whose disc (swept as above) the step
+        towards ``ahead`` would bring closer than the sum of radii plus :data:`NET_MARGIN_M`. A
+        disc, not the behaviours' rectangle, so that it never stops a robot its gate lets pass
+        (the gate keeps :data:`~.gate.PAD_M` > NET_MARGIN_M between the discs)."""
+        m = self.model
+        here = np.array([m.x, m.y])
+        way = np.asarray(ahead, dtype=float) - here
+        dist = float(np.hypot(*way))
+        if dist <= 0.0:
+            return None
+        end = here + way * (min(step, dist) / dist)
+        hit = []
+        for o in others:
+            dx, dy = sweep.get(o.id, (0.0, 0.0))
+            n = 1 + math.ceil(math.hypot(dx, dy) / 0.05)
+            pts = np.array(o.position) + np.outer(np.linspace(0.0, 1.0, n), [dx, dy])
+            near = float(np.min(segment_point_distance(here, end, pts)))
+            now = float(np.min(np.hypot(*(pts - here).T)))
+            if near < m.kind.radius + o.radius + NET_MARGIN_M and near < now - 1e-9:
+                hit.append(o)
+        return min(hit, key=lambda o: math.dist(o.position, (m.x, m.y)), default=None)
 
 
 # -------------------------------------------------------------------------------------------------
@@ -297,7 +369,7 @@ class BehaviorCoordination(Coordination):
     def must_replan_around(self, path: TimedPath, now: float, point: Point, clearance: float) -> bool:
         return False  # the robots see it and drive round it themselves
 
-    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams) -> Driver:
+    def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams, gated: bool = False) -> Driver:
         return BehaviorDriver(model, warehouse, params)
 
 

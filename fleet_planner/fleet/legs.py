@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-from msg_schemas.records import TaskEvent
+from msg_schemas.records import GateRecord, TaskEvent
 
 from ..model import RAMP_PIECES, Point, TimedPath
 from ..robots import RobotKind
@@ -86,11 +86,13 @@ class Leg:
 @dataclass
 class Decisions:
     """The outcome of one :meth:`FleetManager.step <.manager.FleetManager.step>`: legs to send,
-    events to publish, log lines."""
+    events to publish, log lines, and the gate records of robots whose links changed (central
+    coordination, :mod:`.gate`; each goes to its robot, latched)."""
 
     legs: list[Leg] = field(default_factory=list)
     events: list[TaskEvent] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    gates: list[GateRecord] = field(default_factory=list)
 
 
 def station_at(warehouse: Warehouse, pose: Point) -> Station | None:

@@ -55,6 +55,7 @@ from ..planners import Planner, get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
+from .gate import GateBook
 from .jobstore import DuplicateJob, JobStore
 from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import ObstacleMap, ObstacleParams
@@ -114,6 +115,8 @@ class FleetManager:
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
         self._seq = 0
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
+        #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
+        self.gates = GateBook() if self.strategy.sends_gates else None
         if store is not None:
             self._reload(store)
 
@@ -292,7 +295,7 @@ class FleetManager:
         """After a restart: a robot whose status names a reloaded job it picked the goods of takes
         it up again and heads for the storing site (the goods are not picked again)."""
         job = self.jobs.get(r.status.task_id) if r.status.task_id is not None else None
-        if (job is None or r.job is not None or job.robot != r.id or not job.picked
+        if (job is None or r.job is not None or job.robot != r.id or not job.picked or r.status.loaded is False
                 or job.state != "active" or any(o.job == job.task.id for o in self.robots.values())):
             return
         r.job = job.task.id
@@ -334,6 +337,7 @@ class FleetManager:
         self._notes = []
         self._find_immobile(now, d)
         self._watch_obstacles(now, d)
+        self._find_rejected(d)
         if self.store is not None:
             for r in self.robots.values():
                 self._adopt(r)
@@ -360,6 +364,15 @@ class FleetManager:
             elif r.online and not r.immobile and r.status.mode == "error":
                 self._immobilise(r, now, d, "out of battery")
 
+    def _find_rejected(self, d: Decisions) -> None:
+        """A robot whose status names its latest leg as rejected stands where it is (it stopped):
+        its leg is planned again from there, never assumed driven."""
+        for r in self.robots.values():
+            if r.leg is not None and r.status.rejected_path_id == r.leg.path_id and not r.immobile:
+                d.notes.append(f"robot {r.id} could not take leg {r.leg.path_id}: planning it again from "
+                               f"({r.status.x:.2f}, {r.status.y:.2f})")
+                r.leg, r.replan = None, r.target is not None
+
     def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
         """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
         (or fails, if it holds the goods and is out of battery) and legs passing near it re-plan."""
@@ -380,11 +393,20 @@ class FleetManager:
                 d.notes.append(f"job {job.task.id} is queued again for another robot")
         for o in self._replan_around(r, r.pos, now):
             d.notes.append(f"robot {o.id} re-plans around {r.id}")
+        if self.gates is not None:  # robots waiting for it that do not pass it go on; the others re-plan
+            records, stuck = self.gates.forget(r, self.robots.values(), now)
+            d.gates += records
+            for oid in stuck:
+                o = self.robots[oid]
+                if o.target is not None and not o.replan:
+                    o.replan = o.conflict = True
+                    d.notes.append(f"robot {o.id} re-plans around {r.id} (its gate waits for it)")
 
     def _arrivals(self, now: float, d: Decisions) -> None:
         """Robots at the end of their legs: a pick or place done moves the job on, and done means
         the robot reported it: a status showed it picking / placing there and a later one shows it
-        no longer at it (the clock alone never finishes one); any other target is simply reached."""
+        no longer at it, with the goods on board after a pick and off it after a place where the
+        status says (``loaded``); the clock alone never finishes one. Any other target is simply reached."""
         for r in self.robots.values():
             if r.arrived_at is None or r.target is None or not r.online:
                 continue
@@ -392,6 +414,8 @@ class FleetManager:
             if target.purpose in ACTING:
                 if r.status.mode == ACTING[target.purpose] or not r.saw_action:
                     continue
+                if r.status.loaded is not None and r.status.loaded != (target.purpose == "pick"):
+                    continue  # it says the goods are not (or still) on board: not done, whatever the clock
                 self._action_done(r, target, now, d)
             else:
                 r.target, r.idle_since = None, now
@@ -441,7 +465,7 @@ class FleetManager:
         path_id = max(round(now * 1e9), r.last_path_id + 1)
         x, y = self.strategy.start_of(r, path_id / 1e9)
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
-        self._give(r, leg, d)
+        self._give(r, leg, d, now)
         r.conflict = False
         d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
         self._replan_around(r, (x, y), now)
@@ -536,11 +560,13 @@ class FleetManager:
                     self._send_away(blocker, now, d)
                 return None
         leg = Leg(r.id, path, path_id, target.purpose, target.name)
-        self._give(r, leg, d)
+        self._give(r, leg, d, now)
         r.target, r.trouble = target, ""
         return leg
 
-    def _give(self, r: FleetRobot, leg: Leg, d: Decisions) -> None:
+    def _give(self, r: FleetRobot, leg: Leg, d: Decisions, now: float) -> None:
+        if self.gates is not None:  # its links, and the links others get where it passes first
+            d.gates += self.gates.on_leg(r, leg.path_id, leg.path, self.robots.values(), now)
         r.leg, r.last_path_id = leg, leg.path_id
         r.arrived_at, r.saw_action = None, False
         d.legs.append(leg)

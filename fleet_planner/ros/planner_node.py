@@ -146,6 +146,7 @@ class PlannerNode(Node):
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
         self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
+        self._gates: dict[str, Publisher] = {}
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
         self._tasks = create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
@@ -238,6 +239,8 @@ class PlannerNode(Node):
         log = self.get_logger()
         for note in d.notes:
             log.info(note)
+        for gate in d.gates:  # before the legs: a robot waits for the record of its leg
+            self._publisher(self._gates, topics.gate_topic, String, gate.robot_id).publish(record_to_string(gate))
         for leg in d.legs:
             try:
                 msg = timed_path_to_msg(leg.relative(), ns_to_stamp(leg.path_id), self.frame_id)
@@ -257,6 +260,11 @@ class PlannerNode(Node):
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:
             self._events.publish(record_to_string(self.keys.sign(ev, self._events.topic_name)))
+
+    def _publisher(self, table: dict[str, Publisher], topic: Any, kind: Any, robot_id: str) -> Publisher:
+        if robot_id not in table:
+            table[robot_id] = self.create_publisher(kind, topic(robot_id), topics.LATCHED_QOS)
+        return table[robot_id]
 
     def _path_publisher(self, robot_id: str) -> tuple[Publisher, Publisher | None]:
         """The publishers of a robot's timed paths and (with a signing key) of their signatures."""

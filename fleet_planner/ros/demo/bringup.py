@@ -56,10 +56,11 @@ class Fleet:
 
 def bring_up(context: Context, warehouse: Warehouse, kinds: Mapping[str, RobotKind], members: Sequence[FleetMember],
              rate: float, planner_params: Sequence[Parameter] = (), params_file: str | Path | None = None,
-             coordination: str = "central") -> Fleet:
+             coordination: str = "central", agent_overrides: Sequence[Parameter] = ()) -> Fleet:
     """Sim clock, planner, one agent per fleet member and a monitor, all on simulated time in
     ``context`` and on one executor. ``planner_params`` and ``params_file`` (a ros__parameters
-    YAML) configure the planner; ``coordination`` goes to the planner and every agent."""
+    YAML) configure the planner; ``coordination`` goes to the planner and every agent, and
+    ``agent_overrides`` to every agent."""
     sim = [Parameter("use_sim_time", value=True)]
     mode = [Parameter("coordination", value=coordination)]
     clock = SimClock(context=context, parameter_overrides=[Parameter("rate", value=float(rate))])
@@ -67,7 +68,8 @@ def bring_up(context: Context, warehouse: Warehouse, kinds: Mapping[str, RobotKi
     planner = PlannerNode(context=context, warehouse=warehouse, kinds=kinds, cli_args=cli,
                           parameter_overrides=sim + mode + list(planner_params))
     agents = {m.id: AgentNode(f"agent_{m.id}", context=context, warehouse=warehouse, kinds=kinds,
-                              parameter_overrides=sim + mode + agent_params(m)) for m in members}
+                              parameter_overrides=sim + mode + agent_params(m) + list(agent_overrides))
+              for m in members}
     monitor = FleetMonitor(context=context, parameter_overrides=sim)
     fleet = Fleet(clock, planner, agents, monitor, SingleThreadedExecutor(context=context))
     for node in fleet.nodes:

@@ -1,0 +1,329 @@
+"""Execution gated by the (M,D) network: a robot does not enter a collision region before the
+robot ranked above it there has left it, by their reported progress, whatever the clock says
+(docs/ARCHITECTURE.md, "Gated execution"; the spirit of the Action Dependency Graph of Hoenig et
+al., built on the collision regions of You & Ji, "Design of a Multi-robot Bin Packing System in
+an Automatic Warehouse").
+
+Two robots on fixed paths conflict where their discs (grown by :data:`PAD_M`) overlap: a set of
+pairs (travelled length of one, travelled length of the other). Each connected piece of that set
+is a collision region; one of the two robots passes it first. The other gets **links**
+(:class:`Link`): "do not drive beyond ``entry`` metres along your path before ``robot`` reports
+more than ``exit`` metres along its path ``path_id``" - one link per stretch of the region, so a
+robot may follow another down an aisle (the exit grows along the entry, a staircase). Which robot
+passes first comes from the plan's times (the curve of the two travelled lengths in time passes
+on one side of the region), except where reality decides: a robot that may already be in the
+region (its due position, which it is never ahead of, reaches it soon) passes first, and a robot
+whose new path starts inside a region passes it first.
+
+The robot's end is pure and small: :func:`gate_limit` says how far the robot may drive along its
+path now, given its :class:`~msg_schemas.records.GateRecord` and the other robots' last statuses
+(any ``Mapping[robot id -> RobotStatus]``, so where they come from may change); unknown progress
+(no status, a status on an earlier path, a later path its record was not checked against) means
+wait. :func:`watched_robots` says whose statuses a robot's gate needs.
+
+The planner's end is :class:`GateBook`: on every new leg (:meth:`GateBook.on_leg`) it computes
+the leg's links against every other robot's live paths, and the links the others must get
+because the new leg passes a region before them; those records grow and are re-sent whole (a
+higher ``seq``). A robot that stops for good (:meth:`GateBook.forget`) is dropped from the
+records of robots whose way does not pass it; the others keep waiting until they are re-planned.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial.distance import cdist
+
+from msg_schemas.records import GateRecord, RobotStatus
+
+from ..geometry import polyline_passes_near
+from ..model import TimedPath
+from .state import FleetRobot
+
+#: spacing (m) of the samples along each path the regions are found on; the sampling is covered by
+#: growing the discs by one spacing
+SAMPLE_M = 0.1
+#: the gate keeps the discs this far (m) apart beyond the sum of radii; it must stay below the
+#: planner's margin, so that a plan never enters the regions it is gated by
+PAD_M = 0.08
+#: a link covers a stretch of the waiting robot's path over which the exit it waits for grows by
+#: at most this much (m): finer is closer to the plan, coarser is fewer links
+PIECE_TOL_M = 0.05
+#: a new link reaches a driving robot within this long (s); it is ranked first wherever its due
+#: position gets within a region before then
+REACH_S = 1.0
+
+
+@dataclass(frozen=True)
+class Link:
+    """Do not drive beyond ``entry`` (m along my path) before ``robot`` reports more than ``exit``
+    (m along its path ``path_id``; None: it never leaves the region on that path) or a later path."""
+
+    robot: str
+    path_id: int
+    exit: float | None
+    entry: float
+
+    def to_dict(self) -> dict[str, object]:
+        return {"robot": self.robot, "path_id": self.path_id, "exit": self.exit, "entry": self.entry}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Link:
+        """A link of a (validated) gate record."""
+        ex = d["exit"]
+        return cls(str(d["robot"]), int(d["path_id"]), None if ex is None else float(ex), float(d["entry"]))
+
+
+def links_of(record: GateRecord) -> list[Link]:
+    return [Link.from_dict(d) for d in record.links]
+
+
+# -------------------------------------------------------------------------------------------------
+# the robot's end
+# -------------------------------------------------------------------------------------------------
+def travelled(status: RobotStatus) -> float | None:
+    """How far (m) ``status`` says its robot drove along its path (None: it does not say; a robot
+    at the end of its path has driven all of it)."""
+    if status.travelled_m is not None:
+        return status.travelled_m
+    return math.inf if status.progress >= 1.0 else None
+
+
+def satisfied(link: Link, statuses: Mapping[str, RobotStatus], watch: Mapping[str, int]) -> bool:
+    """Whether ``link``'s robot has left the region: its status shows it beyond the exit on the
+    link's path, or on a later path that the record was checked against (``watch``)."""
+    st = statuses.get(link.robot)
+    if st is None or st.path_id is None:
+        return False
+    if st.path_id == link.path_id:
+        done = travelled(st)
+        return link.exit is not None and done is not None and done > link.exit
+    return st.path_id > link.path_id and watch.get(link.robot, -1) >= st.path_id
+
+
+def gate_limit(record: GateRecord | None, path_id: int | None, statuses: Mapping[str, RobotStatus]) -> float:
+    """How far (m along its path ``path_id``) a robot may drive now: the nearest entry of a link
+    not yet satisfied (infinite if none); 0 without a record for that path (wait for it)."""
+    if record is None or path_id is None or record.path_id != path_id:
+        return 0.0
+    watch = record.watch or {}
+    return min((lk.entry for lk in links_of(record) if not satisfied(lk, statuses, watch)), default=math.inf)
+
+
+def blockers(record: GateRecord | None, statuses: Mapping[str, RobotStatus], before: float) -> list[str]:
+    """The robots whose links, not yet satisfied, stop the robot before ``before`` m."""
+    if record is None:
+        return []
+    watch = record.watch or {}
+    return sorted({lk.robot for lk in links_of(record) if lk.entry < before and not satisfied(lk, statuses, watch)})
+
+
+def watched_robots(record: GateRecord | None, statuses: Mapping[str, RobotStatus] | None = None) -> set[str]:
+    """The robots whose statuses the gate of ``record`` needs: every robot its links name, or with
+    ``statuses``, only those whose links are not yet satisfied by them."""
+    if record is None:
+        return set()
+    links = links_of(record)
+    if statuses is None:
+        return {lk.robot for lk in links}
+    watch = record.watch or {}
+    return {lk.robot for lk in links if not satisfied(lk, statuses, watch)}
+
+
+# -------------------------------------------------------------------------------------------------
+# regions and links
+# -------------------------------------------------------------------------------------------------
+@dataclass
+class _Samples:
+    s: np.ndarray     # travelled length of each sample (m)
+    xy: np.ndarray    # (n, 2) positions
+    t: np.ndarray     # planned first arrival at each sample (s)
+    h: float          # spacing
+    parks: bool       # the last sample is where the path ends (the robot stays there for ever)
+
+
+def _arc(path: TimedPath) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path.waypoints[:, :2], axis=0).T))])
+
+
+def sample(path: TimedPath, lo: float = 0.0, hi: float = math.inf, step: float = SAMPLE_M) -> _Samples:
+    """Samples of ``path`` from ``lo`` to ``hi`` m along it, at most ``step`` apart."""
+    wp, arc = path.waypoints, _arc(path)
+    total = float(arc[-1])
+    lo, hi = min(max(lo, 0.0), total), min(hi, total)
+    hi = max(hi, lo)
+    n = max(1, math.ceil((hi - lo) / step - 1e-9) + 1)
+    s = np.linspace(lo, hi, n)
+    keep = np.concatenate([[True], np.diff(arc) > 0])  # the first arrival where the path holds
+    a = arc[keep]
+    if len(a) == 1:
+        xy = np.repeat(wp[:1, :2], n, axis=0)
+        t = np.full(n, wp[0, 2])
+    else:
+        xy = np.column_stack([np.interp(s, a, wp[keep, 0]), np.interp(s, a, wp[keep, 1])])
+        t = np.interp(s, a, wp[keep, 2])
+    return _Samples(s, xy, t, (hi - lo) / (n - 1) if n > 1 else 0.0, hi >= total)
+
+
+def arc_at(path: TimedPath, t: float) -> float:
+    """How far along ``path`` its plan is at time ``t``."""
+    wp = path.waypoints
+    return float(np.interp(t, wp[:, 2], _arc(path)))
+
+
+def regions(a: _Samples, b: _Samples, reach: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The connected pieces of sample pairs closer than ``reach`` (grown by both spacings): each
+    as the indices into ``a`` and into ``b`` of its pairs."""
+    reach = reach + a.h / 2 + b.h / 2
+    lo, hi = a.xy.min(axis=0) - reach, a.xy.max(axis=0) + reach
+    near_b = np.nonzero(np.all((b.xy >= lo) & (b.xy <= hi), axis=1))[0]
+    if not len(near_b):
+        return []
+    mask = np.zeros((len(a.s), len(b.s)), dtype=bool)
+    mask[:, near_b] = cdist(a.xy, b.xy[near_b]) < reach
+    if not mask.any():
+        return []
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=int))
+    ia, ib = np.nonzero(labels)
+    lab = labels[ia, ib]
+    order = np.argsort(lab, kind="stable")
+    cuts = np.searchsorted(lab[order], np.arange(1, n + 1))
+    return [(ia[order[c:e]], ib[order[c:e]]) for c, e in zip(cuts, np.append(cuts[1:], len(order)))]
+
+
+def pieces(first: _Samples, then: _Samples, i_first: np.ndarray,
+           i_then: np.ndarray) -> list[tuple[float | None, float]]:
+    """The links of one region that ``first`` passes before ``then``: (exit along first's path,
+    entry along then's path), one per stretch of ``then``'s path where the exit grows by at most
+    :data:`PIECE_TOL_M`."""
+    rows, inv = np.unique(i_then, return_inverse=True)
+    far = np.full(len(rows), -1, dtype=int)
+    np.maximum.at(far, inv, i_first)
+    out: list[tuple[float | None, float]] = []
+    k = 0
+    while k < len(rows):
+        start, top = k, far[k]
+        while (k + 1 < len(rows) and rows[k + 1] == rows[k] + 1
+               and first.s[far[k + 1]] <= first.s[far[start]] + PIECE_TOL_M):
+            k += 1
+            top = max(top, far[k])
+        parked = first.parks and top == len(first.s) - 1
+        exit_m = None if parked else float(first.s[top] + first.h / 2)
+        out.append((exit_m, max(0.0, float(then.s[rows[start]] - then.h / 2 - 1e-6))))
+        k += 1
+    return out
+
+
+def first_by_plan(new: _Samples, new_path: TimedPath, other: _Samples, i_new: np.ndarray, i_other: np.ndarray) -> bool:
+    """Whether the new path's robot passes the region first by the plan's times: when the other
+    robot first reaches its part of a pair, the new robot is already beyond its part (majority)."""
+    when = other.t[i_other]
+    at = np.interp(when, new_path.waypoints[:, 2], _arc(new_path))
+    return bool(np.count_nonzero(at > new.s[i_new]) * 2 > len(i_new))
+
+
+# -------------------------------------------------------------------------------------------------
+# the planner's end
+# -------------------------------------------------------------------------------------------------
+class GateBook:
+    """Every robot's gate record and live paths, on the planner's end (pure)."""
+
+    def __init__(self, pad_m: float = PAD_M, sample_m: float = SAMPLE_M, reach_s: float = REACH_S):
+        self.pad_m, self.sample_m, self.reach_s = pad_m, sample_m, reach_s
+        self.records: dict[str, GateRecord] = {}
+        #: per robot, the paths it may be driving: its latest leg and the one its status names
+        self.paths: dict[str, dict[int, TimedPath]] = {}
+
+    def _live(self, o: FleetRobot) -> dict[int, TimedPath]:
+        paths = self.paths.get(o.id, {})
+        if paths:
+            latest = max(paths)
+            paths = {pid: p for pid, p in paths.items() if pid == latest or pid == o.status.path_id}
+            self.paths[o.id] = paths
+        return paths
+
+    def on_leg(self, r: FleetRobot, path_id: int, path: TimedPath, fleet: Iterable[FleetRobot],
+               now: float) -> list[GateRecord]:
+        """``r`` gets leg ``path_id``: its gate record, and the records of others that grow (links
+        where the new leg passes first; the watch of robots whose links name ``r``). Returned to send."""
+        old = self._live(r)
+        self.paths[r.id] = {pid: p for pid, p in old.items() if pid == r.status.path_id}
+        self.paths[r.id][path_id] = path
+        mine = sample(path, step=self.sample_m)
+        links: list[Link] = []
+        watch: dict[str, int] = {}
+        grown: dict[str, list[Link]] = {}
+        for o in fleet:
+            if o is r or o.immobile:
+                continue
+            paths = self._live(o)
+            if not paths:
+                continue
+            latest = max(paths)
+            recorded = o.id in self.records and self.records[o.id].path_id == latest
+            for pid, p in paths.items():
+                on_it = o.status.path_id == pid
+                done = travelled(o.status) if on_it else None
+                done = 0.0 if done is None else min(done, p.length)
+                reach = max(done, arc_at(p, now + self.reach_s))
+                if pid == latest:
+                    theirs = sample(p, done, step=self.sample_m)
+                elif on_it:  # the path it drives until it takes its latest one: only near where it is
+                    theirs = sample(p, done, reach, step=self.sample_m)
+                else:
+                    continue
+                for i_mine, i_theirs in regions(mine, theirs, r.radius + o.radius + self.pad_m):
+                    enters = float(theirs.s[i_theirs].min()) - theirs.h / 2
+                    o_first = (pid != latest or not recorded or reach >= enters
+                               or (i_mine.min() > 0 and not first_by_plan(mine, path, theirs, i_mine, i_theirs)))
+                    if o_first:
+                        links += [Link(o.id, pid, ex, en) for ex, en in pieces(theirs, mine, i_theirs, i_mine)]
+                        watch[o.id] = latest
+                    else:
+                        grown.setdefault(o.id, []).extend(
+                            Link(r.id, path_id, ex, en) for ex, en in pieces(mine, theirs, i_mine, i_theirs))
+        out = [self._set(GateRecord(robot_id=r.id, path_id=path_id, seq=0, stamp=float(now),
+                                    links=tuple(lk.to_dict() for lk in links), watch=watch))]
+        for oid, rec in list(self.records.items()):
+            if oid == r.id:
+                continue
+            names_r = any(d["robot"] == r.id for d in rec.links)
+            if oid not in grown and not names_r:
+                continue
+            added = tuple(lk.to_dict() for lk in grown.get(oid, []))
+            out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
+                                            links=rec.links + added, watch={**(rec.watch or {}), r.id: path_id})))
+        return out
+
+    def forget(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
+        """``r`` stopped for good where its status says: the records of robots whose way from where
+        they are does not pass near it drop their links on it (re-sent); the ids of the robots
+        whose way does are returned (they keep waiting for it: re-plan them)."""
+        self.paths.pop(r.id, None)
+        self.records.pop(r.id, None)
+        out, stuck = [], []
+        by_id = {o.id: o for o in fleet}
+        for oid, rec in list(self.records.items()):
+            if not any(d["robot"] == r.id for d in rec.links):
+                continue
+            o = by_id.get(oid)
+            path = self.paths.get(oid, {}).get(rec.path_id)
+            if o is not None and path is not None:
+                done = travelled(o.status) if o.status.path_id == rec.path_id else 0.0
+                ahead = sample(path, 0.0 if done is None else done, step=self.sample_m)
+                clear = o.radius + r.radius + self.pad_m + self.sample_m
+                if polyline_passes_near(np.vstack([ahead.xy, ahead.xy[-1:]]), r.pos, clear):
+                    stuck.append(oid)
+                    continue
+            out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
+                                            links=tuple(d for d in rec.links if d["robot"] != r.id),
+                                            watch={k: v for k, v in (rec.watch or {}).items() if k != r.id})))
+        return out, stuck
+
+    def _set(self, rec: GateRecord) -> GateRecord:
+        self.records[rec.robot_id] = rec
+        return rec

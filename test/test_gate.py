@@ -1,0 +1,189 @@
+"""Execution gated by the (M,D) network (issue 9, deliverable 4), without ROS: the links of a leg
+(who passes each collision region first, where the other waits), the robot's end of the gate
+(how far it may drive given the others' statuses; unknown progress = wait), the records that grow
+when a new leg passes before a driving robot, and pure fleet runs with random slow-downs and
+halts and lateness re-planning off: no contact (the independent checker on the driven tracks),
+every job done."""
+import math
+import random
+
+import numpy as np
+import pytest
+from gated_sim import GatedSim, random_slowdowns
+from test_dispatch import FAST, WH, four_robots, status, task
+
+from fleet_planner.fleet.gate import GateBook, Link, gate_limit, links_of, watched_robots
+from fleet_planner.fleet.state import FleetRobot
+from fleet_planner.model import TimedPath
+from msg_schemas.records import GateRecord, RecordError, RobotStatus
+
+R = FAST["cargo"].radius
+
+
+def straight(rid, a, b, t0, speed=1.0, hold=0.0):
+    """A timed path from a to b at ``speed``, leaving at ``t0 + hold``."""
+    d = math.dist(a, b)
+    wp = [[*a, t0], [*a, t0 + hold], [*b, t0 + hold + d / speed]]
+    return TimedPath(rid, R, np.array(wp))
+
+
+def robot(rid, x, y, path_id=None, travelled=None, stamp=0.0, progress=0.0):
+    st = status(rid, "cargo", x, y, path_id=path_id, progress=progress, stamp=stamp, travelled_m=travelled)
+    return FleetRobot(FAST["cargo"], st, stamp, stamp)
+
+
+def record(links, path_id=10, watch=None, seq=0):
+    return GateRecord(robot_id="me", path_id=path_id, seq=seq, stamp=0.0,
+                      links=tuple(lk.to_dict() for lk in links), watch=watch)
+
+
+def said(rid, path_id, travelled, progress=0.5):
+    return RobotStatus(id=rid, kind="cargo", x=0.0, y=0.0, yaw=0.0, vx=0.0, vy=0.0, battery=1.0, mode="driving",
+                       progress=progress, stamp=0.0, radius=R, path_id=path_id, travelled_m=travelled)
+
+
+# -- the robot's end -------------------------------------------------------------------------------
+def test_a_robot_drives_up_to_the_entry_of_a_region_until_the_robot_above_reports_leaving_it():
+    rec = record([Link("a", 5, 4.0, 2.5)], watch={"a": 5})
+    assert gate_limit(rec, 10, {}) == 2.5                          # nothing heard: wait
+    assert gate_limit(rec, 10, {"a": said("a", 5, 3.9)}) == 2.5    # not yet out
+    assert gate_limit(rec, 10, {"a": said("a", 5, 4.1)}) == math.inf
+    assert gate_limit(rec, 10, {"a": said("a", 4, 9.0)}) == 2.5    # an earlier path: not yet on it
+    assert gate_limit(rec, 10, {"a": said("a", 7, 0.0)}) == 2.5    # a later path the record never saw
+    assert gate_limit(record([Link("a", 5, 4.0, 2.5)], watch={"a": 7}), 10, {"a": said("a", 7, 0.0)}) == math.inf
+    assert gate_limit(rec, 11, {"a": said("a", 5, 4.1)}) == 0.0    # the record is for another leg: wait
+    assert gate_limit(None, 10, {}) == 0.0
+    parked = record([Link("a", 5, None, 2.5)], watch={"a": 5})     # it parks in the region on that path
+    assert gate_limit(parked, 10, {"a": said("a", 5, 99.0, progress=1.0)}) == 2.5
+
+
+def test_the_watched_robots_are_those_named_and_not_yet_out_of_the_way():
+    rec = record([Link("a", 5, 4.0, 2.5), Link("b", 3, 1.0, 6.0), Link("b", 3, 2.0, 7.0)], watch={"a": 5, "b": 3})
+    assert watched_robots(rec) == {"a", "b"}
+    assert watched_robots(rec, {"a": said("a", 5, 4.5)}) == {"b"}
+    assert watched_robots(None) == set()
+
+
+def test_gate_records_round_trip_and_are_checked_field_by_field():
+    rec = record([Link("a", 5, None, 2.5)], watch={"a": 5})
+    assert GateRecord.from_json(rec.to_json()) == rec
+    with pytest.raises(RecordError, match=r"gate.links\[0\].robot: a robot does not wait for itself"):
+        GateRecord(robot_id="a", path_id=1, seq=0, stamp=0.0, links=(Link("a", 1, 1.0, 1.0).to_dict(),))
+    with pytest.raises(RecordError, match=r"gate.links\[0\].entry"):
+        GateRecord.from_dict({"schema": "fleet/gate@1", "robot_id": "me", "path_id": 1, "seq": 0, "stamp": 0.0,
+                              "links": [{"robot": "a", "path_id": 1, "exit": 1.0, "entry": -1.0}]})
+
+
+def test_statuses_of_agents_without_the_new_fields_still_parse():
+    old = ('{"schema":"fleet/robot_status@1","id":"r1","kind":"cargo","x":1,"y":2,"yaw":0,"vx":0,"vy":0,'
+           '"battery":1,"mode":"idle","progress":1,"stamp":0,"radius":0.35,"path_id":3}')
+    st = RobotStatus.from_json(old)
+    assert st.travelled_m is None and st.rejected_path_id is None
+
+
+# -- links from the plan ---------------------------------------------------------------------------
+def test_crossing_legs_link_the_later_robot_to_the_earlier_ones_exit():
+    book = GateBook()
+    a, b = robot("a", 0.0, 5.0), robot("b", 5.0, 0.0)
+    pa = straight("a", (0.0, 5.0), (10.0, 5.0), 1.0)              # crosses (5, 5) at t = 6
+    book.on_leg(a, 1_000_000_000, pa, [a, b], 0.0)
+    a.status = said("a", 1_000_000_000, 0.0)
+    pb = straight("b", (5.0, 0.0), (5.0, 10.0), 1.0, hold=6.0)    # reaches (5, 5) at t = 12
+    out = book.on_leg(b, 1_000_000_001, pb, [a, b], 0.0)
+    mine = out[0]
+    assert mine.robot_id == "b" and links_of(mine)
+    links = links_of(mine)
+    assert {(lk.robot, lk.path_id) for lk in links} == {("a", 1_000_000_000)}
+    assert 5.0 - 2 * R - 0.3 < links[0].entry < 5.0 - 2 * R        # b stops short of a's way ...
+    assert 5.0 + 2 * R < max(lk.exit for lk in links) < 5.0 + 2 * R + 0.3  # ... until a is past it
+    assert all(lk.exit > lk2.exit - 1e-9 for lk, lk2 in zip(links[1:], links))  # further in, a further on
+    assert [r.robot_id for r in out] == ["b"]                 # a's record does not grow
+
+
+def test_a_new_leg_that_passes_first_grows_the_record_of_the_robot_already_driving():
+    book = GateBook()
+    a, b = robot("a", 0.0, 5.0), robot("b", 5.0, 0.0)
+    pa = straight("a", (0.0, 5.0), (10.0, 5.0), 1.0, hold=20.0)   # a leaves late: crosses at t = 26
+    book.on_leg(a, 1_000_000_000, pa, [a, b], 0.0)
+    a.status = said("a", 1_000_000_000, 0.0)
+    pb = straight("b", (5.0, 0.0), (5.0, 10.0), 1.0)              # b is through by t = 7
+    out = book.on_leg(b, 1_000_000_001, pb, [a, b], 0.0)
+    assert [r.robot_id for r in out] == ["b", "a"]
+    assert not out[0].links
+    grown = out[1]
+    assert grown.seq == 1 and grown.path_id == 1_000_000_000 and grown.watch == {"b": 1_000_000_001}
+    links = links_of(grown)
+    assert {(lk.robot, lk.path_id) for lk in links} == {("b", 1_000_000_001)}
+    assert links[0].entry < 5.0 - 2 * R < 5.0 + 2 * R < max(lk.exit for lk in links)
+
+
+def test_a_robot_that_may_already_be_in_the_region_passes_first_whatever_the_plan_says():
+    book = GateBook()
+    a, b = robot("a", 0.0, 5.0), robot("b", 5.0, 0.0)
+    pa = straight("a", (0.0, 5.0), (10.0, 5.0), 0.0)
+    book.on_leg(a, 1, pa, [a, b], 0.0)
+    a.status = said("a", 1, 4.0)                               # a is at the crossing now
+    pb = straight("b", (5.0, 0.0), (5.0, 10.0), 0.0)
+    mine = book.on_leg(b, 2, pb, [a, b], 4.0)[0]
+    assert {lk.robot for lk in links_of(mine)} == {"a"}
+
+
+def test_a_robot_following_another_down_an_aisle_gets_a_staircase_of_links():
+    book = GateBook()
+    a, b = robot("a", 2.0, 5.0), robot("b", 0.0, 5.0)
+    book.on_leg(a, 1, straight("a", (2.0, 5.0), (12.0, 5.0), 0.0), [a, b], 0.0)
+    a.status = said("a", 1, 0.0)
+    mine = book.on_leg(b, 2, straight("b", (0.0, 5.0), (10.0, 5.0), 0.0), [a, b], 0.0)[0]
+    links = links_of(mine)
+    assert len(links) > 10
+    entries, exits = [lk.entry for lk in links], [lk.exit for lk in links[:-1]]
+    assert entries == sorted(entries) and exits == sorted(exits)
+    # b may be right behind a (2 m apart at the start) but never closer than the discs plus the pad
+    for lk in links[:-1]:
+        assert lk.exit + 2.0 - lk.entry >= 2 * R
+
+
+def test_a_robot_that_stops_for_good_is_dropped_from_gates_whose_way_does_not_pass_it():
+    book = GateBook()
+    a, b, c = robot("a", 0.0, 5.0), robot("b", 5.0, 0.0), robot("c", 9.0, 0.0)
+    book.on_leg(a, 1, straight("a", (0.0, 5.0), (10.0, 5.0), 0.0), [a, b, c], 0.0)
+    a.status = said("a", 1, 0.0)
+    book.on_leg(b, 2, straight("b", (5.0, 0.0), (5.0, 10.0), 0.0, hold=10.0), [a, b, c], 0.0)
+    book.on_leg(c, 3, straight("c", (9.0, 0.0), (9.0, 10.0), 0.0, hold=15.0), [a, b, c], 0.0)
+    assert {r: watched_robots(rec) for r, rec in book.records.items()} == {"a": set(), "b": {"a"}, "c": {"a"}}
+    a.status = RobotStatus.from_dict({**said("a", 1, 5.0).to_dict(), "x": 5.0, "y": 5.0})  # a dies at (5, 5):
+    # in b's way, not in c's
+    records, stuck = book.forget(a, [a, b, c], 1.0)
+    assert stuck == ["b"] and [r.robot_id for r in records] == ["c"] and not records[0].links
+
+
+# -- fleets with slow-downs and halts ---------------------------------------------------------------
+def jobs(n, seed):
+    rng = random.Random(seed)
+    sites = sorted(s.name for s in WH.stations.values() if s.type == "storage")
+    return [task(f"J{k}", rng.choice(["chute_1", "chute_2"]), rng.choice(sites)) for k in range(n)]
+
+
+def gated_run(seed, gated=True, limit=900.0, **params):
+    fleet = four_robots()
+    sim = GatedSim(fleet, gated=gated, slow=random_slowdowns([f[0] for f in fleet], seed, horizon_s=200, n=8),
+                   **params)
+    todo = jobs(10, seed)
+    sim.submit(*todo)
+    done = sim.run_until(lambda: all(sim.last(j.id) == "done" for j in todo), limit=limit)
+    return sim, done
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_gated_robots_slowed_and_halted_at_random_never_touch_and_do_every_job_without_re_planning(seed):
+    sim, done = gated_run(seed, lateness_tolerance_s=3600.0)
+    assert done, sim.notes[-5:]
+    gap, a, b, t = sim.gap()
+    assert gap >= 0.0, f"{a} and {b} overlapped by {-gap:.3f} m at t = {t:.1f} s"
+    assert not any("late: re-planning" in n for n in sim.notes)
+    assert sim.links_sent > 0  # the gates had something to say
+
+
+def test_without_the_gate_the_same_halts_and_no_re_planning_leave_jobs_undone():
+    _, done = gated_run(2, gated=False, limit=300.0, lateness_tolerance_s=3600.0)
+    assert not done  # the clock-driven fleet jams where the gated one gets through (seed 2 above)
