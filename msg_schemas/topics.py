@@ -3,6 +3,13 @@
 Nodes create publishers and subscriptions with the pair from here, e.g.
 ``node.create_subscription(String, TASKS, cb, TASKS_QOS)``, so both ends always match.
 
+The names are relative (issue 12, ROS conventions): a node in the root namespace talks on
+``/fleet/tasks``, ``/robots/r1/timed_path``, ``/map``, as always; a fleet brought up in a namespace
+(``/site_a``: its planner, agents and tools alike) talks on ``/site_a/fleet/tasks`` and so on, so
+two fleets run side by side without hearing each other. (A robot's namespace is therefore its
+fleet's; give each agent its ``id``.) Nodes that need a topic's full name, as a signature's channel,
+take it from their publisher or subscription (``topic_name``).
+
 QoS choices:
 
 * Commands and events (``TASKS``, ``TASK_EVENTS``): reliable, volatile, deep queue (1000) so a
@@ -25,25 +32,25 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from .records import robot_id_problem
 
-TASKS = "/fleet/tasks"
-TASK_EVENTS = "/fleet/task_events"
-ROBOT_STATUS = "/fleet/robot_status"
-SCHEDULE = "/fleet/schedule"
-MARKERS = "/fleet/markers"
-MAP = "/map"
-WAIT_MESSAGES = "/fleet/wait_messages"
+TASKS = "fleet/tasks"
+TASK_EVENTS = "fleet/task_events"
+ROBOT_STATUS = "fleet/robot_status"
+SCHEDULE = "fleet/schedule"
+MARKERS = "fleet/markers"
+MAP = "map"
+WAIT_MESSAGES = "fleet/wait_messages"
 
 
 def timed_path_topic(robot_id: str) -> str:
-    """``/robots/<robot_id>/timed_path``; ValueError if the id cannot be part of a topic name."""
+    """``robots/<robot_id>/timed_path``; ValueError if the id cannot be part of a topic name."""
     problem = robot_id_problem(robot_id)
     if problem:
         raise ValueError(f"robot id {problem}")
-    return f"/robots/{robot_id}/timed_path"
+    return f"robots/{robot_id}/timed_path"
 
 
 def timed_path_auth_topic(robot_id: str) -> str:
-    """``/robots/<robot_id>/timed_path_auth``: the signatures of its timed paths (where keys are configured)."""
+    """``robots/<robot_id>/timed_path_auth``: the signatures of its timed paths (where keys are configured)."""
     return timed_path_topic(robot_id) + "_auth"
 
 

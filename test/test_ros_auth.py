@@ -56,7 +56,7 @@ def test_only_signed_tasks_are_taken_and_only_signed_commands_obeyed(keyed, ros_
     fleet, files = keyed
     mon, planner = fleet.monitor, fleet.planner
     client, forger = Keys(sign_file=files["client"]), Keys(sign_file=files["forger"])
-    channel = topics.TASKS
+    channel = mon._tasks.topic_name  # the full name: "/fleet/tasks"
     mon.submit(Task(id="U1", pick="chute_1", place="B01-01"))                               # unsigned
     mon.submit(forger.sign(Task(id="U2", pick="chute_1", place="B01-01"), channel))        # untrusted key
     tampered = client.sign(Task(id="U3", pick="chute_1", place="B01-01"), channel)
@@ -80,7 +80,7 @@ def test_only_signed_tasks_are_taken_and_only_signed_commands_obeyed(keyed, ros_
         refused = agent.keys.refused
         for ev in (TaskEvent(task_id="K1", event="cancelled", stamp=mon.now(), robot_id=robot),
                    forger.sign(TaskEvent(task_id="K1", event="cancelled", stamp=mon.now(), robot_id=robot),
-                               topics.TASK_EVENTS)):
+                               fake.topic_name)):
             fake.publish(String(data=ev.to_json()))
         assert wait_for(fleet, lambda: agent.keys.refused >= refused + 2)
         assert agent.agent.job == "K1"
