@@ -18,6 +18,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", sorted(glob("config/*.yaml") + glob("config/*.map"))),
+        ("share/" + package_name + "/launch", sorted(glob("launch/*.launch.py"))),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -33,6 +34,8 @@ setup(
             "robot_agent = robot_agent.agent_node:main",
             "fleet-demo = fleet_planner.ros.demo:main",
             "fleet-submit = fleet_planner.ros.submit:main",
+            "sim_clock = fleet_planner.ros.sim_clock:main",
+            "fleet-console = fleet_planner.ros.console:main",  # (the web console, issue 12)
         ],
     },
 )
