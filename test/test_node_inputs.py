@@ -146,3 +146,32 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
     assert "r2" in agent.agent.heard
     agent._on_timer()
 
+
+
+@pytest.fixture(scope="module")
+def keyed_agent(ros_context, tmp_path_factory):
+    import os
+
+    from fleet_planner.auth import new_key_line
+    key = tmp_path_factory.mktemp("keys") / "planner.key"
+    key.write_text(new_key_line("planner") + "\n")
+    os.chmod(key, 0o600)
+    agent = AgentNode("fuzz_keyed_agent", context=ros_context, warehouse=WH, kinds=KINDS, parameter_overrides=[
+        Parameter("id", value="r2"), Parameter("auth_trust_file", value=str(key))])
+    try:
+        yield agent
+    finally:
+        agent.destroy_node()
+
+
+@given(text=HOSTILE, stamp=STAMP, poses=st.lists(st.tuples(STAMP, FLOATS, FLOATS, WILD_TEXT), max_size=4))
+@FUZZ
+def test_an_agent_with_keys_refuses_whatever_is_not_signed_and_never_raises(keyed_agent, text, stamp, poses):
+    msg = Path()
+    msg.header.stamp = stamp
+    msg.poses = [pose(*p) for p in poses]
+    keyed_agent._on_path(msg)
+    for callback in (keyed_agent._on_path_auth, keyed_agent._on_event, keyed_agent._on_task):
+        callback(String(data=text))
+    keyed_agent._on_event(String(data=TaskEvent(task_id="J1", event="assigned", stamp=1.0, robot_id="r2").to_json()))
+    assert keyed_agent.agent.job is None and keyed_agent.agent.model.path is None
