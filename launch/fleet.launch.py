@@ -65,6 +65,7 @@ def _nodes(context, *args, **kwargs):
                           parameters=[{**common, "id": r["id"], "kind": r["kind"], "x": float(r["x"]),
                                        "y": float(r["y"]), "yaw": float(r.get("yaw", 0.0)),
                                        "battery": float(r.get("battery", 1.0)), "planner": "planner",
+                                       "fleet_file": fleet_file,
                                        "auth_trust_file": arg["planner_key"]}]))
     if arg["console"].lower() == "true":
         nodes.append(Node(package=PACKAGE, executable="fleet-console", name="fleet_console", output="screen",

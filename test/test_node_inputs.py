@@ -34,7 +34,8 @@ def nodes(ros_context, tmp_path_factory):
                           parameter_overrides=[Parameter("fleet_file", value=str(fleet_file))])
     agent = AgentNode("fuzz_agent", context=ros_context, warehouse=WH, kinds=KINDS,
                       parameter_overrides=[Parameter("id", value="r1"), Parameter("x", value=CHARGERS[0][0]),
-                                           Parameter("y", value=CHARGERS[0][1])])
+                                           Parameter("y", value=CHARGERS[0][1]),
+                                           Parameter("fleet_file", value=str(fleet_file))])
     sent: list[String] = []
     publish = planner._events.publish
     planner._events.publish = lambda msg: (sent.append(msg), publish(msg))  # spy: still published
@@ -129,7 +130,7 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
     planner._on_status(status("r2", now + 3600.0, "manipulator", CHARGERS[1]))  # far ahead
     assert not any(rid.startswith("intruder") for rid in planner.fleet.robots)
     assert "r2" not in planner.fleet.robots
-    assert len(planner.fleet._strangers) <= 1001
+    assert len(planner.fleet.roster.strangers) <= 1001
     planner._on_status(status("r1", planner._now()))
     assert "r1" in planner.fleet.robots
     planner._on_task(String(data=Task(id="after_the_flood", pick="chute_1", place="B01-01").to_json()))
@@ -138,7 +139,11 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
     assigned = [TaskEvent.from_json(m.data) for m in sent]
     sent.clear()
     assert any(e.event == "assigned" and e.robot_id == "r1" and e.task_id == "after_the_flood" for e in assigned)
-    # the agent ignores stale statuses of others and keeps its own going
+    # the agent hears no stranger, ignores stale statuses of others and keeps its own going
+    for i in range(3000):
+        agent._on_status(status(f"intruder{i}", agent._now()))
+    assert not any(rid.startswith("intruder") for rid in agent.agent.heard)
+    assert len(agent._roster.strangers) <= 1001
     agent._on_status(status("r2", agent._now() - 3600.0, "manipulator", CHARGERS[1]))
     assert "r2" not in agent.agent.heard
     agent._on_timer()  # (the core refuses statuses stamped ahead of its last tick)
