@@ -67,7 +67,12 @@ def _fixed(description: str) -> ParameterDescriptor:
 class AgentNode(Node):
     """One robot. ``warehouse`` and ``kinds`` may be handed in (tests); otherwise they are read from the
     files named by the parameters ``warehouse_file`` and ``kinds_file`` (empty: the shipped ones).
-    The robot's id is the parameter ``id``, or else the last part of the node's namespace."""
+    The robot's id is the parameter ``id``, or else the last part of the node's namespace (topic
+    names are relative, so an agent in ``/r1`` talks on ``/r1/fleet/...``: in a fleet, give the id).
+
+    Task events and timed paths count only from the planner node (``planner``; see
+    ``fleet_planner/ros/origin.py``) or, with ``auth_trust_file``, only when signed by one of its keys
+    (``fleet_planner/ros/signing.py``); with ``fleet_file``, only the roster's statuses are heard."""
 
     def __init__(self, name: str = "robot_agent", *, warehouse: Warehouse | None = None,
                  kinds: Mapping[str, RobotKind] | None = None, **kwargs: Any):
