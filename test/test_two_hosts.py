@@ -50,6 +50,8 @@ def two_hosts():
     finally:
         for ns in made:  # deleting a namespace deletes its end of the veth, and so the pair
             subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=10)
+        # a pair never moved into the namespaces (set-up failed half way) is still here: remove it
+        subprocess.run(["ip", "link", "del", links[0]], capture_output=True, timeout=10)
 
 
 def test_a_job_is_done_by_agents_on_another_host(two_hosts, tmp_path):
