@@ -18,6 +18,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", sorted(glob("config/*.yaml") + glob("config/*.map"))),
+        ("share/" + package_name + "/launch", sorted(glob("launch/*.launch.py"))),
     ],
     package_data={"fleet_planner.ros.console": ["static/*"]},  # the web console's page
     install_requires=["setuptools"],
@@ -35,6 +36,7 @@ setup(
             "fleet-demo = fleet_planner.ros.demo:main",
             "fleet-submit = fleet_planner.ros.submit:main",
             "fleet-op = fleet_planner.ros.operate:main",
+            "sim_clock = fleet_planner.ros.sim_clock:main",
             "fleet-console = fleet_planner.ros.console:main",
         ],
     },

@@ -3,6 +3,13 @@
 Nodes create publishers and subscriptions with the pair from here, e.g.
 ``node.create_subscription(String, TASKS, cb, TASKS_QOS)``, so both ends always match.
 
+The names are relative (issue 12, ROS conventions): a node in the root namespace talks on
+``/fleet/tasks``, ``/robots/r1/timed_path``, ``/map``, as always; a fleet brought up in a namespace
+(``/site_a``: its planner, agents and tools alike) talks on ``/site_a/fleet/tasks`` and so on, so
+two fleets run side by side without hearing each other. (A robot's namespace is therefore its
+fleet's; give each agent its ``id``.) Nodes that need a topic's full name, as a signature's channel,
+take it from their publisher or subscription (``topic_name``).
+
 QoS choices:
 
 * Commands and events (``TASKS``, ``TASK_EVENTS``): reliable, volatile, deep queue (1000) so a
@@ -27,40 +34,40 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from .records import robot_id_problem
 
-TASKS = "/fleet/tasks"
-TASK_EVENTS = "/fleet/task_events"
-ROBOT_STATUS = "/fleet/robot_status"
-SCHEDULE = "/fleet/schedule"
-MARKERS = "/fleet/markers"
-MAP = "/map"
-WAIT_MESSAGES = "/fleet/wait_messages"
-OBSTACLES = "/fleet/obstacles"  # fleet/obstacle@1: people, vehicles, pallets (fleet_planner/fleet/obstacles.py)
+TASKS = "fleet/tasks"
+TASK_EVENTS = "fleet/task_events"
+ROBOT_STATUS = "fleet/robot_status"
+SCHEDULE = "fleet/schedule"
+MARKERS = "fleet/markers"
+MAP = "map"
+WAIT_MESSAGES = "fleet/wait_messages"
+OBSTACLES = "fleet/obstacles"  # fleet/obstacle@1: people, vehicles, pallets (fleet_planner/fleet/obstacles.py)
 
 
 def timed_path_topic(robot_id: str) -> str:
-    """``/robots/<robot_id>/timed_path``; ValueError if the id cannot be part of a topic name."""
+    """``robots/<robot_id>/timed_path``; ValueError if the id cannot be part of a topic name."""
     problem = robot_id_problem(robot_id)
     if problem:
         raise ValueError(f"robot id {problem}")
-    return f"/robots/{robot_id}/timed_path"
+    return f"robots/{robot_id}/timed_path"
 
 
 def timed_path_auth_topic(robot_id: str) -> str:
-    """``/robots/<robot_id>/timed_path_auth``: the signatures of its timed paths (where keys are configured)."""
+    """``robots/<robot_id>/timed_path_auth``: the signatures of its timed paths (where keys are configured)."""
     return timed_path_topic(robot_id) + "_auth"
 
 
 def neighbours_topic(robot_id: str) -> str:
-    """``/robots/<robot_id>/neighbours`` (the planner's relay of the statuses a robot must hear);
+    """``robots/<robot_id>/neighbours`` (the planner's relay of the statuses a robot must hear);
     ValueError if the id cannot be part of a topic name."""
     problem = robot_id_problem(robot_id)
     if problem:
         raise ValueError(f"robot id {problem}")
-    return f"/robots/{robot_id}/neighbours"
+    return f"robots/{robot_id}/neighbours"
 
 
 def gate_topic(robot_id: str) -> str:
-    """``/robots/<robot_id>/gate``: the robot's precedence links (``fleet/gate@1``, latched)."""
+    """``robots/<robot_id>/gate``: the robot's precedence links (``fleet/gate@1``, latched)."""
     return timed_path_topic(robot_id).rsplit("/", 1)[0] + "/gate"
 
 
@@ -87,16 +94,16 @@ NEIGHBOURS_QOS = _qos(10, reliable=False)
 # -- the operator (fleet_planner/fleet/operator.py; docs/ARCHITECTURE.md, "Topics and QoS") ------------
 #: ``fleet/command@1`` (commands with arguments) in, ``fleet/command_reply@1`` (same ``id``) out:
 #: reliable and volatile like the tasks and their events
-COMMANDS = "/fleet/commands"
-COMMAND_REPLIES = "/fleet/command_replies"
+COMMANDS = "fleet/commands"
+COMMAND_REPLIES = "fleet/command_replies"
 COMMANDS_QOS = _qos(100)
 COMMAND_REPLIES_QOS = _qos(100)
 #: std_msgs/Bool, latched: whether the e-stop is engaged (the planner publishes it, every agent holds)
-ESTOPPED = "/fleet/estopped"
+ESTOPPED = "fleet/estopped"
 ESTOPPED_QOS = LATCHED_QOS
 #: std_srvs/SetBool services of the planner: pause (true) / resume the fleet; engage (true) / release the e-stop
-PAUSE_FLEET_SERVICE = "/fleet/pause"
-ESTOP_SERVICE = "/fleet/estop"
+PAUSE_FLEET_SERVICE = "fleet/pause"
+ESTOP_SERVICE = "fleet/estop"
 #: geometry_msgs/Twist to a robot in manual drive: best effort, so any teleop publisher matches
 CMD_VEL_QOS = _qos(10, reliable=False)
 
@@ -107,5 +114,5 @@ def robot_topic(robot_id: str, name: str) -> str:
     problem = robot_id_problem(robot_id)
     if problem:
         raise ValueError(f"robot id {problem}")
-    return f"/robots/{robot_id}/{name}"
+    return f"robots/{robot_id}/{name}"
 OBSTACLES_QOS = _qos(100)  # reliable: a pallet reported once must arrive; a tracker repeats the rest

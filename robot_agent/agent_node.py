@@ -27,7 +27,15 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import String
 
 from fleet_planner.fleet import COORDINATION, RobotAgent
-from fleet_planner.fleet.intake import MAX_PATH_OFFSET_S, MAX_PATH_POSES, MAX_STATUS_AGE_S, stamp_problem
+from fleet_planner.fleet.fleet_file import load_fleet
+from fleet_planner.fleet.intake import (
+    MAX_HEARD,
+    MAX_PATH_OFFSET_S,
+    MAX_PATH_POSES,
+    MAX_STATUS_AGE_S,
+    Roster,
+    stamp_problem,
+)
 from fleet_planner.model import ROBOT_KINDS
 from fleet_planner.robots import RobotKind, RobotModel, load_kinds
 from fleet_planner.ros.drain import create_draining_subscription
@@ -65,7 +73,12 @@ def _fixed(description: str) -> ParameterDescriptor:
 class AgentNode(Node):
     """One robot. ``warehouse`` and ``kinds`` may be handed in (tests); otherwise they are read from the
     files named by the parameters ``warehouse_file`` and ``kinds_file`` (empty: the shipped ones).
-    The robot's id is the parameter ``id``, or else the last part of the node's namespace."""
+    The robot's id is the parameter ``id``, or else the last part of the node's namespace (topic
+    names are relative, so an agent in ``/r1`` talks on ``/r1/fleet/...``: in a fleet, give the id).
+
+    Task events and timed paths count only from the planner node (``planner``; see
+    ``fleet_planner/ros/origin.py``) or, with ``auth_trust_file``, only when signed by one of its keys
+    (``fleet_planner/ros/signing.py``); with ``fleet_file``, only the roster's statuses are heard."""
 
     def __init__(self, name: str = "robot_agent", *, warehouse: Warehouse | None = None,
                  kinds: Mapping[str, RobotKind] | None = None, **kwargs: Any):
@@ -91,6 +104,9 @@ class AgentNode(Node):
         planner = self.declare_parameter("planner", "planner", _fixed(
             "the planner's node name (relative to this node's namespace, or absolute): task events and timed "
             "paths are taken only while no other node publishes them")).value
+        fleet_file = self.declare_parameter("fleet_file", "", _fixed(
+            "fleet YAML whose robot ids are the roster: statuses of other ids are ignored (one warning each); "
+            "empty: every robot's are heard")).value
         trust_file = self.declare_parameter("auth_trust_file", "", _fixed(
             "key file of the planner (fleet_planner/auth.py): with it, only task events and timed paths signed "
             "by one of its keys are taken, from any node (empty: only from the planner node, unsigned)")).value
@@ -115,6 +131,7 @@ class AgentNode(Node):
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         chargers = [s.pose for s in warehouse.stations_of("charger")]
         model = RobotModel(robot_id, kinds[kind], x, y, yaw, battery, chargers)
+        self._roster = Roster([m.id for m in load_fleet(fleet_file, kinds)] if fleet_file else None)
         self.planner = OriginCheck.qualify(self, planner)
         self.agent = RobotAgent(model, warehouse, mode, planner=self.planner, gated=bool(gated))
         self.agent.speed_scale = float(scale)
@@ -234,6 +251,13 @@ class AgentNode(Node):
             problem = stamp_problem(f"robot {status.id!r}", status.stamp, self._now(), float("inf"), MAX_STATUS_AGE_S)
             if problem:  # (ahead: RobotAgent.on_status refuses those)
                 raise ValueError(problem)
+            known, warning = self._roster.admit(status.id)
+            if warning:
+                self.get_logger().warning(warning)
+            if not known:
+                return
+            if status.id not in self.agent.heard and len(self.agent.heard) >= MAX_HEARD:
+                raise ValueError(f"robot {status.id!r}: already hearing {MAX_HEARD} robots; ignored")
             self.agent.on_status(status)
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)

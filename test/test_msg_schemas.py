@@ -150,7 +150,7 @@ def test_timed_path_topic_accepts_exactly_the_ids_ros_accepts(robot_id):
     except InvalidTopicNameException:
         ros_ok = False
     if ros_ok:
-        assert timed_path_topic(robot_id) == f"/robots/{robot_id}/timed_path"
+        assert timed_path_topic(robot_id) == f"robots/{robot_id}/timed_path"  # relative: namespaces work
     else:
         with pytest.raises(ValueError, match="robot id must be"):
             timed_path_topic(robot_id)
@@ -162,8 +162,9 @@ def test_topic_names_are_valid_and_the_qos_pairs_match():
 
     from msg_schemas import topics as T
 
-    for name in (T.TASKS, T.TASK_EVENTS, T.ROBOT_STATUS, T.SCHEDULE, T.MARKERS, T.MAP):
-        validate_full_topic_name(name)
+    for name in (T.TASKS, T.TASK_EVENTS, T.ROBOT_STATUS, T.SCHEDULE, T.MARKERS, T.MAP, T.WAIT_MESSAGES):
+        assert not name.startswith("/")  # relative, so that a namespace moves the whole fleet
+        validate_full_topic_name("/" + name)
     for qos in (T.TASKS_QOS, T.TASK_EVENTS_QOS, T.ROBOT_STATUS_QOS, T.TIMED_PATH_QOS, T.SCHEDULE_QOS,
                 T.MARKERS_QOS, T.MAP_QOS):
         assert qos_check_compatible(qos, qos)[0] != QoSCompatibility.ERROR

@@ -34,7 +34,8 @@ def nodes(ros_context, tmp_path_factory):
                           parameter_overrides=[Parameter("fleet_file", value=str(fleet_file))])
     agent = AgentNode("fuzz_agent", context=ros_context, warehouse=WH, kinds=KINDS,
                       parameter_overrides=[Parameter("id", value="r1"), Parameter("x", value=CHARGERS[0][0]),
-                                           Parameter("y", value=CHARGERS[0][1])])
+                                           Parameter("y", value=CHARGERS[0][1]),
+                                           Parameter("fleet_file", value=str(fleet_file))])
     sent: list[String] = []
     publish = planner._events.publish
     planner._events.publish = lambda msg: (sent.append(msg), publish(msg))  # spy: still published
@@ -129,7 +130,7 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
     planner._on_status(status("r2", now + 3600.0, "manipulator", CHARGERS[1]))  # far ahead
     assert not any(rid.startswith("intruder") for rid in planner.fleet.robots)
     assert "r2" not in planner.fleet.robots
-    assert len(planner.fleet._strangers) <= 1001
+    assert len(planner.fleet.roster.strangers) <= 1001
     planner._on_status(status("r1", planner._now()))
     assert "r1" in planner.fleet.robots
     planner._on_task(String(data=Task(id="after_the_flood", pick="chute_1", place="B01-01").to_json()))
@@ -138,7 +139,11 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
     assigned = [TaskEvent.from_json(m.data) for m in sent]
     sent.clear()
     assert any(e.event == "assigned" and e.robot_id == "r1" and e.task_id == "after_the_flood" for e in assigned)
-    # the agent ignores stale statuses of others and keeps its own going
+    # the agent hears no stranger, ignores stale statuses of others and keeps its own going
+    for i in range(3000):
+        agent._on_status(status(f"intruder{i}", agent._now()))
+    assert not any(rid.startswith("intruder") for rid in agent.agent.heard)
+    assert len(agent._roster.strangers) <= 1001
     agent._on_status(status("r2", agent._now() - 3600.0, "manipulator", CHARGERS[1]))
     assert "r2" not in agent.agent.heard
     agent._on_timer()  # (the core refuses statuses stamped ahead of its last tick)
@@ -146,3 +151,32 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
     assert "r2" in agent.agent.heard
     agent._on_timer()
 
+
+
+@pytest.fixture(scope="module")
+def keyed_agent(ros_context, tmp_path_factory):
+    import os
+
+    from fleet_planner.auth import new_key_line
+    key = tmp_path_factory.mktemp("keys") / "planner.key"
+    key.write_text(new_key_line("planner") + "\n")
+    os.chmod(key, 0o600)
+    agent = AgentNode("fuzz_keyed_agent", context=ros_context, warehouse=WH, kinds=KINDS, parameter_overrides=[
+        Parameter("id", value="r2"), Parameter("auth_trust_file", value=str(key))])
+    try:
+        yield agent
+    finally:
+        agent.destroy_node()
+
+
+@given(text=HOSTILE, stamp=STAMP, poses=st.lists(st.tuples(STAMP, FLOATS, FLOATS, WILD_TEXT), max_size=4))
+@FUZZ
+def test_an_agent_with_keys_refuses_whatever_is_not_signed_and_never_raises(keyed_agent, text, stamp, poses):
+    msg = Path()
+    msg.header.stamp = stamp
+    msg.poses = [pose(*p) for p in poses]
+    keyed_agent._on_path(msg)
+    for callback in (keyed_agent._on_path_auth, keyed_agent._on_event, keyed_agent._on_task):
+        callback(String(data=text))
+    keyed_agent._on_event(String(data=TaskEvent(task_id="J1", event="assigned", stamp=1.0, robot_id="r2").to_json()))
+    assert keyed_agent.agent.job is None and keyed_agent.agent.model.path is None

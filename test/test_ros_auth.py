@@ -17,6 +17,7 @@ from fleet_planner.ros.demo.monitor import FleetMonitor, spin_until
 from fleet_planner.ros.planner_node import PlannerNode
 from fleet_planner.ros.signing import Keys
 from fleet_planner.ros.sim_clock import SimClock
+from fleet_planner.ros.submit import Submitter
 from msg_schemas import topics
 from msg_schemas.records import Task, TaskEvent
 from robot_agent.agent_node import AgentNode
@@ -56,7 +57,7 @@ def test_only_signed_tasks_are_taken_and_only_signed_commands_obeyed(keyed, ros_
     fleet, files = keyed
     mon, planner = fleet.monitor, fleet.planner
     client, forger = Keys(sign_file=files["client"]), Keys(sign_file=files["forger"])
-    channel = topics.TASKS
+    channel = mon._tasks.topic_name  # the full name: "/fleet/tasks"
     mon.submit(Task(id="U1", pick="chute_1", place="B01-01"))                               # unsigned
     mon.submit(forger.sign(Task(id="U2", pick="chute_1", place="B01-01"), channel))        # untrusted key
     tampered = client.sign(Task(id="U3", pick="chute_1", place="B01-01"), channel)
@@ -80,7 +81,7 @@ def test_only_signed_tasks_are_taken_and_only_signed_commands_obeyed(keyed, ros_
         refused = agent.keys.refused
         for ev in (TaskEvent(task_id="K1", event="cancelled", stamp=mon.now(), robot_id=robot),
                    forger.sign(TaskEvent(task_id="K1", event="cancelled", stamp=mon.now(), robot_id=robot),
-                               topics.TASK_EVENTS)):
+                               fake.topic_name)):
             fake.publish(String(data=ev.to_json()))
         assert wait_for(fleet, lambda: agent.keys.refused >= refused + 2)
         assert agent.agent.job == "K1"
@@ -91,3 +92,25 @@ def test_only_signed_tasks_are_taken_and_only_signed_commands_obeyed(keyed, ros_
     said = [e.event for e in mon.events_of("K1") if e.auth and e.auth["key"] == "planner"]  # (the monitor has no keys)
     assert said == ["accepted", "assigned", "picked", "placed", "done"]
     no_contact(fleet)
+
+
+def test_fleet_submit_signs_its_task_and_believes_only_signed_events(keyed, ros_context):
+    fleet, files = keyed
+    task = Task(id="K2", pick="chute_1", place="B02-02")
+    submitter = Submitter(task, "keyed_submit", keys=Keys(files["client"], files["planner"]), context=ros_context)
+    forger = Keys(sign_file=files["forger"])
+    fake = fleet.monitor.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
+    fleet.executor.add_node(submitter)
+    try:
+        assert wait_for(fleet, submitter.planner_ready)
+        for ev in (TaskEvent(task_id="K2", event="done", stamp=1.0),
+                   forger.sign(TaskEvent(task_id="K2", event="done", stamp=1.0), fake.topic_name)):
+            fake.publish(String(data=ev.to_json()))
+        submitter.send()
+        assert wait_for(fleet, lambda: any(e.event == "done" for e in submitter.events)), submitter.events
+        assert [e.event for e in submitter.events] == ["accepted", "assigned", "picked", "placed", "done"]
+        assert submitter.keys.refused >= 2
+    finally:
+        fleet.monitor.destroy_publisher(fake)
+        fleet.executor.remove_node(submitter)
+        submitter.destroy_node()

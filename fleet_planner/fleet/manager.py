@@ -56,13 +56,11 @@ from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
 from .gate import GateBook
+from .intake import Roster
 from .jobstore import DuplicateJob, JobStore
 from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Target, can_do
-
-#: unknown robot ids (off the roster) warned about one by one; beyond that, silently ignored
-MAX_STRANGERS = 1000
 
 
 class FleetManager:
@@ -110,8 +108,7 @@ class FleetManager:
         self.max_clock_skew_s = float(max_clock_skew_s)
         #: the obstacles of the intelligent space: participants above every robot (fleet/obstacles.py)
         self.obstacles = ObstacleMap(obstacle_params, self.max_clock_skew_s)
-        self.roster = None if roster is None else frozenset(roster)
-        self._strangers: set[str] = set()   # ids off the roster already warned about
+        self.roster = Roster(roster)  # (None: anyone joins)
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
         self._seq = 0
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
@@ -233,14 +230,11 @@ class FleetManager:
         if status.stamp > now + self.max_clock_skew_s:
             raise ValueError(f"robot {status.id!r}: status stamped {status.stamp - now:.3g} s ahead of the "
                              f"planner's clock (at most {self.max_clock_skew_s:g} s)")
-        if self.roster is not None and status.id not in self.roster:
-            if status.id in self._strangers or len(self._strangers) > MAX_STRANGERS:
-                return  # warned already (or about too many): its statuses never make it part of the fleet
-            self._strangers.add(status.id)  # one warning per unknown id, for at most MAX_STRANGERS ids
-            if len(self._strangers) > MAX_STRANGERS:
-                raise ValueError(f"more than {MAX_STRANGERS} robot ids not on the fleet's roster; "
-                                 "further ones are ignored without a word")
-            raise ValueError(f"robot {status.id!r}: not on the fleet's roster; its statuses are ignored")
+        known, warning = self.roster.admit(status.id)
+        if not known:  # one warning per unknown id (at most MAX_STRANGERS); it never joins the fleet
+            if warning:
+                raise ValueError(warning)
+            return
         kind = self.kinds.get(status.kind)
         if kind is None:
             raise ValueError(f"robot {status.id!r}: kind {status.kind!r} is not one of the known kinds "

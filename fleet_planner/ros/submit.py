@@ -123,7 +123,7 @@ def follow(node: Submitter, timeout: float) -> int:
     while not node.planner_ready() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.1)
     if not node.planner_ready():
-        print(f"{task.id}: no planner on {topics.TASKS} within {timeout:g} s", file=sys.stderr)
+        print(f"{task.id}: no planner on {node._pub.topic_name} within {timeout:g} s", file=sys.stderr)
         return 1
     node.send()
     shown = 0
