@@ -28,6 +28,7 @@ from visualization_msgs.msg import MarkerArray
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.fleet.coordination import AGENT_BEHAVIOR
 from fleet_planner.fleet.fleet_file import load_fleet
+from fleet_planner.fleet.gate import watched_robots
 from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
@@ -154,10 +155,13 @@ class PlannerNode(Node):
         self.operator = PlannerOperator(self, self.fleet, self._publish)
         create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
         self._timer = self.create_timer(period, self._on_timer)
-        # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py); the lead wires
-        # ``neighbour_relay.watch`` to the execution gate
+        # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py) and the robots its
+        # execution gate watches (fleet_planner/fleet/gate.py)
         self.neighbour_relay = NeighbourPublisher(
             self, self.fleet, relay_period, AGENT_BEHAVIOR.comm_range if coordination == "behavior" else 0.0)
+        gates = self.fleet.gates
+        if gates is not None:  # a gated robot hears every robot its links name, however far
+            self.neighbour_relay.watch = lambda rid: watched_robots(gates.records.get(rid))
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
         self.get_logger().info(
             f"planning for warehouse {warehouse.name!r} ({len(warehouse.stations)} stations), {coordination} "
