@@ -436,10 +436,26 @@ class CommandReply(Record):
     command: str | None = spec(optional(choice(COMMANDS)), default=None)
 
 
-RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, Command, CommandReply)
+@dataclass(frozen=True)
+class OperatorState(Record):
+    """What the operator has set on the planner (latched, for consoles): the e-stop, a paused
+    fleet, the robots paused and those in manual drive."""
+
+    SCHEMA: ClassVar[str] = "fleet/operator_state@1"
+    NAME: ClassVar[str] = "operator_state"
+
+    stamp: float = spec(number())
+    estop: bool = spec(boolean)
+    fleet_paused: bool = spec(boolean)
+    paused: tuple[str, ...] = spec(list_of(ros_id, unique=True), default=())
+    manual: tuple[str, ...] = spec(list_of(ros_id, unique=True), default=())
+
+
+RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, Command, CommandReply,
+                                     OperatorState)
 
 __all__ = ["BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Command", "CommandReply",
-           "EVENTS_NEEDING_REASON", "INT_MAX", "INT_MIN", "MAX_DEPTH",
+           "EVENTS_NEEDING_REASON", "OperatorState", "INT_MAX", "INT_MIN", "MAX_DEPTH",
            "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS",
            "RECORDS", "TASK_EVENTS", "Check", "Record", "RecordError", "RobotStatus", "Schedule", "Task", "TaskEvent",
            "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json", "nonempty",

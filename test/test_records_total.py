@@ -20,6 +20,7 @@ from msg_schemas.records import (
     RECORDS,
     Command,
     CommandReply,
+    OperatorState,
     RecordError,
     RobotStatus,
     Task,
@@ -33,7 +34,9 @@ GOOD_ALL = {**{cls.SCHEMA: data for cls, data in GOOD.items()},
             Command.SCHEMA: {"schema": Command.SCHEMA, "id": "c1", "command": "send", "robot_id": "r1",
                              "station": "chute_1"},
             CommandReply.SCHEMA: {"schema": CommandReply.SCHEMA, "id": "c1", "ok": False, "stamp": 1.0,
-                                  "message": "robot_id: unknown robot 'r9'", "command": "send"}}
+                                  "message": "robot_id: unknown robot 'r9'", "command": "send"},
+            OperatorState.SCHEMA: {"schema": OperatorState.SCHEMA, "stamp": 2.0, "estop": True, "fleet_paused": False,
+                                   "paused": ["r1"], "manual": []}}
 BY_SCHEMA = {cls.SCHEMA: cls for cls in RECORDS}
 
 # text that includes lone surrogates and control characters (hypothesis' default text has neither)
