@@ -13,12 +13,30 @@ the web server (:mod:`.server`, aiohttp) runs in a thread beside the executor.
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
+from typing import Any
+
+from rclpy.executors import Executor
+from rclpy.parameter import Parameter
 
 from fleet_planner.ros.console.node import ConsoleNode
 from fleet_planner.ros.console.server import ConsoleServer
 from fleet_planner.ros.entry import CONFIG_ERRORS, run_node, spin_node
+from fleet_planner.warehouse import Warehouse
 
-__all__ = ["ConsoleNode", "ConsoleServer", "main"]
+__all__ = ["ConsoleNode", "ConsoleServer", "attach_console", "main"]
+
+
+def attach_console(executor: Executor, warehouse: Warehouse, parking: Sequence[tuple[float, float]], port: int,
+                   **node_kwargs: Any) -> tuple[ConsoleNode, ConsoleServer]:
+    """A console node on ``executor`` (simulated time) and its page served on localhost:``port``
+    (0: any free port; the URL is ``server.url``): how the demo starts one."""
+    node = ConsoleNode(warehouse=warehouse, parking=parking,
+                       parameter_overrides=[Parameter("use_sim_time", value=True)], **node_kwargs)
+    executor.add_node(node)
+    server = ConsoleServer(node, "127.0.0.1", port, node.rate_hz)
+    server.start()
+    return node, server
 
 
 def serve(node: ConsoleNode) -> int | None:
