@@ -251,3 +251,28 @@ def test_every_command_record_is_carried_out():
                  {"command": "send", "robot_id": "r3", "station": "chute_2"}):
         out = sim.op.execute(Command(id="c", **data), sim.t)
         assert out.ok, (data, out.message)
+
+
+def test_a_changed_priority_is_kept_in_the_job_store_and_a_cancelled_job_is_not_reloaded(tmp_path):
+    from test_dispatch import FAST, PARKING, WH
+
+    from fleet_planner.fleet import DispatchParams, FleetManager, JobStore
+
+    store = JobStore(tmp_path / "jobs.db")
+    fm = FleetManager(WH, FAST, DispatchParams(), PARKING, store=store)
+    op = Operator(fm)
+    fm.submit(task("J1"), 0.0)
+    fm.submit(task("J2"), 0.0)
+    assert op.set_priority("J1", 4, 1.0).ok and op.cancel("J2", 1.0).ok
+    assert store.get("J1").task.priority == 4 and store.get("J2").state == "cancelled"
+    assert [h.event for h in store.history("J1")] == ["accepted", "priority"]
+    again = FleetManager(WH, FAST, DispatchParams(), PARKING, store=store)
+    assert set(again.jobs) == {"J1"} and again.jobs["J1"].task.priority == 4
+
+
+def test_manual_drive_is_refused_while_the_robot_picks():
+    sim = OpSim([("r1", "cargo", *CHARGERS[0], 1.0)])
+    m = sim.agents["r1"].model
+    m.start_action("pick", 0.0, 5.0)
+    with pytest.raises(ValueError, match=r"^data: robot r1 is picking"):
+        sim.agents["r1"].hand.set_manual(True)
