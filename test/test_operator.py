@@ -5,9 +5,10 @@ the robots' driven positions are judged by the independent checker (no two discs
 import math
 
 import pytest
-from test_dispatch import CHARGERS, Sim, four_robots, status, task
+from test_dispatch import CHARGERS, FAST, PARKING, WH, Sim, four_robots, status, task
 
 from fleet_planner.checker import min_separation
+from fleet_planner.fleet import DispatchParams, FleetManager, JobStore
 from fleet_planner.fleet.manual import DEADMAN_S, check_twist
 from fleet_planner.fleet.operator import Operator
 from msg_schemas.records import Command, RecordError
@@ -254,10 +255,6 @@ def test_every_command_record_is_carried_out():
 
 
 def test_a_changed_priority_is_kept_in_the_job_store_and_a_cancelled_job_is_not_reloaded(tmp_path):
-    from test_dispatch import FAST, PARKING, WH
-
-    from fleet_planner.fleet import DispatchParams, FleetManager, JobStore
-
     store = JobStore(tmp_path / "jobs.db")
     fm = FleetManager(WH, FAST, DispatchParams(), PARKING, store=store)
     op = Operator(fm)
