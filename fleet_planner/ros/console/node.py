@@ -47,6 +47,8 @@ from msg_schemas.records import (
 ANSWER_S = 10.0
 #: an obstacle not heard of for this long (s, ROS time) is no longer drawn (unless persistent)
 OBSTACLE_EXPIRES_S = 5.0
+#: at most this many robots on the map (a flood of made-up ids must not grow the console without bound)
+MAX_ROBOTS = 1000
 #: at most this many jobs in the table (the oldest finished ones go first)
 MAX_JOBS = 500
 #: the events after which a job is over
@@ -131,6 +133,10 @@ class ConsoleNode(OperatorClient):
             return
         with self._lock:
             new = st.id not in self.status
+            if new and len(self.status) >= MAX_ROBOTS:
+                self.get_logger().warning(f"robot {st.id}: more than {MAX_ROBOTS} robots; not shown",
+                                          throttle_duration_sec=5.0)
+                return
             self.status[st.id] = st
         if new:  # its legs, latched: the current one comes at once
             self.create_subscription(Path, topics.timed_path_topic(st.id),
