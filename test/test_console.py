@@ -187,3 +187,67 @@ def test_bad_requests_on_the_websocket_are_answered_naming_the_field(console):
     replies = asyncio.run(talk())
     for ref, (_, words) in enumerate(requests, start=1):
         assert not replies[ref]["ok"] and words in replies[ref]["message"], (ref, replies[ref])
+
+
+def test_the_job_and_robot_buttons_cancel_reprioritise_send_and_drive_by_hand(browser, console):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.support.ui import Select
+
+    fleet, node, _ = console
+    mon = fleet.monitor
+    log = lambda: browser.find_element("id", "log").text  # noqa: E731
+    click(browser, "#pause-fleet-btn")
+    submit_from_page(browser, "WEB3", "chute_2", "B04-01")
+    until(lambda: job_state(browser, "WEB3") == "accepted", what="WEB3 accepted")
+    row = browser.find_element("id", "job-WEB3")
+    prio = row.find_element("css selector", "input.prio")
+    prio.clear()
+    prio.send_keys("7")
+    row.find_element("css selector", "button.set-prio").click()
+    until(lambda: "job WEB3: priority 0 -> 7" in log(), what="the priority reply")
+    row.find_element("css selector", "button.cancel").click()
+    until(lambda: job_state(browser, "WEB3") == "cancelled", what="WEB3 cancelled on the page")
+    click(browser, "#resume-fleet-btn")
+    # send a free robot to a parking spot from its row
+    rid = until(lambda: next((m.id for m in MEMBERS if fleet.planner.fleet.robots[m.id].free), None),
+                what="a free robot")
+    robot_row = browser.find_element("id", f"row-{rid}")
+    Select(robot_row.find_element("css selector", "select.station")).select_by_value("parking_2")
+    robot_row.find_element("css selector", "button.send").click()
+    spot = fleet.planner.fleet.parking["parking_2"]
+    until(lambda: math.dist((mon.status[rid].x, mon.status[rid].y), spot) < 0.05, what=f"{rid} at parking_2")
+    # manual drive with the drive pad
+    robot_row.find_element("css selector", "button.manual-on").click()
+    until(lambda: mon.status[rid].manual, what=f"{rid} in manual drive")
+    Select(browser.find_element("id", "drive-robot")).select_by_value(rid)
+    start = (mon.status[rid].x, mon.status[rid].y)
+    heading = math.cos(mon.status[rid].yaw), math.sin(mon.status[rid].yaw)
+    free_ahead = WH.grid.disc_is_free(start[0] + heading[0], start[1] + heading[1], mon.status[rid].radius)
+    pad = browser.find_element("id", "drive-fwd" if free_ahead else "drive-back")
+    ActionChains(browser).click_and_hold(pad).perform()
+    try:
+        until(lambda: math.dist((mon.status[rid].x, mon.status[rid].y), start) > 0.2, what=f"{rid} driven by hand")
+    finally:
+        ActionChains(browser).release(pad).perform()
+    robot_row.find_element("css selector", "button.manual-off").click()
+    until(lambda: not mon.status[rid].manual and not fleet.planner.fleet.robots[rid].manual,
+          what=f"{rid} back in the plan")
+    assert "manual " + rid + " on: robot " + rid + ": manual drive on" in log()
+
+
+def test_an_obstacle_of_the_intelligent_space_is_drawn_and_cleared(browser, console):
+    from std_msgs.msg import String
+
+    from fleet_planner.ros.console.node import OBSTACLES_QOS, OBSTACLES_TOPIC
+
+    fleet = console[0]
+    pub = fleet.monitor.create_publisher(String, OBSTACLES_TOPIC, OBSTACLES_QOS)
+    record = {"schema": "fleet/obstacle@1", "id": "pallet_1", "kind": "pallet", "x": 12.0, "y": 6.0,
+              "radius": 0.4, "stamp": fleet.monitor.now(), "persistent": True}
+    until(lambda: pub.get_subscription_count() > 0, what="the console hears obstacles")
+    pub.publish(String(data=json.dumps(record)))
+    until(lambda: browser.execute_script("return !!document.getElementById('obstacle-pallet_1')"),
+          what="the obstacle on the map")
+    pub.publish(String(data=json.dumps({**record, "cleared": True})))
+    until(lambda: browser.execute_script("return !document.getElementById('obstacle-pallet_1')"),
+          what="the obstacle gone")
