@@ -266,7 +266,8 @@ class Operator:
             else:
                 r.target, r.replan, r.arrived_at, r.saw_action = None, False, None, False
                 if _on_the_move(r) and not r.manual and not self.fleet.halted:
-                    self.fleet._hold(r, now, d)
+                    if not self._hold_clear(r, now, d):
+                        self.fleet._hold(r, now, d)
                     r.idle_since = now
                 why += f"; robot {r.id} is released"
         job.state = "cancelled"
