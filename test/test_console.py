@@ -73,6 +73,8 @@ def browser(console):
     driver.set_page_load_timeout(WAIT)
     try:
         driver.get(console[2])
+        until(lambda: driver.find_element("id", "conn").text == "live", what="the websocket")
+        until(lambda: len(robots_on_page(driver)) == len(MEMBERS), what="every robot on the map")
         yield driver
     finally:
         driver.quit()
@@ -220,15 +222,25 @@ def test_the_job_and_robot_buttons_cancel_reprioritise_send_and_drive_by_hand(br
     robot_row.find_element("css selector", "button.manual-on").click()
     until(lambda: mon.status[rid].manual, what=f"{rid} in manual drive")
     Select(browser.find_element("id", "drive-robot")).select_by_value(rid)
+
+    def hold(button, condition, seconds):
+        """Hold a drive pad button until ``condition()`` or ``seconds`` wall seconds; whether it held."""
+        pad = browser.find_element("id", button)
+        end = time.monotonic() + seconds
+        ActionChains(browser).click_and_hold(pad).perform()
+        try:
+            until(lambda: condition() or time.monotonic() > end, timeout=seconds + 5.0, what=button)
+            return condition()
+        finally:
+            ActionChains(browser).release(pad).perform()
+
+    yaw0 = mon.status[rid].yaw
+    assert hold("drive-left", lambda: abs(math.remainder(mon.status[rid].yaw - yaw0, math.tau)) > 0.3, WAIT), \
+        f"{rid} turned by hand"
     start = (mon.status[rid].x, mon.status[rid].y)
-    heading = math.cos(mon.status[rid].yaw), math.sin(mon.status[rid].yaw)
-    free_ahead = WH.grid.disc_is_free(start[0] + heading[0], start[1] + heading[1], mon.status[rid].radius)
-    pad = browser.find_element("id", "drive-fwd" if free_ahead else "drive-back")
-    ActionChains(browser).click_and_hold(pad).perform()
-    try:
-        until(lambda: math.dist((mon.status[rid].x, mon.status[rid].y), start) > 0.2, what=f"{rid} driven by hand")
-    finally:
-        ActionChains(browser).release(pad).perform()
+    moved = lambda: math.dist((mon.status[rid].x, mon.status[rid].y), start) > 0.2  # noqa: E731
+    # forwards, or backwards if something is in front of it
+    assert hold("drive-fwd", moved, 10.0) or hold("drive-back", moved, 10.0), f"{rid} driven by hand"
     robot_row.find_element("css selector", "button.manual-off").click()
     until(lambda: not mon.status[rid].manual and not fleet.planner.fleet.robots[rid].manual,
           what=f"{rid} back in the plan")

@@ -111,6 +111,8 @@ class ConsoleNode(OperatorClient):
         self.operator = OperatorState(stamp=0.0, estop=False, fleet_paused=False)
         self.obstacles: dict[str, dict[str, Any]] = {}
         self.task_events: dict[str, TaskEvent] = {}
+        self._submitted: set[str] = set()            # jobs the page submitted, not yet answered
+        self._verdicts: dict[str, TaskEvent] = {}    # their accepted / rejected events
         self._tasks_pub = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
         sub = create_draining_subscription
         sub(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
@@ -167,6 +169,8 @@ class ConsoleNode(OperatorClient):
             return
         with self._lock:
             self.task_events[ev.task_id] = ev
+            if ev.event in ("accepted", "rejected") and ev.task_id in self._submitted:
+                self._verdicts[ev.task_id] = ev  # the answer to a job the page submitted
             job = self.jobs.setdefault(ev.task_id, {"id": ev.task_id, "robot": None, "late": False})
             if ev.event == "late":
                 job["late"] = True
@@ -305,6 +309,9 @@ class ConsoleNode(OperatorClient):
             answer = self._answer(p)
             if answer is None and time.monotonic() > p.deadline:
                 answer = {"ok": False, "message": "no answer from the fleet in time"}
+                with self._lock:
+                    self._submitted.discard(p.task_id or "")
+                    self._verdicts.pop(p.task_id or "", None)
             if answer is None:
                 still.append(p)
             elif not p.future.done():
@@ -322,9 +329,12 @@ class ConsoleNode(OperatorClient):
             reply = self.replies.get(p.command_id)
             return None if reply is None else {"ok": reply.ok, "message": reply.message}
         if p.task_id is not None:
-            ev = self.task_events.get(p.task_id)
-            if ev is None or ev.event not in ("accepted", "rejected"):
-                return None if ev is None else {"ok": True, "message": f"job {p.task_id} {ev.event}"}
+            with self._lock:
+                ev = self._verdicts.pop(p.task_id, None)
+                if ev is not None:
+                    self._submitted.discard(p.task_id)
+            if ev is None:
+                return None
             return {"ok": ev.event == "accepted",
                     "message": f"job {p.task_id} {ev.event}" + (f": {ev.reason}" if ev.reason else "")}
         return {"ok": True, "message": "sent"}
@@ -373,6 +383,9 @@ class ConsoleNode(OperatorClient):
                 raise BadRequest("task: no planner takes tasks now")
             with self._lock:
                 self.tasks.setdefault(task.id, task)
+                if len(self._submitted) >= MAX_JOBS:
+                    raise BadRequest("task: too many jobs waiting for the planner's answer")
+                self._submitted.add(task.id)
             self._tasks_pub.publish(String(data=task.to_json()))
             pending.task_id = task.id
         self._pending.append(pending)
