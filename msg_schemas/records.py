@@ -571,14 +571,29 @@ class GateRecord(Record):
                 raise RecordError(f"gate.links[{n}].robot: a robot does not wait for itself ({self.robot_id!r})")
 
 
+@dataclass(frozen=True)
+class OperatorState(Record):
+    """What the operator has set on the planner (latched, for consoles): the e-stop, a paused
+    fleet, the robots paused and those in manual drive."""
+
+    SCHEMA: ClassVar[str] = "fleet/operator_state@1"
+    NAME: ClassVar[str] = "operator_state"
+
+    stamp: float = spec(number())
+    estop: bool = spec(boolean)
+    fleet_paused: bool = spec(boolean)
+    paused: tuple[str, ...] = spec(list_of(ros_id, unique=True), default=())
+    manual: tuple[str, ...] = spec(list_of(ros_id, unique=True), default=())
+
+
 RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours,
-                                     Command, CommandReply, ObstacleRecord, GateRecord)
+                                     Command, CommandReply, ObstacleRecord, GateRecord, OperatorState)
 
 __all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Check", "Command", "CommandReply",
            "EVENTS_NEEDING_REASON", "GATE_LINK", "GateRecord", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS",
            "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS", "MAX_OBSTACLE_SPEED",
            "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours", "OBSTACLE_KINDS", "ObstacleRecord",
-           "PathAuth", "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS", "Task",
-           "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of", "load_json",
-           "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec", "text",
-           "unsigned_json"]
+           "OperatorState", "PathAuth", "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS",
+           "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of",
+           "load_json", "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec",
+           "text", "unsigned_json"]

@@ -40,6 +40,24 @@ if ! venv_works; then
     "$PYTHON" -m venv "$VENV"
 fi
 
+# the web console's browser test (test/test_console.py): Debian's chromium and its chromedriver,
+# installed with apt when missing (CI runs as root); browser downloads by tool installers do not work here
+need_browser() { ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; }
+if need_browser; then
+    if [[ $(id -u) -eq 0 ]] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup.sh: installing chromium and chromium-driver with apt (output in $VENV/apt.log)"
+        if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+                chromium chromium-driver; } >"$VENV/apt.log" 2>&1; then
+            echo "setup.sh: apt-get could not install chromium; the end of $VENV/apt.log:" >&2
+            tail -n 20 "$VENV/apt.log" >&2
+            exit 1
+        fi
+    else
+        echo "setup.sh: chromium and chromedriver are missing (apt-get install chromium chromium-driver as root);" \
+             "test/test_console.py needs them" >&2
+    fi
+fi
+
 up_to_date() {
     [[ -f "$STAMP" && -x "$VENV/bin/fleet-plan" ]] || return 1
     local f

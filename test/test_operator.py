@@ -4,12 +4,15 @@ deadlines; bad input is refused naming the field. Runs on test_dispatch's simula
 the robots' driven positions are judged by the independent checker (no two discs ever touch)."""
 import math
 
+import numpy as np
 import pytest
-from test_dispatch import CHARGERS, Sim, four_robots, status, task
+from test_dispatch import CHARGERS, FAST, PARKING, WH, Sim, four_robots, status, task
 
 from fleet_planner.checker import min_separation
+from fleet_planner.fleet import DispatchParams, FleetManager, JobStore, Leg
 from fleet_planner.fleet.manual import DEADMAN_S, check_twist
 from fleet_planner.fleet.operator import Operator
+from fleet_planner.model import TimedPath
 from msg_schemas.records import Command, RecordError
 
 
@@ -251,3 +254,65 @@ def test_every_command_record_is_carried_out():
                  {"command": "send", "robot_id": "r3", "station": "chute_2"}):
         out = sim.op.execute(Command(id="c", **data), sim.t)
         assert out.ok, (data, out.message)
+
+
+def test_a_changed_priority_is_kept_in_the_job_store_and_a_cancelled_job_is_not_reloaded(tmp_path):
+    store = JobStore(tmp_path / "jobs.db")
+    fm = FleetManager(WH, FAST, DispatchParams(), PARKING, store=store)
+    op = Operator(fm)
+    fm.submit(task("J1"), 0.0)
+    fm.submit(task("J2"), 0.0)
+    assert op.set_priority("J1", 4, 1.0).ok and op.cancel("J2", 1.0).ok
+    assert store.get("J1").task.priority == 4 and store.get("J2").state == "cancelled"
+    assert [h.event for h in store.history("J1")] == ["accepted", "priority"]
+    again = FleetManager(WH, FAST, DispatchParams(), PARKING, store=store)
+    assert set(again.jobs) == {"J1"} and again.jobs["J1"].task.priority == 4
+
+
+def test_manual_drive_is_refused_while_the_robot_picks():
+    sim = OpSim([("r1", "cargo", *CHARGERS[0], 1.0)])
+    m = sim.agents["r1"].model
+    m.start_action("pick", 0.0, 5.0)
+    with pytest.raises(ValueError, match=r"^data: robot r1 is picking"):
+        sim.agents["r1"].hand.set_manual(True)
+
+
+def _corridor():
+    """A y on the test warehouse with a free straight run from x = 1.5 to 14.5 for the largest robot."""
+    return next(y + 0.5 for y in range(1, 12) if all(WH.grid.disc_is_free(x / 4, y + 0.5, 0.45)
+                                                      for x in range(6, 59)))
+
+
+def _leg(rid, radius, points, path_id, purpose, goal):
+    return Leg(rid, TimedPath(rid, radius, np.array(points, dtype=float)), path_id, purpose, goal)
+
+
+@pytest.mark.parametrize("follower", [True, False])
+def test_a_paused_robot_in_the_way_drives_on_along_its_leg_to_a_place_nobody_passes(follower):
+    """r1 drives east down a corridor; r2 follows it and stops 0.5 m beyond where r1 is now. Paused,
+    r1 would stand in r2's way: it drives on along its own leg, as planned, to the first place r2
+    never comes near, and holds there; without r2 behind it, it holds where it is."""
+    y = _corridor()
+    fm = FleetManager(WH, FAST, DispatchParams(), PARKING)
+    op = Operator(fm)
+    now = 0.5
+    fm.on_status(status("r1", "cargo", 5.5, y, mode="driving", stamp=now, path_id=1, progress=0.5 / 8), now)
+    r1 = fm.robots["r1"]
+    r1.leg, r1.last_path_id = _leg("r1", r1.radius, [[5.0, y, 0.0], [13.0, y, 8.0]], 1, "park", "parking_1"), 1
+    if follower:
+        fm.on_status(status("r2", "cargo", 2.5, y, mode="driving", stamp=now, path_id=2, progress=0.5 / 4), now)
+        r2 = fm.robots["r2"]
+        r2.leg, r2.last_path_id = _leg("r2", r2.radius, [[2.0, y, 0.0], [6.0, y, 4.0]], 2, "park", "parking_2"), 2
+    out = op.pause("r1", now)
+    [leg] = out.decisions.legs
+    end = leg.path.waypoints[-1]
+    if not follower:
+        assert leg.purpose == "hold" and len(leg.path.waypoints) == 1 and abs(end[0] - 5.5) < 1e-6
+        return
+    clearance = 2 * r1.radius + fm.margin
+    assert leg.purpose == "hold" and 6.0 + clearance <= end[0] <= 6.0 + clearance + 0.3, end
+    assert leg.path.waypoints[0][:2].tolist() == [5.5, y]
+    # the hold leg is the planned leg up to there (same place at every time), then standing
+    for t in np.linspace(now, end[2], 20):
+        assert np.allclose(leg.path.position(t), r1.leg.path.position(t) if t <= end[2] else end[:2])
+    assert not fm.robots["r2"].replan and "drives on" in " ".join(out.decisions.notes)

@@ -21,6 +21,7 @@ from msg_schemas.records import (
     Command,
     CommandReply,
     GateRecord,
+    OperatorState,
     RecordError,
     RobotStatus,
     Task,
@@ -37,7 +38,9 @@ GOOD_ALL = {**{cls.SCHEMA: data for cls, data in GOOD.items()},
                                   "message": "robot_id: unknown robot 'r9'", "command": "send"},
             GateRecord.SCHEMA: {"schema": GateRecord.SCHEMA, "robot_id": "r1", "path_id": 7, "seq": 2, "stamp": 1.0,
                                 "links": [{"robot": "r2", "path_id": 5, "exit": 3.5, "entry": 1.25}],
-                                "watch": {"r2": 5}}}
+                                "watch": {"r2": 5}},
+            OperatorState.SCHEMA: {"schema": OperatorState.SCHEMA, "stamp": 2.0, "estop": True, "fleet_paused": False,
+                                   "paused": ["r1"], "manual": []}}
 BY_SCHEMA = {cls.SCHEMA: cls for cls in RECORDS}
 
 # text that includes lone surrogates and control characters (hypothesis' default text has neither)

@@ -183,7 +183,3 @@ def test_fleet_op_on_the_command_line(fleet):
     assert code == 0 and "resumed" in text, text
     code, text = fleet_op("cancel", "no_such_job")
     assert code == 1 and "task_id: unknown job 'no_such_job'" in text, text
-    code, text = fleet_op("estop")
-    assert code == 0 and "e-stop engaged" in text, text
-    code, text = fleet_op("release")
-    assert code == 0 and "e-stop released" in text, text

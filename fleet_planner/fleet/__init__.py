@@ -14,6 +14,10 @@ Where each concept lives:
 * :mod:`.coordination` - the coordination mode, a strategy used on both ends: :class:`Coordination`
   (:class:`CentralCoordination`, :class:`BehaviorCoordination`), looked up by name with
   :func:`get_coordination`; how a robot drives under it, a :class:`Driver`;
+* :mod:`.operator` - the operator's commands on the manager, :class:`~.operator.Operator`: pause,
+  e-stop, cancel, priority, send to a station, manual drive and deadlines as the plan sees them;
+* :mod:`.manual` - the operator's hand on the robot, :class:`~.manual.OperatorHand`: the e-stop and
+  manual drive by velocity commands (:func:`~.manual.check_twist`);
 * :mod:`.wire` - status <-> behaviour views (:func:`view_of_status`, :func:`behavior_state`) and
   status samples as a timed path (:func:`samples_to_path`);
 * :mod:`.fleet_file` - the robots of a bring-up (:func:`load_fleet`, :class:`FleetMember`,

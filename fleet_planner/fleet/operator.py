@@ -6,8 +6,11 @@ drive and deadlines mean for the plan. :class:`Operator` drives a
 raises on bad input: an unknown robot, a finished job, a wrong type get ``ok=False`` and a reason
 that starts with the field at fault (``robot_id: unknown robot 'r9' (known: r1, r2)``).
 
-* **pause** (one robot or the fleet): a robot driving a leg gets a hold where it is now and the
-  others re-plan around it as a parked obstacle (the manager's ``_hold``); one that stands at the
+* **pause** (one robot or the fleet): a robot driving a leg holds where it is safe to hold: where
+  it is, if no other robot's trajectory passes there, else (central, on time) it drives on along
+  its own leg as planned to the first place within :data:`DRIVE_ON_M` that none passes, and holds
+  there; failing that, where it is. The others re-plan around it as a parked obstacle (the
+  manager's ``_replan_around``). One that stands at the
   end of its leg, or is picking or placing, is already where it is safe to hold and just gets no
   new leg (an action under way finishes, and the job moves on when it is resumed). Robots that
   join while the fleet is paused are paused too.
@@ -35,15 +38,23 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
+
 from msg_schemas.records import INT_MAX, INT_MIN, Command, TaskEvent
 
-from ..model import Point
-from .legs import Decisions
+from ..geometry import point_at_arc
+from ..model import Point, TimedPath
+from .legs import Decisions, Leg
 from .manager import FleetManager
 from .state import MANUAL_GROWTH_M, FleetRobot, Job, Target
 
 #: the job states from which nothing more happens
 CLOSED = ("done", "failed", "cancelled")
+#: how far (m) along its leg a paused robot may drive on to a place where it is in nobody's way
+DRIVE_ON_M = 4.0
+#: a robot later than this (s) on its leg, or further (m) from where it is due, is held where it is
+LATE_S, ON_LEG_M = 0.5, 0.1
+_SAMPLE_M = 0.25   # m between the places tried along the leg
 #: how many known names a rejection lists at most
 _LIST_AT_MOST = 12
 
@@ -136,8 +147,52 @@ class Operator:
         r.paused = True
         d.notes.append(f"robot {r.id} is paused")
         if _on_the_move(r) and not self.fleet.halted:
-            self.fleet._hold(r, now, d)
+            if not self._hold_clear(r, now, d):
+                self.fleet._hold(r, now, d)
             self._held.add(r.id)
+
+    def _hold_clear(self, r: FleetRobot, now: float, d: Decisions) -> bool:
+        """Hold a central robot that is on time where it is in nobody's way: where it is, if no
+        other robot's trajectory from now on passes there, else the first place along the rest of
+        its leg (within :data:`DRIVE_ON_M`, never its goal) that none passes, reached on its leg as
+        planned (the leg up to there, then standing there). False: none found (hold it where it is)."""
+        fm, leg = self.fleet, r.leg
+        if fm.strategy.name != "central" or leg is None or r.status.lateness_s > LATE_S:
+            return False
+        wp = leg.path.waypoints
+        path_id = max(round(now * 1e9), r.last_path_id + 1)
+        t_new = path_id / 1e9
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+        s_now = float(np.interp(t_new, wp[:, 2], arc))
+        due = point_at_arc(wp[:, :2], arc, s_now)
+        if math.dist(due, fm.strategy.start_of(r, t_new)) > ON_LEG_M:
+            return False
+        others = [o for o in fm.robots.values() if o is not r]
+
+        def clear(p: Point) -> bool:
+            return not any(fm.strategy.must_replan_around(o.trajectory(), now, p, o.radius + r.radius + fm.margin)
+                           for o in others)
+
+        if clear(due):
+            return False  # where it is is in nobody's way: an ordinary hold
+        end = min(float(arc[-1]) - _SAMPLE_M, s_now + DRIVE_ON_M)
+        s = s_now + _SAMPLE_M
+        while s <= end:
+            p = point_at_arc(wp[:, :2], arc, s)
+            if clear(p):
+                k = int(np.searchsorted(arc, s, side="left"))  # arc[k-1] < s <= arc[k]: a moving piece
+                t_p = float(wp[k - 1, 2] + (s - arc[k - 1]) / (arc[k] - arc[k - 1]) * (wp[k, 2] - wp[k - 1, 2]))
+                rows = [[*due, t_new]] + [list(w) for a, w in zip(arc, wp) if s_now <= a < s and w[2] > t_new]
+                rows.append([*p, max(t_p, rows[-1][2])])
+                path = TimedPath(r.id, r.radius, np.array(rows, dtype=float))
+                fm._give(r, Leg(r.id, path, path_id, "hold", ""), d)
+                r.conflict = False
+                d.notes.append(f"robot {r.id} drives on {s - s_now:.1f} m along its leg to hold at "
+                               f"({p[0]:.2f}, {p[1]:.2f}), out of the others' way")
+                fm._replan_around(r, p, now)
+                return True
+            s += _SAMPLE_M
+        return False
 
     def resume(self, robot_id: str | None, now: float) -> Outcome:
         """Resume one robot or, with None, the whole fleet (every paused robot)."""
@@ -211,7 +266,8 @@ class Operator:
             else:
                 r.target, r.replan, r.arrived_at, r.saw_action = None, False, None, False
                 if _on_the_move(r) and not r.manual and not self.fleet.halted:
-                    self.fleet._hold(r, now, d)
+                    if not self._hold_clear(r, now, d):
+                        self.fleet._hold(r, now, d)
                     r.idle_since = now
                 why += f"; robot {r.id} is released"
         job.state = "cancelled"

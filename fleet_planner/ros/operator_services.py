@@ -38,7 +38,7 @@ from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.validation import printable
 from msg_schemas import topics
 from msg_schemas.convert import string_to_record
-from msg_schemas.records import Command, CommandReply, RecordError, load_json, nonempty
+from msg_schemas.records import Command, CommandReply, OperatorState, RecordError, load_json, nonempty
 
 Publish = Callable[[Decisions, float], None]
 
@@ -59,6 +59,8 @@ class PlannerOperator:
         self._robot_services: dict[str, Service] = {}
         self._estopped = node.create_publisher(Bool, topics.ESTOPPED, topics.ESTOPPED_QOS)
         self._replies = node.create_publisher(String, topics.COMMAND_REPLIES, topics.COMMAND_REPLIES_QOS)
+        self._state = node.create_publisher(String, topics.OPERATOR_STATE, topics.OPERATOR_STATE_QOS)
+        self._last_state: tuple | None = None
         node.create_service(SetBool, topics.PAUSE_FLEET_SERVICE, self._on_pause_fleet)
         node.create_service(SetBool, topics.ESTOP_SERVICE, self._on_estop)
         create_draining_subscription(node, String, topics.COMMANDS, self._on_command, topics.COMMANDS_QOS)
@@ -71,7 +73,19 @@ class PlannerOperator:
             self._robot_services[rid] = self.node.create_service(
                 SetBool, topics.robot_topic(rid, "pause"),
                 lambda req, res, rid=rid: self._on_pause_robot(rid, req, res))
-        return self.operator.step(now)
+        d = self.operator.step(now)
+        self._publish_state(now)
+        return d
+
+    def _publish_state(self, now: float) -> None:
+        """The operator's state, latched, when it changed."""
+        op, robots = self.operator, self.operator.fleet.robots.values()
+        state = (op.estopped, op.fleet_paused, tuple(sorted(r.id for r in robots if r.paused)),
+                 tuple(sorted(r.id for r in robots if r.manual)))
+        if state != self._last_state:
+            self._last_state = state
+            record = OperatorState(stamp=now, estop=state[0], fleet_paused=state[1], paused=state[2], manual=state[3])
+            self._state.publish(String(data=record.to_json()))
 
     # -- handlers: none lets an exception out -----------------------------------------------------
     def _carry_out(self, action: Callable[[float], Outcome]) -> Outcome:
@@ -87,6 +101,7 @@ class PlannerOperator:
             self.node.get_logger().warning(f"operator command refused: {out.message}")
         self._estopped.publish(Bool(data=self.operator.estopped))  # at once, before any leg
         self._publish(out.decisions, now)
+        self._publish_state(now)
         return out
 
     def _answer(self, res: Any, out: Outcome) -> Any:

@@ -62,6 +62,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", action="store_true", help="show the nodes' info messages (in-process mode)")
+    p.add_argument("--console", type=int, metavar="PORT", help="serve the web operator console on localhost:PORT "
+                   "(0: any free port); its URL is printed")
+    p.add_argument("--linger", type=float, default=0.0, help="with --console: keep the fleet and the console up "
+                   "this many wall seconds after the last job (default 0)")
     return p
 
 
@@ -86,6 +90,7 @@ def main(args: list[str] | None = None) -> None:
     procs: list[subprocess.Popen] = []
     fleet: Fleet | None = None
     monitor: FleetMonitor | None = None
+    console = None
     # a failure while the fleet comes up shows its traceback, as it always did (errors=())
     with ros_session(argv, prog="fleet-demo", context=context, errors=()):
         try:
@@ -106,8 +111,14 @@ def main(args: list[str] | None = None) -> None:
                 monitor = FleetMonitor(context=context, parameter_overrides=[Parameter("use_sim_time", value=True)])
                 executor, parking = SingleThreadedExecutor(context=context), parking_of(params_file)
                 executor.add_node(monitor)
+            if opts.console is not None:  # the web operator console, in this process
+                from fleet_planner.ros.console import attach_console
+                console = attach_console(executor, warehouse, parking, opts.console, context=context)
+                print(f"fleet-demo: operator console at {console[1].url}", flush=True)
             summary = run_jobs(executor, monitor, [m.id for m in members], jobs, interval=opts.interval,
                                timeout=opts.timeout, progress=not opts.no_progress)
+            if console is not None:
+                spin_until(executor, lambda: False, max(0.0, opts.linger))
             title = (f"fleet-demo ({opts.coordination}): {summary.done}/{summary.jobs} jobs, {len(members)} robots, "
                      f"closest approach {summary.min_gap:+.2f} m beyond the sum of radii")
             png = opts.out / "fleet_demo.png"
@@ -116,6 +127,10 @@ def main(args: list[str] | None = None) -> None:
             if summary.done < summary.jobs:
                 sys.exit(1)
         finally:
+            if console is not None:
+                console[1].stop()
+                executor.remove_node(console[0])
+                console[0].destroy_node()
             stop_processes(procs)
             if fleet is not None:
                 fleet.destroy()
