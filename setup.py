@@ -33,6 +33,9 @@ setup(
             "robot_agent = robot_agent.agent_node:main",
             "fleet-demo = fleet_planner.ros.demo:main",
             "fleet-submit = fleet_planner.ros.submit:main",
+            "fleet-people = fleet_planner.ros.people:main",
+            "fleet-record = fleet_planner.ros.record:main",
+            "fleet-replay = fleet_planner.ros.replay:main",
         ],
     },
 )
