@@ -27,7 +27,9 @@ from msg_schemas.records import (
 
 GOOD_ALL = {**{cls.SCHEMA: data for cls, data in GOOD.items()},
             WaitMessageRecord.SCHEMA: {"schema": WaitMessageRecord.SCHEMA, "sender": "r1", "receiver": "r2",
-                                       "waiting": ["r1"], "stamp": 1.0}}
+                                       "waiting": ["r1"], "stamp": 1.0},
+            "fleet/obstacle@1": {"schema": "fleet/obstacle@1", "id": "person_1", "kind": "person", "x": 3.0, "y": 4.0,
+                                 "vx": 1.0, "vy": 0.0, "radius": 0.3, "stamp": 1.0}}
 BY_SCHEMA = {cls.SCHEMA: cls for cls in RECORDS}
 
 # text that includes lone surrogates and control characters (hypothesis' default text has neither)

@@ -411,9 +411,7 @@ class FleetManager:
         for r in self.robots.values():
             if (r.target is not None and not r.replan and r.on_leg and r.status.mode != "error"
                     and self.strategy.is_late(r, self.params.lateness_tolerance_s)):
-                # conflict: if no leg can be planned, it holds where it is, so that the others plan
-                # around where it is rather than around the leg it no longer keeps to
-                r.replan = r.conflict = True
+                r.replan = True
                 d.notes.append(f"robot {r.id} is {r.status.lateness_s:.1f} s late: re-planning its leg")
 
     def _replan(self, now: float, d: Decisions) -> None:
