@@ -134,10 +134,9 @@ def main(args: list[str] | None = None) -> None:
         from fleet_planner.ros.demo.summary import plot_run
         from fleet_planner.warehouse import load_warehouse
 
-        gap, *_ = run.closest_robots()
         title = (f"fleet-replay {opts.run.name}: {len(run.done())} jobs done, {len(run.robots)} robots, "
                  f"{len(run.obstacles)} obstacles")
-        plot_run(load_warehouse(opts.warehouse), run.robot_paths() + run.obstacle_paths(), opts.plot, title)
+        plot_run(load_warehouse(opts.warehouse), run.robot_paths(), opts.plot, title, obstacles=run.obstacle_paths())
         print(f"picture: {opts.plot}")
 
 

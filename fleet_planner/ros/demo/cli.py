@@ -123,7 +123,9 @@ def main(args: list[str] | None = None) -> None:
             title = (f"fleet-demo ({opts.coordination}): {summary.done}/{summary.jobs} jobs, {len(members)} robots, "
                      f"closest approach {summary.min_gap:+.2f} m beyond the sum of radii")
             png = opts.out / "fleet_demo.png"
-            plot_run(warehouse, monitor.trajectories() + monitor.obstacle_trajectories(), png, title, parking)
+            for _ in range(20):   # what is still on its way to the recorder
+                executor.spin_once(timeout_sec=0.02)
+            plot_run(warehouse, monitor.trajectories(), png, title, parking, monitor.obstacle_trajectories())
             lines = summary.lines(monitor.radius)
             gap, robot, person, t = monitor.obstacle_separation()
             if robot is not None and t is not None:
