@@ -38,6 +38,9 @@ setup(
             "fleet-op = fleet_planner.ros.operate:main",
             "sim_clock = fleet_planner.ros.sim_clock:main",
             "fleet-console = fleet_planner.ros.console:main",
+            "fleet-people = fleet_planner.ros.people:main",
+            "fleet-record = fleet_planner.ros.record:main",
+            "fleet-replay = fleet_planner.ros.replay:main",
         ],
     },
 )

@@ -40,7 +40,9 @@ GOOD_ALL = {**{cls.SCHEMA: data for cls, data in GOOD.items()},
                                 "links": [{"robot": "r2", "path_id": 5, "exit": 3.5, "entry": 1.25}],
                                 "watch": {"r2": 5}},
             OperatorState.SCHEMA: {"schema": OperatorState.SCHEMA, "stamp": 2.0, "estop": True, "fleet_paused": False,
-                                   "paused": ["r1"], "manual": []}}
+                                   "paused": ["r1"], "manual": []},
+            "fleet/obstacle@1": {"schema": "fleet/obstacle@1", "id": "person_1", "kind": "person", "x": 3.0, "y": 4.0,
+                                 "vx": 1.0, "vy": 0.0, "radius": 0.3, "stamp": 1.0}}
 BY_SCHEMA = {cls.SCHEMA: cls for cls in RECORDS}
 
 # text that includes lone surrogates and control characters (hypothesis' default text has neither)

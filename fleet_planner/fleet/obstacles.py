@@ -32,13 +32,14 @@ Times are seconds on one clock (ROS time): ``now`` is always passed in.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
 
 from msg_schemas.records import ObstacleRecord
 
+from ..checker import min_separation
 from ..geometry import polyline_passes_near
 from ..model import Point, TimedPath
 
@@ -57,8 +58,8 @@ PREFIX = "obstacle:"
 class ObstacleParams:
     """How obstacles are predicted and forgotten (seconds, metres)."""
 
-    horizon_s: float = 4.0   # a moving obstacle is predicted this far ahead (constant velocity)
-    growth: float = 0.15     # m its disc grows per second of prediction
+    horizon_s: float = 3.0   # a moving obstacle is predicted this far ahead (constant velocity)
+    growth: float = 0.1      # m its disc grows per second of prediction
     stale_s: float = 1.5     # an obstacle that is not persistent is gone this long after its last record
 
     RANGES = {"horizon_s": (0.0, 60.0), "growth": (0.0, 5.0), "stale_s": (0.05, 3600.0)}
@@ -209,3 +210,21 @@ class ObstacleMap:
             ahead = min(max(0.0, t + dt - ob.stamp), stale_s)
             out.append((PREFIX + ob.id, (ob.x, ob.y), ob.radius, (ob.vx * ahead, ob.vy * ahead)))
         return out
+
+
+def closest_approach(robots: Sequence[TimedPath], obstacles: Sequence[TimedPath]
+                     ) -> tuple[float, str | None, str | None, float | None]:
+    """Smallest distance minus the sum of radii between a robot and an obstacle, each obstacle taken
+    only over the time it was seen (its first to last waypoint), by the independent checker:
+    ``(gap, robot id, obstacle id, t)``, ``(inf, None, None, None)`` when there is no pair."""
+    best: tuple[float, str | None, str | None, float | None] = (math.inf, None, None, None)
+    for ob in obstacles:
+        t0, t1 = float(ob.waypoints[0, 2]), float(ob.waypoints[-1, 2])
+        for r in robots:
+            wp = r.waypoints
+            inside = wp[(wp[:, 2] > t0) & (wp[:, 2] < t1)]
+            during = TimedPath(r.robot_id, r.radius, np.vstack([[*r.position(t0), t0], inside, [*r.position(t1), t1]]))
+            gap = min_separation([during, ob])
+            if gap[0] < best[0]:
+                best = gap
+    return best

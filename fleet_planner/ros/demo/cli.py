@@ -5,8 +5,11 @@ per robot of ``config/fleet.yaml``, then submits ``--jobs`` random pick-and-plac
 ``/fleet/tasks`` and shows progress until all are done. Nodes share one process and one executor
 (``--mode inproc``, the default) or run as separate processes (``--mode procs``: the console
 scripts, or ``python -m`` where a script is not installed, in the same ROS environment).
-``--coordination behavior`` runs the same fleet with the robots avoiding each other by the BBMRCA
-behaviours instead of timed paths (the planner only allocates and gives goals).
+``--people N`` adds N simulated people walking between random points (obstacles on
+``/fleet/obstacles``, planned around); ``--record run.mcap`` records the run's topics (MCAP, ROS 2
+encoding; ``fleet-replay run.mcap --plot out.png`` draws it). ``--coordination behavior`` runs
+the same fleet with the robots avoiding each other by the BBMRCA behaviours instead of timed paths
+(the planner only allocates and gives goals).
 
 At the end it prints a summary (jobs done, completion time, average speed, and the smallest
 distance ever seen between two robots against the sum of their radii, computed here from the
@@ -28,17 +31,18 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.logging import LoggingSeverity
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from tqdm import tqdm
 
-from fleet_planner.fleet import COORDINATION, load_fleet
+from fleet_planner.fleet import COORDINATION, FleetMember, load_fleet
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.demo.bringup import Fleet, bring_up, parking_of, start_processes, stop_processes
 from fleet_planner.ros.demo.jobs import TERMINAL, random_jobs
 from fleet_planner.ros.demo.monitor import FleetMonitor, spin_until
 from fleet_planner.ros.demo.summary import Summary, plot_run, summarise
 from fleet_planner.ros.entry import ros_session
-from fleet_planner.warehouse import config_path, load_warehouse
+from fleet_planner.warehouse import Warehouse, config_path, load_warehouse
 from msg_schemas.records import Task
 
 DEMO_PARAMS = "planner_params.yaml"
@@ -57,6 +61,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fleet", type=Path, help="fleet file (default: config/fleet.yaml)")
     p.add_argument("--warehouse", type=Path, help="warehouse YAML (default: config/warehouse.yaml)")
     p.add_argument("--params", type=Path, help="planner ros__parameters YAML (default: config/planner_params.yaml)")
+    p.add_argument("--people", type=int, default=0,
+                   help="simulated people walking between random points, reported on /fleet/obstacles (default 0)")
+    p.add_argument("--record", type=Path, metavar="RUN.mcap",
+                   help="record the run's topics to this MCAP file (ROS 2 encoding; fleet-replay draws it)")
     p.add_argument("--seed", type=int, default=1, help="seed of the random jobs (default 1)")
     p.add_argument("--out", type=Path, default=Path("out"), help="where the picture goes (default out/)")
     p.add_argument("--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)")
@@ -76,8 +84,8 @@ def main(args: list[str] | None = None) -> None:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
     opts = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
-    if opts.jobs < 1 or not opts.rate > 0 or not opts.interval >= 0:
-        _parser().error("--jobs must be >= 1, --rate > 0 and --interval >= 0")
+    if opts.jobs < 1 or not opts.rate > 0 or not opts.interval >= 0 or not 0 <= opts.people <= 100:
+        _parser().error("--jobs must be >= 1, --rate > 0, --interval >= 0 and --people in 0..100")
 
     warehouse = load_warehouse(opts.warehouse)
     kinds = load_kinds()
@@ -91,6 +99,7 @@ def main(args: list[str] | None = None) -> None:
     fleet: Fleet | None = None
     monitor: FleetMonitor | None = None
     console = None
+    extras: list[Node] = []
     # a failure while the fleet comes up shows its traceback, as it always did (errors=())
     with ros_session(argv, prog="fleet-demo", context=context, errors=()):
         try:
@@ -115,6 +124,9 @@ def main(args: list[str] | None = None) -> None:
                 from fleet_planner.ros.console import attach_console
                 console = attach_console(executor, warehouse, parking, opts.console, context=context)
                 print(f"fleet-demo: operator console at {console[1].url}", flush=True)
+            extras = _extras(context, opts, warehouse, members)  # people, recorder: in this process
+            for node in extras:
+                executor.add_node(node)
             summary = run_jobs(executor, monitor, [m.id for m in members], jobs, interval=opts.interval,
                                timeout=opts.timeout, progress=not opts.no_progress)
             if console is not None:
@@ -122,11 +134,26 @@ def main(args: list[str] | None = None) -> None:
             title = (f"fleet-demo ({opts.coordination}): {summary.done}/{summary.jobs} jobs, {len(members)} robots, "
                      f"closest approach {summary.min_gap:+.2f} m beyond the sum of radii")
             png = opts.out / "fleet_demo.png"
-            plot_run(warehouse, monitor.trajectories(), png, title, parking)
-            print("\n".join(summary.lines(monitor.radius) + [f"picture: {png}"]))
+            for _ in range(20):   # what is still on its way to the recorder
+                executor.spin_once(timeout_sec=0.02)
+            plot_run(warehouse, monitor.trajectories(), png, title, parking, monitor.obstacle_trajectories())
+            lines = summary.lines(monitor.radius)
+            gap, robot, person, t = monitor.obstacle_separation()
+            if robot is not None and t is not None:
+                lines.append(f"closest approach to an obstacle: {gap:+.3f} m beyond the sum of radii ({robot} and "
+                             f"{person} at t = {t:.1f} s, {'no contact' if gap >= 0 else 'DISCS OVERLAPPED'})")
+            for node in extras:
+                executor.remove_node(node)
+                node.destroy_node()   # the recorder closes its file
+            extras = []
+            if opts.record:
+                lines.append(f"recording: {opts.record} (fleet-replay {opts.record} --plot out.png draws it)")
+            print("\n".join(lines + [f"picture: {png}"]))
             if summary.done < summary.jobs:
                 sys.exit(1)
         finally:
+            for node in extras:
+                node.destroy_node()
             if console is not None:
                 console[1].stop()
                 executor.remove_node(console[0])
@@ -136,6 +163,24 @@ def main(args: list[str] | None = None) -> None:
                 fleet.destroy()
             elif monitor is not None:
                 monitor.destroy_node()
+
+
+def _extras(context: Context, opts: argparse.Namespace, warehouse: Warehouse,
+            members: Sequence[FleetMember]) -> list[Node]:
+    """The simulated people (``--people``) and the recorder (``--record``), on simulated time."""
+    from fleet_planner.fleet.people import random_people
+    from fleet_planner.ros.people import PeopleNode
+    from fleet_planner.ros.record import RecorderNode
+
+    sim = [Parameter("use_sim_time", value=True)]
+    nodes: list[Node] = []
+    if opts.record:
+        nodes.append(RecorderNode(context=context, output=opts.record, parameter_overrides=sim))
+    if opts.people:
+        walkers = random_people(warehouse.grid, opts.people, opts.seed,
+                                avoid=[(m.x, m.y) for m in members] + [s.pose for s in warehouse.stations.values()])
+        nodes.append(PeopleNode(context=context, walkers=walkers, parameter_overrides=sim))
+    return nodes
 
 
 def run_jobs(executor: Executor, monitor: FleetMonitor, robot_ids: Sequence[str], jobs: Sequence[Task], *,

@@ -6,13 +6,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 from rclpy.executors import Executor
 from rclpy.node import Node
 from std_msgs.msg import String
 
 from fleet_planner.checker import min_separation
 from fleet_planner.fleet import samples_to_path
+from fleet_planner.fleet.obstacles import closest_approach
 from fleet_planner.model import TimedPath
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.ros.submit import planner_matched
@@ -87,19 +87,7 @@ class FleetMonitor(Node):
     def obstacle_separation(self) -> tuple[float, str | None, str | None, float | None]:
         """Smallest distance minus the sum of radii between a robot and an obstacle, over every
         reported time (each obstacle counted only while it was reported)."""
-        best: tuple[float, str | None, str | None, float | None] = (float("inf"), None, None, None)
-        robots = self.trajectories()
-        for ob in self.obstacle_trajectories():
-            t0, t1 = ob.waypoints[0, 2], ob.waypoints[-1, 2]
-            for r in robots:
-                wp = r.waypoints
-                inside = wp[(wp[:, 2] > t0) & (wp[:, 2] < t1)]
-                ends = np.array([[*r.position(t0), t0], [*r.position(t1), t1]])
-                during = TimedPath(r.robot_id, r.radius, np.vstack([ends[:1], inside, ends[1:]]))
-                gap = min_separation([during, ob])
-                if gap[0] < best[0]:
-                    best = gap
-        return best
+        return closest_approach(self.trajectories(), self.obstacle_trajectories())
 
     def events_of(self, task_id: str) -> list[TaskEvent]:
         return [e for e in self.events if e.task_id == task_id]

@@ -65,8 +65,9 @@ def summarise(monitor: FleetMonitor, jobs: Sequence[Task], first_submit: float, 
 
 
 def plot_run(warehouse: Warehouse, trajectories: Sequence[TimedPath], path_png: str | Path, title: str,
-             parking: Sequence[tuple[float, float]] = ()) -> None:
-    """The robots' reported trajectories over the map (drawn like the map file, y downwards)."""
+             parking: Sequence[tuple[float, float]] = (), obstacles: Sequence[TimedPath] = ()) -> None:
+    """The robots' reported trajectories over the map (drawn like the map file, y downwards), and
+    the obstacles' (people...) dashed in black."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -93,6 +94,12 @@ def plot_run(warehouse: Warehouse, trajectories: Sequence[TimedPath], path_png: 
         ax.add_patch(Circle(tuple(wp[0, :2]), path.radius, fill=False, ec=c, lw=1.2, zorder=5))
         ax.add_patch(Circle(tuple(wp[-1, :2]), path.radius, fc=c, ec="black", lw=0.5, zorder=5))
         ax.annotate(path.robot_id, tuple(wp[0, :2]), ha="center", va="center", fontsize=6, zorder=6)
+    for k, path in enumerate(obstacles):
+        wp = path.waypoints
+        ax.plot(wp[:, 0], wp[:, 1], "--", color="black", lw=0.8, alpha=0.6, zorder=4,
+                label="obstacle (person...)" if k == 0 else None)
+        ax.add_patch(Circle(tuple(wp[-1, :2]), path.radius, fc="none", ec="black", ls="--", lw=0.8, zorder=5))
+        ax.annotate(path.robot_id, tuple(wp[-1, :2]), ha="center", va="bottom", fontsize=5, zorder=6)
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     ax.set_aspect("equal")
