@@ -102,7 +102,7 @@ COMMAND_REPLIES_QOS = _qos(100)
 ESTOPPED = "fleet/estopped"
 ESTOPPED_QOS = LATCHED_QOS
 #: ``fleet/operator_state@1``, latched: the e-stop, a paused fleet, paused and manual robots (for consoles)
-OPERATOR_STATE = "/fleet/operator_state"
+OPERATOR_STATE = "fleet/operator_state"
 OPERATOR_STATE_QOS = LATCHED_QOS
 #: std_srvs/SetBool services of the planner: pause (true) / resume the fleet; engage (true) / release the e-stop
 PAUSE_FLEET_SERVICE = "fleet/pause"

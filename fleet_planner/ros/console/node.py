@@ -57,7 +57,7 @@ FINISHED = ("done", "failed", "rejected", "cancelled")
 REQUESTS = ("command", "manual", "drive", "submit")
 _SERVICE_COMMANDS = {"pause", "resume", "estop", "release"}
 #: the intelligent space's obstacles (fleet/obstacle@1; named in msg_schemas.topics where that branch has landed)
-OBSTACLES_TOPIC = getattr(topics, "OBSTACLES", "/fleet/obstacles")
+OBSTACLES_TOPIC = topics.OBSTACLES
 OBSTACLES_QOS = getattr(topics, "OBSTACLES_QOS", topics.COMMANDS_QOS)
 
 
