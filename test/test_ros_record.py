@@ -34,6 +34,8 @@ def test_a_recorded_run_reads_back_with_its_robots_people_jobs_and_paths(ros_con
         mon.submit(Task(id="R1", pick="chute_1", place="B01-01"))
         assert spin_until(ex, lambda: mon.last_event.get("R1") is not None and mon.last_event["R1"].event == "done"
                           and walker.gone, 3 * WAIT)
+        events = "/" + topics.TASK_EVENTS   # every event the monitor heard is in the file too
+        assert spin_until(ex, lambda: recorder.recorder.written(events) >= len(mon.events), WAIT)
         seen = dict(mon.tracks)
     finally:
         for node in extra:
@@ -46,7 +48,7 @@ def test_a_recorded_run_reads_back_with_its_robots_people_jobs_and_paths(ros_con
         f.seek(0)
         assert make_reader(f).get_header().profile == "ros2"
     channels = {c.topic: c for c in summary.channels.values()}
-    assert {topics.ROBOT_STATUS, topics.TASK_EVENTS, topics.OBSTACLES, topics.MAP} <= set(channels)
+    assert {"/" + t for t in (topics.ROBOT_STATUS, topics.TASK_EVENTS, topics.OBSTACLES, topics.MAP)} <= set(channels)
     assert any(t.startswith("/robots/") and t.endswith("/timed_path") for t in channels)
     for c in channels.values():
         schema = summary.schemas[c.schema_id]

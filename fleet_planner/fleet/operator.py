@@ -185,7 +185,7 @@ class Operator:
                 rows = [[*due, t_new]] + [list(w) for a, w in zip(arc, wp) if s_now <= a < s and w[2] > t_new]
                 rows.append([*p, max(t_p, rows[-1][2])])
                 path = TimedPath(r.id, r.radius, np.array(rows, dtype=float))
-                fm._give(r, Leg(r.id, path, path_id, "hold", ""), d)
+                fm._give(r, Leg(r.id, path, path_id, "hold", ""), d, now)
                 r.conflict = False
                 d.notes.append(f"robot {r.id} drives on {s - s_now:.1f} m along its leg to hold at "
                                f"({p[0]:.2f}, {p[1]:.2f}), out of the others' way")

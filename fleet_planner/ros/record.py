@@ -129,6 +129,14 @@ class McapRecorder:
             metadata={"offered_qos_profiles": qos_yaml(qos)})
         self._seq[topic] = 0
 
+    def has(self, topic: str) -> bool:
+        """Whether ``topic`` (its full name) has a channel."""
+        return topic in self._channels
+
+    def written(self, topic: str) -> int:
+        """How many messages were written on ``topic`` (its full name)."""
+        return self._seq.get(topic, 0)
+
     def write(self, topic: str, data: bytes, stamp_ns: int) -> None:
         """One serialized message on ``topic`` (added before) at ``stamp_ns``."""
         if self.closed:
@@ -154,12 +162,15 @@ class RecorderNode(Node):
         out = self.declare_parameter("output", str(output or "run.mcap")).value
         self.output = Path(out)
         self.recorder = McapRecorder(self.output)
+        # the timed paths of this fleet's robots (this node's namespace)
+        self._timed_path = re.compile("^" + re.escape(self.get_namespace().rstrip("/")) + _TIMED_PATH.pattern[1:])
         for topic, msg_type, qos in (*RECORDED, *extra):
             self._subscribe(topic, msg_type, qos)
         self._discover = self.create_timer(0.5, self._find_paths)
         self.get_logger().info(f"recording the fleet's topics to {self.output}")
 
     def _subscribe(self, topic: str, msg_type: Any, qos: QoSProfile) -> None:
+        topic = self.resolve_topic_name(topic)  # channels carry full names (``/site_a/fleet/...`` in a namespace)
         self.recorder.add_topic(topic, msg_type, qos)
 
         def on_message(data: bytes) -> None:
@@ -173,7 +184,7 @@ class RecorderNode(Node):
     def _find_paths(self) -> None:
         """Every robot's timed path, as its topic appears."""
         for topic, types in self.get_topic_names_and_types():
-            if _TIMED_PATH.match(topic) and "nav_msgs/msg/Path" in types and topic not in self.recorder._channels:
+            if self._timed_path.match(topic) and "nav_msgs/msg/Path" in types and not self.recorder.has(topic):
                 self._subscribe(topic, PathMsg, topics.TIMED_PATH_QOS)
 
     def destroy_node(self) -> None:

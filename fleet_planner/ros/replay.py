@@ -64,6 +64,11 @@ def _messages(path: Path) -> Iterator[tuple[str, int, object]]:
             yield channel.topic, message.log_time, decoded
 
 
+def _is(topic: str, name: str) -> bool:
+    """Whether the recorded ``topic`` (a full name) is the fleet topic ``name`` in any namespace."""
+    return topic == "/" + name or topic.endswith("/" + name)
+
+
 def read_run(path: str | Path) -> Run:
     """Read a recorded run; ValueError if the file is not an MCAP file of ROS 2 messages."""
     run = Run()
@@ -74,18 +79,18 @@ def read_run(path: str | Path) -> Run:
             first = t_ns if first is None else min(first, t_ns)
             last = t_ns if last is None else max(last, t_ns)
             try:
-                if topic == topics.ROBOT_STATUS:
+                if _is(topic, topics.ROBOT_STATUS):
                     st = RobotStatus.from_json(msg.data)  # type: ignore[attr-defined]
                     assert isinstance(st, RobotStatus)
                     run.robots.setdefault(st.id, []).append((st.x, st.y, st.stamp))
                     run.robot_radius[st.id] = st.radius
-                elif topic == topics.OBSTACLES:
+                elif _is(topic, topics.OBSTACLES):
                     ob = ObstacleRecord.from_json(msg.data)  # type: ignore[attr-defined]
                     assert isinstance(ob, ObstacleRecord)
                     if not ob.cleared:
                         run.obstacles.setdefault(ob.id, []).append((ob.x, ob.y, ob.stamp))
                         run.obstacle_radius[ob.id] = ob.radius
-                elif topic == topics.TASK_EVENTS:
+                elif _is(topic, topics.TASK_EVENTS):
                     ev = TaskEvent.from_json(msg.data)  # type: ignore[attr-defined]
                     assert isinstance(ev, TaskEvent)
                     run.events.append(ev)
