@@ -323,7 +323,9 @@ def main(argv=None) -> int:
 
     tqdm.monitor_interval = 0   # no monitor thread: the planning runs are forked
     args = _args(argv)
-    extra = {m: [n for n in ns if n not in args.sizes] for m, ns in args.extra.items()} if args.maps_dir.is_dir() else {}
+    extra = {m: [n for n in ns if n not in args.sizes] for m, ns in args.extra.items()}
+    if not args.maps_dir.is_dir():
+        extra = {}
     n_max = max([args.sizes[-1]] + [n for ns in extra.values() for n in ns])
     if args.maps_dir.is_dir():
         names = [s.strip() for s in args.maps.split(",")] if args.maps else None
