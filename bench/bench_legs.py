@@ -65,7 +65,8 @@ def main(argv=None) -> int:
             print(f"{args.map:<10} {n:>4} {method:<13} {len(wall):>5} {np.percentile(w, 50):7.1f} "
                   f"{np.percentile(w, 90):7.1f} {np.percentile(w, 99):7.1f} {w.max():7.1f} "
                   f"{np.percentile(c, 99):7.1f} "
-                  f"{res.completed:>4}/{res.n_deliveries:<4} {res.ctime:8.1f} {res.collisions:>4} {res.stop}", flush=True)
+                  f"{res.completed:>4}/{res.n_deliveries:<4} {res.ctime:8.1f} {res.collisions:>4} {res.stop}",
+                  flush=True)
     return 0
 
 
