@@ -110,13 +110,14 @@ def _args(argv=None) -> argparse.Namespace:
     if args.suite:
         suite = SUITES[args.suite]
         given = set(argv if argv is not None else sys.argv[1:])
-        if "--sizes" not in given:
+        args.extra = {}
+        if "--sizes" not in given:   # the suite's sizes, with its extra sizes on some maps
             args.sizes = ",".join(str(n) for n in suite["sizes"])
+            args.extra = suite["extra"]
         if "--planners" not in given:
             args.planners = ",".join(suite["planners"])
         if args.maps is None:
             args.maps = ",".join(suite["maps"])
-        args.extra = suite["extra"]
     else:
         args.extra = {}
     if args.cpu_limit is not None and not (math.isfinite(args.cpu_limit) and args.cpu_limit > 0):
