@@ -329,6 +329,7 @@ class _Session:
         #: goal they are
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {} if must is None else must
         self.reorders = self.reroutes = self.detoured = 0
+        self.detour_tries: dict[int, int] = {}
         #: shortest paths already known (robot -> path): kept when they avoid what they must
         self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
@@ -464,7 +465,10 @@ class _Session:
             return False
         me, sched = self.robots[x], self.sched
         changed = False
-        for _ in range(self.planner.detours):
+        # at most ``detours`` tries per robot in a session: a re-ordering re-schedules everyone
+        # below, and trying the same detours again rarely pays
+        while self.detour_tries.get(x, 0) < self.planner.detours:
+            self.detour_tries[x] = self.detour_tries.get(x, 0) + 1
             arr, dep = sched.arr[x], sched.dep[x]
             if len(arr) < 3:
                 return changed
