@@ -37,7 +37,17 @@ def main(argv=None) -> int:
     p.add_argument("--dock", type=float, default=5.0)
     p.add_argument("--stations", type=int, default=20)
     p.add_argument("--maps-dir", type=Path, default=REPO.parent / "shared" / "data" / "maps")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="a planner option for every method (e.g. early_holds=true), repeatable")
     args = p.parse_args(argv)
+    options: dict = {}
+    for item in args.option:
+        key, sep, value = item.partition("=")
+        if not sep:
+            p.error(f"--option: expected KEY=VALUE (got {item!r})")
+        low = value.lower()
+        options[key] = True if low == "true" else False if low == "false" else float(value) \
+            if value.replace(".", "", 1).isdigit() else value
     print(f"{'map':<10} {'N':>4} {'method':<13} {'legs':>5} {'p50 ms':>7} {'p90 ms':>7} {'p99 ms':>7} "
           f"{'max ms':>7} {'cpu p99':>7} {'done':>9} {'CTime':>8} {'coll':>4} stop")
     for n in [int(s) for s in args.sizes.split(",")]:
@@ -58,7 +68,7 @@ def main(argv=None) -> int:
             cls.plan_incremental = timed
             try:
                 problem = bench_delivery.make_problem(args.map, n, args)
-                res = simulate(problem, method, wall_cap_s=args.wall_cap)
+                res = simulate(problem, method, wall_cap_s=args.wall_cap, planner_options=options or None)
             finally:
                 cls.plan_incremental = original
             w, c = 1000 * np.array(wall or [0.0]), 1000 * np.array(cpu or [0.0])
