@@ -108,7 +108,7 @@ class MDPlanner(Planner):
     ``detour_min`` s in all is re-planned up to this many times around the stretch after its longest
     wait and takes the candidate with the earliest arrival under holds. ``search`` (default on):
     when greedy re-ordering gives up, the priority search of :mod:`.md_search` tries further orders
-    until ``time_limit`` s have passed since planning began; ``fallback`` (default "crowd"; a
+    until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts); ``fallback`` (default "crowd"; a
     registered ``dense`` planner is preferred when there is one): the dense solver that plans when
     the search fails, named in the plan's ``info["fallback"]``; None refuses instead. The live
     fleet's legs (:meth:`plan_incremental`) stop trying detours and re-orderings once
@@ -189,7 +189,7 @@ class MDPlanner(Planner):
             except PlanningError as exc:
                 blocked = next(iter(exc.blockers.items()), None)
                 if (not self.search or blocked is None or time.perf_counter() >= deadline
-                        or blocked[0] not in ids or blocked[1] not in ids):
+                        or attempts >= 10 + 2 * len(robots) or blocked[0] not in ids or blocked[1] not in ids):
                     return self._fallback(grid, robots, exc, attempts, t_start, deadline)
                 order = search.next_order(session.order, ids[blocked[0]], ids[blocked[1]])
                 if progress:
