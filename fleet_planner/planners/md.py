@@ -108,10 +108,11 @@ class MDPlanner(Planner):
     ``detour_min`` s in all is re-planned up to this many times around the stretch after its longest
     wait and takes the candidate with the earliest arrival under holds. ``search`` (default on):
     when greedy re-ordering gives up, the priority search of :mod:`.md_search` tries further orders
-    until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts); ``fallback`` (default "crowd"; a
-    registered ``dense`` planner is preferred when there is one): the dense solver that plans when
-    the search fails, named in the plan's ``info["fallback"]``; None refuses instead. The live
-    fleet's legs (:meth:`plan_incremental`) stop trying detours and re-orderings once
+    until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts);
+    ``fallback`` (default "crowd"; a registered ``dense`` planner is preferred when there is one):
+    the dense solver that plans when the search fails, named in the plan's ``info["fallback"]``;
+    None refuses instead. The live fleet's legs (:meth:`plan_incremental`) stop trying detours and
+    re-orderings once
     ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
     fleet manager re-plans later)."""
 
