@@ -96,6 +96,8 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--planners", default="md,md-box", help=f"of {', '.join(planner_names())} (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="radii and speeds (default: %(default)s)")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds per planning run (default: %(default)s)")
+    p.add_argument("--cpu-limit", type=float, dest="cpu_limit",
+                   help="also stop a run after this many CPU seconds (a timeout; fair on a loaded machine)")
     p.add_argument("--time-limit", type=float, dest="time_limit",
                    help="md planners: seconds for the priority search before the dense fallback (default: md's own)")
     p.add_argument("--suite", choices=sorted(SUITES),
@@ -108,15 +110,18 @@ def _args(argv=None) -> argparse.Namespace:
     if args.suite:
         suite = SUITES[args.suite]
         given = set(argv if argv is not None else sys.argv[1:])
-        if "--sizes" not in given:
+        args.extra = {}
+        if "--sizes" not in given:   # the suite's sizes, with its extra sizes on some maps
             args.sizes = ",".join(str(n) for n in suite["sizes"])
+            args.extra = suite["extra"]
         if "--planners" not in given:
             args.planners = ",".join(suite["planners"])
         if args.maps is None:
             args.maps = ",".join(suite["maps"])
-        args.extra = suite["extra"]
     else:
         args.extra = {}
+    if args.cpu_limit is not None and not (math.isfinite(args.cpu_limit) and args.cpu_limit > 0):
+        p.error(f"--cpu-limit: must be a finite number of seconds > 0 (got {args.cpu_limit!r})")
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         p.error(f"--time-limit: must be a finite number of seconds > 0 (got {args.time_limit!r})")
     try:
@@ -201,7 +206,12 @@ def _planner(name: str, time_limit: float | None):
     return planner
 
 
-def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, time_limit: float | None = None) -> None:
+def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, time_limit: float | None = None,
+           cpu_limit: float | None = None) -> None:
+    if cpu_limit is not None:   # on a loaded machine wall time says little: bound the CPU time
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_CPU, (math.ceil(cpu_limit), math.ceil(cpu_limit) + 1))
     try:
         t0, c0 = time.perf_counter(), time.process_time()
         plan = _planner(name, time_limit).plan(grid, robots)
@@ -216,17 +226,26 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, time_limi
 
 
 def run_one(inst: Instance, n: int, planner: str, timeout: float, alone: AloneTimes,
-            time_limit: float | None = None) -> Row:
+            time_limit: float | None = None, cpu_limit: float | None = None) -> Row:
     robots = inst.robots[:n]
     row = Row(inst.name, n, planner)
     ctx = mp.get_context("fork")
     results = ctx.Queue()
-    proc = ctx.Process(target=_child, args=(results, inst.grid, robots, planner, time_limit), daemon=True)
+    proc = ctx.Process(target=_child, args=(results, inst.grid, robots, planner, time_limit, cpu_limit), daemon=True)
     proc.start()
+    stop = time.perf_counter() + timeout
     try:
-        status, elapsed, payload = results.get(timeout=timeout)
-    except queue.Empty:
-        status, elapsed, payload = "timeout", None, f"> {timeout:g} s"
+        while True:
+            try:
+                status, elapsed, payload = results.get(timeout=min(1.0, max(stop - time.perf_counter(), 0.01)))
+                break
+            except queue.Empty:
+                if time.perf_counter() >= stop:
+                    status, elapsed, payload = "timeout", None, f"> {timeout:g} s"
+                    break
+                if not proc.is_alive():   # killed at its CPU limit (or crashed without a word)
+                    status, elapsed, payload = "timeout", None, f"> {cpu_limit:g} s CPU" if cpu_limit else "died"
+                    break
     finally:
         if proc.is_alive():
             proc.terminate()
@@ -323,7 +342,9 @@ def main(argv=None) -> int:
 
     tqdm.monitor_interval = 0   # no monitor thread: the planning runs are forked
     args = _args(argv)
-    extra = {m: [n for n in ns if n not in args.sizes] for m, ns in args.extra.items()} if args.maps_dir.is_dir() else {}
+    extra = {m: [n for n in ns if n not in args.sizes] for m, ns in args.extra.items()}
+    if not args.maps_dir.is_dir():
+        extra = {}
     n_max = max([args.sizes[-1]] + [n for ns in extra.values() for n in ns])
     if args.maps_dir.is_dir():
         names = [s.strip() for s in args.maps.split(",")] if args.maps else None
@@ -346,7 +367,7 @@ def main(argv=None) -> int:
     with tqdm(jobs, unit="run", file=sys.stderr) as bar:
         for inst, n, planner in bar:
             bar.set_postfix_str(f"{inst.name} N={n} {planner}")
-            row = run_one(inst, n, planner, args.timeout, alone[inst.name], args.time_limit)
+            row = run_one(inst, n, planner, args.timeout, alone[inst.name], args.time_limit, args.cpu_limit)
             rows.append(row)
             if args.csv:   # as it goes, so that a long run killed half way keeps what it measured
                 write_csv(rows, args.csv)

@@ -56,7 +56,7 @@ class _Segs(NamedTuple):
     last: np.ndarray    # last segment of its path
     t0: np.ndarray      # undelayed time at the segment start
     speed: np.ndarray
-    index: np.ndarray   # index of the segment along its path
+    seg: np.ndarray     # index of the segment along its path
 
 
 def _robot_segments(idx: int, pts: np.ndarray, tt: np.ndarray) -> _Segs:
@@ -285,9 +285,9 @@ class CollisionModel:
         others = sorted(others)
         mine = np.array([self._bbox(x) for x in robots])
         theirs = np.array([self._bbox(y) for y in others])
-        close = ((theirs[:, None, :2] <= mine[None, :, 2:] + reach)
-                 & (mine[None, :, :2] <= theirs[:, None, 2:] + reach)).all(2).any(1)
-        return [y for y, c in zip(others, close) if c]
+        close = np.any(np.all((theirs[:, None, :2] <= mine[None, :, 2:] + reach)
+                              & (mine[None, :, :2] <= theirs[:, None, 2:] + reach), axis=2), axis=1)
+        return [y for y, c in zip(others, close.tolist()) if c]
 
     def _build_tree(self) -> None:
         import shapely
@@ -377,7 +377,7 @@ class CollisionModel:
         pieces[:, P_B_LO], pieces[:, P_B_HI] = B.offset + b_lo[hit], B.offset + b_hi[hit]
         pieces[:, P_X_FIRST], pieces[:, P_X_LAST] = A.first, A.last
         pieces[:, P_Y_FIRST], pieces[:, P_Y_LAST] = B.first, B.last
-        pieces[:, P_X_SEG], pieces[:, P_Y_SEG] = A.index, B.index
+        pieces[:, P_X_SEG], pieces[:, P_Y_SEG] = A.seg, B.seg
         pieces = pieces[np.lexsort((pieces[:, P_B_LO], pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
         cuts = np.nonzero(np.diff(pair_key))[0] + 1
@@ -527,7 +527,7 @@ def _merge_boxes_batch(chunks: Sequence[np.ndarray]) -> list[list[tuple[float, f
     boxes, chunk = boxes[order], chunk[order]
     bounds = np.searchsorted(chunk, np.arange(len(chunks) + 1))
     rows = boxes.tolist()
-    return [[tuple(r) for r in rows[lo:hi]] for lo, hi in zip(bounds[:-1], bounds[1:])]  # type: ignore[misc]
+    return [[(r[0], r[1], r[2], r[3]) for r in rows[lo:hi]] for lo, hi in zip(bounds[:-1], bounds[1:])]
 
 
 def _cumlen(path: np.ndarray) -> np.ndarray:

@@ -137,7 +137,7 @@ def test_the_batched_merge_finds_the_regions_of_the_sequential_one():
 
     rng = np.random.default_rng(3)
     chunks = []
-    for k in range(30):
+    for _ in range(30):
         lo = rng.uniform(0, 20, (int(rng.integers(1, 25)), 2))
         size = rng.uniform(0.1, 3, lo.shape)
         boxes = np.stack([lo[:, 0], lo[:, 0] + size[:, 0], lo[:, 1], lo[:, 1] + size[:, 1]], 1)

@@ -141,3 +141,45 @@ def test_the_benchmark_refuses_bad_options_naming_them(capsys):
     assert args.planners == ["md", "md-departure", "prior"] and args.sizes == [100, 200, 400, 500]
     assert args.extra == {"warehouse-10-20-10-2-2": [1000], "warehouse-20-40-10-2-2": [1000]}
     assert args.time_limit == 5.0
+
+
+@settings(max_examples=10, deadline=None)
+@given(n=st.integers(3, 9), seed=st.integers(0, 10_000), holds=st.sampled_from(["none", "anywhere"]),
+       ramps=st.booleans())
+def test_every_plan_of_the_search_is_valid(n, seed, holds, ramps):
+    """The priority search on dense combs (where greedy re-ordering often gives up), without the
+    fallback, with and without acceleration ramps: a plan is valid for the checker or a refusal
+    names the robots."""
+    robots = _robots(n, seed)
+    if ramps:
+        robots = [RobotSpec(r.id, r.radius, r.max_speed, r.start, r.goal, max_accel=0.5) for r in robots]
+    try:
+        plan = get_planner("md", holds=holds, fallback=None, time_limit=0.5).plan(COMB, robots)
+    except PlanningError as err:
+        assert err.failures and set(err.failures) <= {r.id for r in robots}
+        return
+    assert check_plan(COMB, robots, plan) == []
+
+
+@pytest.mark.parametrize("early", [False, True])
+def test_early_holds_keep_the_arrival_and_wait_further_back(early):
+    """The hand-worked case of test_md_holds (robot 2 crosses j's line x = 3 at t = 4, robot 1 crosses
+    x = 11 at t = 10; j must pass each crossing at least sqrt 2 s away from them). The earliest
+    arrival rushes to (10, 11), 1 m before robot 1's crossing, and waits there until 10 + sqrt 2 - 1.
+    With ``early_holds`` the waits move back, the arrival stays 15 + sqrt 2: j leaves its start as
+    late as it can and still pass x = 3 before robot 2 (2 + d <= 4 - sqrt 2: d = 2 - sqrt 2), waits
+    just past that crossing at (4, 11) (reached at d + 3 = 5 - sqrt 2) and leaves it at
+    10 + sqrt 2 - 7 = 3 + sqrt 2 (7 m to robot 1's crossing)."""
+    from test_md_holds import GRID, SPECS
+
+    plan = get_planner("md", order="given", margin=0.0, early_holds=early, detours=0).plan(GRID, SPECS)
+    assert check_plan(GRID, SPECS, plan) == []
+    j = plan.by_id()["j"]
+    assert j.arrival_time == pytest.approx(15 + math.sqrt(2))
+    s2 = math.sqrt(2)
+    if early:
+        assert j.waypoints[:, :2].tolist() == [[1, 11], [1, 11], [4, 11], [4, 11], [16, 11]]
+        assert j.waypoints[:, 2] == pytest.approx([0, 2 - s2, 5 - s2, 3 + s2, 15 + s2])
+    else:
+        assert j.waypoints[:, :2].tolist() == [[1, 11], [10, 11], [10, 11], [16, 11]]
+        assert j.waypoints[:, 2] == pytest.approx([0, 9, 9 + s2, 15 + s2])

@@ -54,7 +54,8 @@ register("md-departure", "fleet_planner.planners.md:MDPlanner",
          "the paper's method: exact collision regions, departure delays only, greedy re-ordering (md before v2)",
          mode="exact", holds="none", search=False, fallback=None)
 register("md-holds", "fleet_planner.planners.md:MDPlanner",
-         "md with holds anywhere along the path but no route choice (earliest arrival against the higher robots' timed trajectories)",
+         "md with holds anywhere along the path but no route choice "
+         "(earliest arrival against the higher robots' timed trajectories)",
          mode="exact", holds="anywhere", detours=0)
 register("md-routes", "fleet_planner.planners.md:MDPlanner",
          "md with route choice in time: robots that wait long try detours, the earliest arrival wins",

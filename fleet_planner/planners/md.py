@@ -100,16 +100,19 @@ class MDPlanner(Planner):
     only choice with boxes). Robots with ``max_accel`` wait only before they depart in either case
     (a stop en route would need braking and accelerating ramps their drive profile does not have).
     ``hold_step`` (m, default one grid cell): with holds, paths get a vertex at least this often, so
-    that there is somewhere to wait. ``early_holds`` (default off): move waits back along the path
-    as far as the arrival allows (measured: slightly worse sums of arrivals, kept as an option).
+    that there is somewhere to wait. ``early_holds``: move waits back along the path as far as the
+    arrival allows, to where the robot already stands (default: in :meth:`plan_incremental` only;
+    measured: the delivery benchmark finishes sooner with them, one-shot sums of arrivals are
+    slightly worse).
     ``detours`` (default 2 with holds, else 0): route choice in time: a robot that waits more than
     ``detour_min`` s in all is re-planned up to this many times around the stretch after its longest
     wait and takes the candidate with the earliest arrival under holds. ``search`` (default on):
     when greedy re-ordering gives up, the priority search of :mod:`.md_search` tries further orders
-    until ``time_limit`` s have passed since planning began; ``fallback`` (default "crowd"; a
-    registered ``dense`` planner is preferred when there is one): the dense solver that plans when
-    the search fails, named in the plan's ``info["fallback"]``; None refuses instead. The live
-    fleet's legs (:meth:`plan_incremental`) stop trying detours and re-orderings once
+    until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts);
+    ``fallback`` (default "crowd"; a registered ``dense`` planner is preferred when there is one):
+    the dense solver that plans when the search fails, named in the plan's ``info["fallback"]``;
+    None refuses instead. The live fleet's legs (:meth:`plan_incremental`) stop trying detours and
+    re-orderings once
     ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
     fleet manager re-plans later)."""
 
@@ -117,7 +120,7 @@ class MDPlanner(Planner):
 
     def __init__(self, margin: float = 0.02, order: str = "shortest", max_reorders: int | None = None,
                  mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
-                 detours: int | None = None, detour_min: float = 2.0, early_holds: bool = False,
+                 detours: int | None = None, detour_min: float = 2.0, early_holds: bool | None = None,
                  time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd",
                  leg_time_limit: float = 0.5):
         if holds is None:
@@ -142,7 +145,7 @@ class MDPlanner(Planner):
         if not (math.isfinite(detour_min) and detour_min >= 0):
             raise ValueError(f"detour_min: must be a finite number >= 0 (got {detour_min!r})")
         self.detours, self.detour_min = detours, float(detour_min)
-        self.early_holds = bool(early_holds)
+        self.early_holds = early_holds if early_holds is None else bool(early_holds)
         if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) \
                 or not (math.isfinite(time_limit) and time_limit > 0):
             raise ValueError(f"time_limit: must be a finite number of seconds > 0 (got {time_limit!r})")
@@ -187,7 +190,7 @@ class MDPlanner(Planner):
             except PlanningError as exc:
                 blocked = next(iter(exc.blockers.items()), None)
                 if (not self.search or blocked is None or time.perf_counter() >= deadline
-                        or blocked[0] not in ids or blocked[1] not in ids):
+                        or attempts >= 10 + 2 * len(robots) or blocked[0] not in ids or blocked[1] not in ids):
                     return self._fallback(grid, robots, exc, attempts, t_start, deadline)
                 order = search.next_order(session.order, ids[blocked[0]], ids[blocked[1]])
                 if progress:
@@ -204,14 +207,15 @@ class MDPlanner(Planner):
     def _fallback(self, grid: GridMap, robots: list[RobotSpec], failure: PlanningError, attempts: int,
                   t_start: float, deadline: float) -> Plan:
         """When prioritized planning finds no plan: the registered dense solver (``dense`` if there
-        is one, else ``crowd``) with what is left of the time budget (at least a second), its plan
-        under md's name with ``info["fallback"]`` saying which; or the original refusal."""
+        is one, else ``crowd``) with what is left of the time budget (at least half of it), its
+        plan under md's name with ``info["fallback"]`` saying which; or the refusal, saying what
+        the search and the fallback tried."""
         if self.fallback is None:
             raise failure
         from . import get_planner, planner_names
 
         name = "dense" if "dense" in planner_names() else self.fallback
-        budget = max(deadline - time.perf_counter(), 1.0)
+        budget = max(deadline - time.perf_counter(), 0.5 * self.time_limit)
         try:
             try:
                 dense = get_planner(name, time_limit_s=budget)
@@ -220,9 +224,8 @@ class MDPlanner(Planner):
             plan = dense.plan(grid, robots)
         except PlanningError as exc:
             why = "; ".join(f"{rid}: {w}" for rid, w in list(exc.failures.items())[:3])
-            failure.failures = {rid: f"{w} (priority search: {attempts} attempt(s); {name}: {why})"
-                                for rid, w in failure.failures.items()}
-            raise failure from exc
+            raise PlanningError({rid: f"{w} (priority search: {attempts} attempt(s); fallback {name}: {why})"
+                                 for rid, w in failure.failures.items()}, failure.blockers) from exc
         info = dict(plan.info)
         info.update({"fallback": name, "search": {"attempts": attempts},
                      "why": "; ".join(f"{rid}: {w}" for rid, w in list(failure.failures.items())[:3])})
@@ -247,7 +250,7 @@ class MDPlanner(Planner):
         order = list(range(nf)) + [nf + x for x in self._initial_order(grid, robots, shortest)]
         session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept],
                            hints={nf + x: path for x, path in shortest.items()},
-                           deadline=time.perf_counter() + self.leg_time_limit)
+                           deadline=time.perf_counter() + self.leg_time_limit, incremental=True)
         session.route()
         session.sched.delays[:nf] = [delay for _, _, delay in kept]
         for x, (_, _, arr, dep) in enumerate(held):
@@ -313,10 +316,13 @@ class _Session:
     def __init__(self, planner: MDPlanner, grid: GridMap, robots: list[RobotSpec], order: list[int],
                  fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = (),
                  hints: dict[int, np.ndarray] | None = None, deadline: float | None = None,
-                 must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] | None = None):
+                 must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] | None = None,
+                 incremental: bool = False):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
         #: perf_counter time after which re-ordering gives up and route choice stops trying (None: no bound)
         self.deadline = deadline
+        #: waits moved back along the path: the planner's choice, by default in legs only (fixed robots)
+        self.early_holds = planner.early_holds if planner.early_holds is not None else incremental
         self.margin = planner.margin
         self.rank = {x: k for k, x in enumerate(order)}
         self.finder = planner._finders.of(grid)
@@ -329,6 +335,7 @@ class _Session:
         #: goal they are
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {} if must is None else must
         self.reorders = self.reroutes = self.detoured = 0
+        self.detour_tries: dict[int, int] = {}
         #: shortest paths already known (robot -> path): kept when they avoid what they must
         self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
@@ -351,7 +358,7 @@ class _Session:
                                     times=[t for _, t in routes], fast_merge=self.planner.holds == "anywhere")
         self.sched = DelayScheduler(self.model, self.planner.mode, self.planner.holds,
                                     start_only=[x for x, r in enumerate(self.robots) if r.max_accel is not None],
-                                    early_holds=self.planner.early_holds)
+                                    early_holds=self.early_holds)
         if self.planner.detours:
             self.sched.after = self._detour
 
@@ -464,7 +471,10 @@ class _Session:
             return False
         me, sched = self.robots[x], self.sched
         changed = False
-        for _ in range(self.planner.detours):
+        # at most ``detours`` tries per robot in a session: a re-ordering re-schedules everyone
+        # below, and trying the same detours again rarely pays
+        while self.detour_tries.get(x, 0) < self.planner.detours:
+            self.detour_tries[x] = self.detour_tries.get(x, 0) + 1
             arr, dep = sched.arr[x], sched.dep[x]
             if len(arr) < 3:
                 return changed
