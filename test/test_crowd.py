@@ -27,7 +27,7 @@ def test_a_dense_aisle_that_prioritized_planning_refuses_is_solved():
     with pytest.raises(PlanningError):
         get_planner("md").plan(grid, POCKET_ROBOTS)
     plan = get_planner("crowd").plan(grid, POCKET_ROBOTS)
-    assert plan.planner == "crowd"
+    assert plan.planner == "dense" and plan.info["solver"].startswith("dense")
     assert check_plan(grid, POCKET_ROBOTS, plan) == []
     # somebody stepped aside into the pocket
     assert any(np.any(np.isclose(p.waypoints[:, 1], 0.5)) for p in plan.paths)
@@ -39,27 +39,38 @@ def test_a_dense_aisle_that_prioritized_planning_refuses_is_solved():
     assert all(link.D <= 1.0 / speed[link.i] + 1e-9 for link in plan.network.links)
 
 
-def test_the_corner_case_point_agents_collide_our_discs_do_not():
+@pytest.mark.parametrize("v_j", [1.0, 0.5])
+def test_the_corner_case_point_agents_collide_our_discs_do_not(v_j):
     """j turns out of the cell B that i enters in the same step: driven in lock-step (what a
-    point-agent MAPF plan means) the centres come 0.707 m close against r_i + r_j = 0.8 m; the
-    precedence pass lets i start only once j has arrived."""
+    point-agent MAPF plan means) the centres come 0.707 m close against r_i + r_j = 0.8 m. The
+    precedence pass lets i start once j is far enough round the corner: with j a = (t - S_j) v_j
+    along its way out and i b = t v_i along its way in (cells of 1 m, B at the origin), their gap
+    is |(a, 1 - b)|, a line in t whose distance from the origin is (a0 v_i + v_j) / |(v_j, v_i)| for
+    j's progress a0 when i starts; so i starts at a0 = (0.8 |(v_j, v_i)| - v_j) / v_i, and the two
+    then touch exactly once (never closer)."""
     grid = GridMap.from_rows(["..", ".."])
     a, b, c = (0.5, 1.5), (1.5, 1.5), (1.5, 0.5)     # i: A -> B, j: B -> C (a right-angle turn)
-    robots = [RobotSpec("i", 0.4, 1.0, a, b), RobotSpec("j", 0.4, 1.0, b, c)]
+    robots = [RobotSpec("i", 0.4, 1.0, a, b), RobotSpec("j", 0.4, v_j, b, c)]
     graph = CellGraph(grid, 0.4)
     starts, goals = [graph.cell(*a), graph.cell(*b)], [graph.cell(*b), graph.cell(*c)]
     configs = ConfigSearch(graph, starts, goals).solve(float("inf"))
     assert configs == [tuple(starts), tuple(goals)]   # one step: i follows j round the corner
     lockstep = Plan("points", [TimedPath("i", 0.4, [[*a, 0.0], [*b, 1.0]]),
-                               TimedPath("j", 0.4, [[*b, 0.0], [*c, 1.0]])])
+                               TimedPath("j", 0.4, [[*b, 0.0], [*c, 1.0 / v_j]])])
     assert [v.kind for v in check_plan(grid, robots, lockstep)] == ["collision"]
-    assert min_separation(lockstep.paths)[0] == pytest.approx(np.sqrt(0.5) - 0.8)
     plan = CrowdPlanner().plan(grid, robots)
     assert check_plan(grid, robots, plan) == []
     i, j = plan.by_id()["i"], plan.by_id()["j"]
-    assert j.arrival_time == pytest.approx(1.0)
-    assert i.start_time == pytest.approx(j.arrival_time) and i.arrival_time == pytest.approx(2.0)
-    assert min_separation(plan.paths)[0] >= -1e-9
+    assert j.start_time == 0.0 and j.arrival_time == pytest.approx(1.0 / v_j)
+    a0 = (0.8 * np.hypot(v_j, 1.0) - v_j) / 1.0       # 0.1314 of j's move at 1 m/s, 0.3944 at 0.5 m/s
+    assert i.start_time == pytest.approx(a0 / v_j, abs=1e-5)            # 0.131 s, 0.789 s
+    assert i.arrival_time == pytest.approx(a0 / v_j + 1.0, abs=1e-5)
+    assert i.start_time < j.arrival_time                                 # no waiting for j's arrival
+    gap = min_separation(plan.paths)[0]
+    assert 0.0 <= gap < 1e-4                                            # they touch, never overlap
+    # one step earlier and they would overlap: the rule is tight
+    early = Plan("early", [TimedPath("i", 0.4, [[*a, i.start_time - 0.01], [*b, i.arrival_time - 0.01]]), j])
+    assert [v.kind for v in check_plan(grid, robots, early)] == ["collision"]
 
 
 def test_trains_follow_and_collinear_moves_are_merged():
@@ -82,7 +93,7 @@ def test_timing_keeps_each_cell_order_and_own_speed():
     # starts 2 - 0.8 m before the leader arrives
     centres = np.array([[0.5, 0.5], [1.5, 0.5], [2.5, 0.5]])
     close = time_moves(configs, [2.0, 1.0], centres, [0.4, 0.4], 1.0)
-    assert close.start.tolist() == pytest.approx([0.0, 0.8])
+    assert close.start.tolist() == pytest.approx([0.0, 0.8], abs=1e-5)
     grid = GridMap.from_rows(["..."])
     robots = [RobotSpec("r0", 0.4, 0.5, (1.5, 0.5), (2.5, 0.5)), RobotSpec("r1", 0.4, 1.0, (0.5, 0.5), (1.5, 0.5))]
     paths = [TimedPath("r0", 0.4, [[1.5, 0.5, 0.0], [2.5, 0.5, 2.0]]),

@@ -35,58 +35,85 @@ import numpy as np
 
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
+from . import crowd_kernels as kern
 from .base import Planner, Progress
-from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, moves_of, remove_loops
+from .crowd_lns import Refiner
+from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
 from .crowd_timing import network, time_moves, timed_paths
+
+#: what the plan's info names as the solver that ran
+SOLVER = "dense: LaCAM/PIBT configuration search + LNS refinement, timed by precedence"
 
 
 class CrowdPlanner(Planner):
-    """LaCAM/PIBT on the grid graph, timed by precedence (see the module docstring).
+    """LaCAM/PIBT on the grid graph, refined by LNS, timed by precedence (see the module docstring).
 
-    ``time_limit_s``: budget of the configuration search; ``seed``: PIBT's tie-breaking;
-    ``network``: also return the (M,D) network of the chosen order (``Plan.network``).
+    ``time_limit`` (alias ``time_limit_s``): budget of the whole plan in seconds (the configuration
+    search must find a first plan within it); ``refine_s``: at most this long is spent improving the
+    first plan (large neighbourhood search, :mod:`.crowd_lns`; 0 switches it off); ``seed``:
+    tie-breaking; ``network``: also return the (M,D) network of the chosen order (``Plan.network``).
+    ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
-    name = "crowd"
+    name = "dense"
 
-    def __init__(self, time_limit_s: float = 30.0, seed: int = 0, network: bool = True):
-        if not time_limit_s > 0:
-            raise ValueError(f"time_limit_s: must be > 0 (got {time_limit_s!r})")
-        self.time_limit_s = float(time_limit_s)
+    def __init__(self, time_limit: float | None = None, refine_s: float = 1.0, seed: int = 0,
+                 network: bool = True, time_limit_s: float | None = None):
+        if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
+            raise ValueError("time_limit and time_limit_s: give one of them")
+        limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
+        if not limit > 0:
+            raise ValueError(f"time_limit: must be > 0 (got {limit!r})")
+        if not refine_s >= 0:
+            raise ValueError(f"refine_s: must be >= 0 (got {refine_s!r})")
+        self.time_limit_s = float(limit)
+        self.refine_s = float(refine_s)
         self.seed = int(seed)
         self.with_network = bool(network)
 
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
+        kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
         t_start = time.perf_counter()
+        deadline = t_start + self.time_limit_s
         robots = list(robots)
         if not robots:
-            return Plan(self.name, [], 0.0, {"steps": 0, "configurations": 0})
+            return Plan(self.name, [], 0.0, {"solver": SOLVER, "steps": 0, "configurations": 0})
         _check_radii(grid, robots)
         graph = CellGraph(grid, max(r.radius for r in robots))
         starts, goals = _cells(graph, robots)
         if progress:
-            progress(0, 2, "configuration search")
+            progress(0, 3, "configuration search")
         search = ConfigSearch(graph, starts, goals, self.seed)
         cut = search.unreachable()
         if cut:
             raise PlanningError({robots[i].id: "its goal cannot be reached from its start on the grid graph "
                                  "of cells its disc fits on" for i in cut})
         try:
-            configs = search.solve(t_start + self.time_limit_s)
+            configs = search.solve_array(deadline)
         except SearchFailed as exc:
-            raise PlanningError({r.id: f"crowd planner: {exc.reason}" for r in robots}) from None
-        if progress:
-            progress(1, 2, "timing by precedence")
+            raise PlanningError({r.id: f"dense solver: {exc.reason}" for r in robots}) from None
+        t_search = time.perf_counter() - t_start
         res = grid.resolution
+        durations = np.array([res / r.max_speed for r in robots])
+        info: dict = {"solver": SOLVER, "steps_first": int(configs.shape[0] - 1),
+                      "configurations": search.expanded, "search_s": round(t_search, 3)}
+        if self.refine_s > 0 and len(robots) > 1:
+            if progress:
+                progress(1, 3, "refinement (LNS)")
+            refiner = Refiner(graph, search.fields, search.grow, search.goals, configs, durations, self.seed)
+            refiner.run(min(deadline, time.perf_counter() + self.refine_s))
+            configs = refiner.configs()
+            info.update(lns_iterations=refiner.iterations, lns_accepted=refiner.accepted)
+        if progress:
+            progress(2, 3, "timing by precedence")
         centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
-        timing = time_moves(remove_loops(moves_of(configs)), [res / r.max_speed for r in robots], centres,
-                            [r.radius for r in robots], res)
-        paths = timed_paths(timing, centres, starts, [r.id for r in robots], [r.radius for r in robots])
+        radii = [r.radius for r in robots]
+        timing = time_moves(remove_loops(configs), durations, centres, radii, res)
+        paths = timed_paths(timing, centres, starts, [r.id for r in robots], radii)
         net = network(timing, [r.id for r in robots], res) if self.with_network else None
         if progress:
-            progress(2, 2, "done")
-        info = {"steps": len(configs) - 1, "configurations": search.expanded,
-                "precedences": len(timing.visits)}
+            progress(3, 3, "done")
+        info.update(steps=int(configs.shape[0] - 1), precedences=len(timing.visits))
         return Plan(self.name, paths, time.perf_counter() - t_start, info, net)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
@@ -135,4 +162,7 @@ def _cells(graph: CellGraph, robots: Sequence[RobotSpec]) -> tuple[list[int], li
     return starts, goals
 
 
-__all__ = ["CrowdPlanner"]
+#: the dense solver's name in the registry (``crowd`` is the same planner under its first name)
+DensePlanner = CrowdPlanner
+
+__all__ = ["SOLVER", "CrowdPlanner", "DensePlanner"]

@@ -39,6 +39,8 @@ import numpy as np
 from ..model import Link, Network, TimedPath
 
 NIL = -1
+#: what a follower keeps on top of r_i + r_j (metres): rounding, not a safety margin
+GAP_M = 1e-6
 
 
 @dataclass
@@ -58,7 +60,7 @@ class Timing:
     visits: list[tuple[int, int]]   # consecutive visits of a cell by two robots: (move out, move in)
 
 
-def time_moves(configs: np.ndarray, durations: Sequence[float], centres: np.ndarray | None = None,
+def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, centres: np.ndarray | None = None,
                radii: Sequence[float] | None = None, step_m: float = 1.0) -> Timing:
     """Earliest start and end of every move of the discrete plan ``configs`` ((steps + 1, robots)
     cell indices) under the precedences of the module docstring; ``durations[i]`` is how long
@@ -104,18 +106,30 @@ def time_moves(configs: np.ndarray, durations: Sequence[float], centres: np.ndar
             break
         depth[src_c] = np.maximum(depth[src_c], new)
     dur = np.asarray(durations, dtype=float)[robot]
-    # slack[m]: how long before the previous holder's arrival move m may start (same direction only)
+    # slack[m]: how long before the previous holder's arrival move m may start (it follows that robot)
     slack = np.zeros(m)
     if centres is not None and radii is not None:
         has = after_cell != NIL
         p = after_cell[has]
         mine = np.nonzero(has)[0]
-        d_in = centres[dst[mine]] - centres[src[mine]]
-        d_out = centres[dst[p]] - centres[src[p]]
+        d_in = (centres[dst[mine]] - centres[src[mine]]) / step_m
+        d_out = (centres[dst[p]] - centres[src[p]]) / step_m
         same_way = np.all(np.abs(d_in - d_out) < 1e-9, axis=1)
+        turn = np.abs(np.sum(d_in * d_out, axis=1)) < 1e-9
         rad = np.asarray(radii, dtype=float)
-        reach = rad[robot[mine]] + rad[robot[p]]
-        slack[mine] = np.where(same_way, np.maximum(2 * step_m - reach, 0.0) * dur[mine] / step_m, 0.0)
+        reach = (rad[robot[mine]] + rad[robot[p]] + GAP_M) / step_m
+        ahead = np.where(same_way, np.maximum(2.0 - reach, 0.0) * dur[mine], 0.0)
+        # a turn: the leader leaves the cell at right angles to the follower's way in. In cell units,
+        # with the leader a = (t - S_j) / dur_j along its way out and the follower b = (t - S_i) / dur_i
+        # along its way in, their gap is |(a, 1 - b)|; from the follower's start on it is the
+        # distance of the origin to a line, smallest (a0 / dur_i + 1 / dur_j) / |(1 / dur_j, 1 / dur_i)|
+        # for the leader's progress a0 at that start: a0 >= (reach |(..)| - 1 / dur_j) dur_i keeps it
+        # >= r_i + r_j (the leader's arrival clips the line, which only widens the gap)
+        v_out, v_in = 1.0 / dur[p], 1.0 / dur[mine]
+        a0 = np.clip((reach * np.hypot(v_out, v_in) - v_out) / v_in, 0.0, 1.0)
+        # the follower may start once the leader has done a0 of its move: (1 - a0) dur_j before its end
+        corner = (1.0 - a0) * dur[p]
+        slack[mine] = np.where(same_way, ahead, np.where(turn, corner, 0.0))
     start = np.zeros(m)
     end = np.zeros(m)
     level = step * (int(depth.max(initial=0)) + 1) + depth
@@ -127,6 +141,7 @@ def time_moves(configs: np.ndarray, durations: Sequence[float], centres: np.ndar
         t = np.where(own != NIL, np.maximum(t, end[np.maximum(own, 0)]), t)
         c = np.maximum(cell, 0)
         t = np.where(cell != NIL, np.maximum(t, np.maximum(start[c], end[c] - slack[group])), t)
+        # (a same-way follower's slack is in its own move time: see time_moves' docstring)
         start[group] = t
         end[group] = t + dur[group]
     return Timing(robot, step, src, dst, start, end, after_cell, first, visits)
