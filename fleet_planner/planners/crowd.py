@@ -36,6 +36,7 @@ import numpy as np
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from . import crowd_kernels as kern
+from . import crowd_st
 from .base import Planner, Progress
 from .crowd_lns import Refiner
 from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
@@ -49,8 +50,9 @@ class CrowdPlanner(Planner):
     """LaCAM/PIBT on the grid graph, refined by LNS, timed by precedence (see the module docstring).
 
     ``time_limit`` (alias ``time_limit_s``): budget of the whole plan in seconds (the configuration
-    search must find a first plan within it); ``refine_s``: at most this long is spent improving the
-    first plan (large neighbourhood search, :mod:`.crowd_lns`; 0 switches it off); ``seed``:
+    search must find a first plan within it); ``refine_s``: at most this much CPU time (seconds: the
+    same on a loaded machine) is spent improving the first plan (large neighbourhood search,
+    :mod:`.crowd_lns`; 0 switches it off); ``seed``:
     tie-breaking; ``network``: also return the (M,D) network of the chosen order (``Plan.network``).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
@@ -73,6 +75,7 @@ class CrowdPlanner(Planner):
 
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
+        crowd_st.warm_up()
         t_start = time.perf_counter()
         deadline = t_start + self.time_limit_s
         robots = list(robots)
@@ -101,7 +104,7 @@ class CrowdPlanner(Planner):
             if progress:
                 progress(1, 3, "refinement (LNS)")
             refiner = Refiner(graph, search.fields, search.grow, search.goals, configs, durations, self.seed)
-            refiner.run(min(deadline, time.perf_counter() + self.refine_s))
+            refiner.run(deadline, cpu_s=self.refine_s)
             configs = refiner.configs()
             info.update(lns_iterations=refiner.iterations, lns_accepted=refiner.accepted)
         if progress:

@@ -59,6 +59,7 @@ class Refiner:
         self.stats = np.zeros(2, dtype=np.int64)      # iterations, accepted
         self.strategy = np.ones(2)
         self.expansion_limit = 4 * graph.n
+        self.weight10 = 20        # the space-time search's heuristic weight x 10 (bounded suboptimal)
         st.seed_rng(int(seed))
 
     @property
@@ -76,14 +77,17 @@ class Refiner:
         """The current plan, cut after the last arrival."""
         return self.paths[:int(self.cost.max(initial=0)) + 1].copy()
 
-    def run(self, deadline: float, max_iterations: int = 1_000_000, batch: int = 16, patience: int = 0) -> None:
-        """Improve the plan until ``deadline`` (perf_counter) or ``max_iterations``, until no robot
-        is delayed, or until ``patience`` iterations in a row did not lower the weighted sum
-        (default: 50 + the number of robots)."""
+    def run(self, deadline: float, max_iterations: int = 1_000_000, batch: int = 16, patience: int = 0,
+            cpu_s: float = float("inf")) -> None:
+        """Improve the plan until ``deadline`` (perf_counter), ``cpu_s`` seconds of this process's CPU
+        time or ``max_iterations``, until no robot is delayed, or until ``patience`` iterations in a
+        row did not lower the weighted sum (default: 50 + the number of robots)."""
         g = self.graph
+        cpu_end = time.process_time() + cpu_s
         patience = patience or 50 + self.n
         best, best_at = self.weighted_cost(), self.iterations
-        while self.iterations < max_iterations and time.perf_counter() < deadline:
+        while (self.iterations < max_iterations and time.perf_counter() < deadline
+               and time.process_time() < cpu_end):
             if self.iterations - best_at >= patience:
                 return
             if not np.any(self.cost > self.lb):
@@ -95,7 +99,8 @@ class Refiner:
             self.gen = int(st.lns_iterations(min(batch, max_iterations - self.iterations), self.paths, self.occ,
                                              self.cost, self.lb, self.weights, self.goals, self.fields, self.grow,
                                              g.nb, g.deg, self.stamp, self.gen, self.parent, self.out, self.size,
-                                             self.expansion_limit, self.horizon, self.strategy, self.stats))
+                                             self.expansion_limit, self.weight10, self.horizon, self.strategy,
+                                             self.stats))
             if self.iterations == before:
                 return
             now = self.weighted_cost()

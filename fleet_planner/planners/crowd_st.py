@@ -44,11 +44,20 @@ def _move_ok(t, u, v, occ, paths, n):
 
 
 @_jit
-def st_search(start, goal, d, occ, paths, nb, deg, limit, bound, stamp, gen, parent, out):
+def _key(g, h, weight10, state):
+    """Heap key: the weighted estimate 10 g + weight10 h (20 bits), then h (11 bits: nearer the
+    goal first), then the state (32 bits)."""
+    f = np.int64(10 * g + weight10 * h)
+    return (f << 43) | (np.int64(min(h, 2047)) << 32) | np.int64(state)
+
+
+@_jit
+def st_search(start, goal, d, occ, paths, nb, deg, limit, bound, weight10, stamp, gen, parent, out):
     """Earliest arrival of one robot from ``start`` (at step 0) at ``goal`` to stay there for ever,
     against the robots on ``occ`` ((horizon + 1, cells) robot per cell per step, NIL when free;
     ``paths`` (horizon + 1, robots) their cells), by A* over (step, cell) with the hop distance ``d``
-    as heuristic. Writes the path to ``out`` (padded with the goal) and returns the arrival step, or
+    as heuristic, weighted by ``weight10`` / 10 (10: plain A*, optimal; more: faster, bounded
+    suboptimal). Writes the path to ``out`` (padded with the goal) and returns the arrival step, or
     -1 when there is none within the horizon, ``limit`` expansions or ``bound`` steps (states whose
     arrival estimate exceeds it are not explored). ``stamp``/``parent`` are
     scratch arrays of (horizon + 1) * cells entries, ``gen`` this search's stamp."""
@@ -70,9 +79,8 @@ def st_search(start, goal, d, occ, paths, nb, deg, limit, bound, stamp, gen, par
     h0 = max(d[start], busy + 1)
     if h0 > bound:
         return -1
-    shift = np.int64(32)
     mask = (np.int64(1) << 32) - 1
-    hk[0] = (((np.int64(h0) << 16) | np.int64(horizon)) << shift) | np.int64(s0)
+    hk[0] = _key(0, h0, weight10, s0)
     size = 1
     expanded = 0
     while size > 0:
@@ -125,8 +133,7 @@ def st_search(start, goal, d, occ, paths, nb, deg, limit, bound, stamp, gen, par
             if g + h > bound:
                 continue
             # priority: f, then deeper first
-            pri = (np.int64(g + h) << 16) | np.int64(horizon - g)
-            key = (pri << shift) | np.int64(s2)
+            key = _key(g, h, weight10, s2)
             if size >= cap:
                 grown = np.empty(2 * cap, dtype=np.int64)
                 grown[:cap] = hk
@@ -174,7 +181,7 @@ def _roulette(weight, total):
 
 @_jit
 def lns_iterations(iters, paths, occ, cost, lb, weights, goals, fields, grow, nb, deg, stamp, gen, parent, out,
-                   size, limit, horizon, strategy, stats):
+                   size, limit, weight10, horizon, strategy, stats):
     """``iters`` iterations of the large neighbourhood search (see :mod:`.crowd_lns`); updates
     ``paths``, ``occ`` and ``cost`` in place, ``strategy`` (the two neighbourhoods' weights) and
     ``stats`` ([iterations, accepted]); returns the last search stamp used."""
@@ -265,8 +272,8 @@ def lns_iterations(iters, paths, occ, cost, lb, weights, goals, fields, grow, nb
             if bound > horizon:
                 bound = horizon
             gen += 1
-            t = st_search(paths[0, a], goals[a], fields[grow[a]], occ, paths, nb, deg, limit, bound, stamp, gen,
-                          parent, out)
+            t = st_search(paths[0, a], goals[a], fields[grow[a]], occ, paths, nb, deg, limit, bound, weight10,
+                          stamp, gen, parent, out)
             if t < 0:
                 ok = False
                 break
@@ -300,3 +307,34 @@ def lns_iterations(iters, paths, occ, cost, lb, weights, goals, fields, grow, nb
 def seed_rng(seed):
     """Seed numba's own generator (the one the kernels draw from)."""
     np.random.seed(seed)
+
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the kernels of this module on a toy instance: two
+    robots passing on a 3x2 grid, one of them re-planned by the LNS."""
+    global _WARM
+    if _WARM:
+        return
+    from .crowd_kernels import bfs_fields
+
+    nb = np.array([[1, 3, NIL, NIL], [0, 2, 4, NIL], [1, 5, NIL, NIL],
+                   [0, 4, NIL, NIL], [1, 3, 5, NIL], [2, 4, NIL, NIL]], dtype=np.int32)
+    deg = np.array([2, 3, 2, 2, 3, 2], dtype=np.int32)
+    goals = np.array([2, 0], dtype=np.int32)
+    fields = bfs_fields(nb, deg, goals)
+    grow = np.array([0, 1], dtype=np.int32)
+    paths = np.array([[0, 2], [1, 5], [2, 4], [2, 3], [2, 0], [2, 0]], dtype=np.int32)
+    occ = np.full((paths.shape[0], 6), NIL, dtype=np.int32)
+    occupy(occ, paths, 0, 0)
+    occupy(occ, paths, 1, 1)
+    cost = arrival_steps(paths, goals)
+    lb = np.array([2, 2], dtype=np.int64)
+    size = paths.shape[0] * 6
+    seed_rng(0)
+    lns_iterations(2, paths, occ, cost, lb, np.ones(2), goals, fields, grow, nb, deg, np.zeros(size, dtype=np.int32),
+                   0, np.zeros(size, dtype=np.int32), np.empty(paths.shape[0], dtype=np.int32), 2, 100,
+                   20, paths.shape[0] - 1, np.ones(2), np.zeros(2, dtype=np.int64))
+    _WARM = True
