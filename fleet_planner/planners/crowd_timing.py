@@ -150,29 +150,40 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
 def timed_paths(timing: Timing, centres: np.ndarray, starts: Sequence[int], ids: Sequence[str],
                 radii: Sequence[float]) -> list[TimedPath]:
     """One timed path per robot: holds where a precedence makes it wait, collinear moves driven
-    without a stop merged into one segment. ``centres`` is (cells, 2)."""
-    out = []
-    start, end = timing.start.tolist(), timing.end.tolist()
-    src, dst = centres[timing.src].tolist(), centres[timing.dst].tolist()
-    first = timing.first.tolist()
-    xy = centres[np.asarray(starts)].tolist()
-    for i, rid in enumerate(ids):
-        lo, hi = first[i], first[i + 1]
-        wp: list[list[float]] = [[xy[i][0], xy[i][1], 0.0]]
-        last_dir: tuple[float, float] | None = None
-        for k in range(lo, hi):
-            s, e = start[k], end[k]
-            p, q = src[k], dst[k]
-            direction = (q[0] - p[0], q[1] - p[1])
-            if s > wp[-1][2]:
-                wp.append([float(p[0]), float(p[1]), s])
-                last_dir = None
-            elif last_dir == direction and len(wp) > 1:
-                wp.pop()   # a straight run without a stop: one segment
-            wp.append([float(q[0]), float(q[1]), e])
-            last_dir = direction
-        out.append(TimedPath(rid, float(radii[i]), np.asarray(wp)))
-    return out
+    without a stop merged into one segment. ``centres`` is (cells, 2).
+
+    Built for all robots at once: move k adds a hold waypoint (its source, its start) when it starts
+    later than the robot's previous waypoint, and its end waypoint unless the robot's next move goes
+    on in the same direction without a stop (then that one's end replaces it)."""
+    n = len(ids)
+    robot, start, end = timing.robot, timing.start, timing.end
+    m = len(robot)
+    first = timing.first
+    idx = np.arange(m)
+    is_first = idx == first[robot] if m else np.zeros(0, dtype=bool)
+    prev_end = np.where(is_first, 0.0, np.concatenate([[0.0], end[:-1]]))
+    hold = start > prev_end
+    direction = centres[timing.dst] - centres[timing.src]
+    same_dir = np.zeros(m, dtype=bool)
+    if m > 1:
+        same_dir[1:] = np.all(np.abs(direction[1:] - direction[:-1]) < 1e-12, axis=1)
+    merge = ~is_first & ~hold & same_dir          # move k replaces the end waypoint of move k - 1
+    emit_end = np.ones(m, dtype=bool)
+    emit_end[:-1] = ~merge[1:]
+    src_xy, dst_xy = centres[timing.src], centres[timing.dst]
+    start_xy = centres[np.asarray(starts, dtype=np.int64)]
+    # rows: (robot, move, sub) with sub 0 = the start (move -1), 1 = a hold, 2 = a move's end
+    rob = np.concatenate([np.arange(n), robot[hold], robot[emit_end]])
+    mov = np.concatenate([np.full(n, -1), idx[hold], idx[emit_end]])
+    sub = np.concatenate([np.zeros(n, dtype=np.int64), np.ones(int(hold.sum()), dtype=np.int64),
+                          np.full(int(emit_end.sum()), 2)])
+    xy = np.concatenate([start_xy, src_xy[hold], dst_xy[emit_end]])
+    t = np.concatenate([np.zeros(n), start[hold], end[emit_end]])
+    order = np.lexsort((sub, mov, rob))
+    rows = np.column_stack([xy[order], t[order]])
+    counts = np.bincount(rob, minlength=n)
+    pieces = np.split(rows, np.cumsum(counts)[:-1])
+    return [TimedPath(rid, float(radii[i]), pieces[i]) for i, rid in enumerate(ids)]
 
 
 def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
@@ -181,25 +192,32 @@ def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
     k-th such cell along j's path. T1 = i starts to move into the cell (0 for its start cell),
     T4 = i has arrived in its next cell, T2 = j starts to move in, T3 = j has arrived in its next
     cell (inf when the cell is j's goal)."""
-    first, robot = timing.first.tolist(), timing.robot.tolist()
-    start, end = timing.start.tolist(), timing.end.tolist()
-    links = []
-    count: dict[int, int] = {}
-    for out_move, in_move in sorted(timing.visits, key=lambda p: p[1]):
+    first, robot = timing.first, timing.robot
+    start, end = timing.start, timing.end
+    if timing.visits:
+        pairs = np.asarray(sorted(timing.visits, key=lambda p: p[1]), dtype=np.int64)
+        out_move, in_move = pairs[:, 0], pairs[:, 1]
         hi, lo = robot[out_move], robot[in_move]
-        k = count[lo] = count.get(lo, 0) + 1
-        entry_hi = out_move - 1 if out_move > first[hi] else NIL
-        t1 = start[entry_hi] if entry_hi != NIL else 0.0
+        # k: 1, 2, ... along each lower robot's path (pairs are sorted by its move, robot-major)
+        new_lo = np.concatenate([[True], lo[1:] != lo[:-1]])
+        run_start = np.maximum.accumulate(np.where(new_lo, np.arange(len(lo)), 0))
+        k = np.arange(len(lo)) - run_start + 1
+        entry_hi = out_move - 1
+        t1 = np.where(out_move > first[hi], start[np.maximum(entry_hi, 0)], 0.0)
         t4 = end[out_move]
         t2 = start[in_move]
-        t3 = end[in_move + 1] if in_move + 1 < first[lo + 1] else math.inf
+        has_next = in_move + 1 < first[lo + 1]
+        t3 = np.where(has_next, end[np.minimum(in_move + 1, len(end) - 1)], math.inf)
         ls = (in_move - first[lo]) * step_m
-        le = ls + (2 if math.isfinite(t3) else 1) * step_m
-        links.append(Link(ids[hi], ids[lo], k, t3 - t1, t4 - t2, t1, t4, float(ls), float(le)))
-    n = len(ids)
-    delay, travel = {}, {}
-    for i in range(n):
-        lo, hi_ = first[i], first[i + 1]
-        delay[ids[i]] = start[lo] if hi_ > lo else 0.0
-        travel[ids[i]] = end[hi_ - 1] - delay[ids[i]] if hi_ > lo else 0.0
+        le = ls + np.where(has_next, 2.0, 1.0) * step_m
+        links = [Link(ids[a], ids[b], kk, m_, d_, k1, k4, l1, l2) for a, b, kk, m_, d_, k1, k4, l1, l2 in
+                 zip(hi.tolist(), lo.tolist(), k.tolist(), (t3 - t1).tolist(), (t4 - t2).tolist(), t1.tolist(),
+                     t4.tolist(), ls.tolist(), le.tolist())]
+    else:
+        links = []
+    moves = first[1:] > first[:-1]
+    d0 = np.where(moves, start[np.minimum(first[:-1], max(len(start) - 1, 0))] if len(start) else 0.0, 0.0)
+    tr = np.where(moves, end[np.maximum(first[1:] - 1, 0)] - d0 if len(end) else 0.0, 0.0)
+    delay = dict(zip(ids, d0.tolist()))
+    travel = dict(zip(ids, tr.tolist()))
     return Network(list(ids), delay, travel, links, None)
