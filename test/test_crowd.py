@@ -3,6 +3,8 @@
 The independent checker is the oracle of every case."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -13,6 +15,7 @@ from fleet_planner.grid import GridMap
 from fleet_planner.model import Plan, PlanningError, RobotSpec, TimedPath
 from fleet_planner.planners import get_planner
 from fleet_planner.planners.crowd import CrowdPlanner
+from fleet_planner.planners.crowd_lns import Refiner
 from fleet_planner.planners.crowd_pibt import CellGraph, ConfigSearch, _valid_step, remove_loops
 from fleet_planner.planners.crowd_timing import time_moves
 
@@ -23,9 +26,14 @@ POCKET_ROBOTS = [RobotSpec("a", 0.40, 1.0, (0.5, 1.5), (6.5, 1.5)), RobotSpec("b
 
 
 def test_a_dense_aisle_that_prioritized_planning_refuses_is_solved():
+    """Two robots each way in a 1-cell aisle with one side pocket: robots must step aside into the
+    pocket and back, which no priority order can ask for (PRIOR fails in all 24 orders, md too)."""
     grid = GridMap.from_rows(POCKET)
     with pytest.raises(PlanningError):
         get_planner("md").plan(grid, POCKET_ROBOTS)
+    for order in itertools.permutations(POCKET_ROBOTS):
+        with pytest.raises(PlanningError):
+            get_planner("prior", order="given", max_reorders=0, time_limit_s=5.0).plan(grid, list(order))
     plan = get_planner("crowd").plan(grid, POCKET_ROBOTS)
     assert plan.planner == "dense" and plan.info["solver"].startswith("dense")
     assert check_plan(grid, POCKET_ROBOTS, plan) == []
@@ -122,6 +130,48 @@ def _occ(config, n):
     for i, v in enumerate(config):
         occ[v] = i
     return occ
+
+
+def test_refinement_keeps_the_rules_and_never_lengthens_the_plan():
+    """LNS on a crowded room (20 robots on 44 cells): every step of the refined plan still obeys
+    the transition rules, every robot ends on its goal and stays there, and the weighted sum of
+    arrivals did not grow (here it shrinks)."""
+    grid = GridMap.from_rows(["........", "..@..@..", "........", "..@..@..", "........", "........"])
+    graph = CellGraph(grid, 0.45)
+    rng = np.random.default_rng(3)
+    starts, goals = rng.permutation(graph.n)[:20].tolist(), rng.permutation(graph.n)[:20].tolist()
+    search = ConfigSearch(graph, starts, goals, seed=1)
+    first = search.solve_array(float("inf"))
+    weights = rng.uniform(1.0, 1.43, 20)
+    ref = Refiner(graph, search.fields, search.grow, search.goals, first, weights, seed=2)
+    before = ref.weighted_cost()
+    ref.run(float("inf"), max_iterations=300)
+    after = ref.configs()
+    assert ref.iterations > 0 and ref.weighted_cost() <= before
+    assert ref.weighted_cost() < before            # this instance has room to improve
+    assert after[0].tolist() == starts and after[-1].tolist() == goals
+    for q_from, q_to in zip(after[:-1], after[1:]):
+        assert _valid_step(q_from.tolist(), q_to.tolist(), _occ(q_from.tolist(), graph.n))
+    cost = ref.cost
+    for i in range(20):
+        assert np.all(after[cost[i]:, i] == goals[i]) and (cost[i] == 0 or after[cost[i] - 1, i] != goals[i])
+    # and the timed plan of the refined steps is valid for discs
+    robots = [RobotSpec(f"r{i}", 0.45 - 0.1 * (i % 2), 1.0 / weights[i], graph.centre(starts[i]),
+                        graph.centre(goals[i])) for i in range(20)]
+    plan = CrowdPlanner(refine_s=0.5).plan(grid, robots)
+    assert check_plan(grid, robots, plan) == [] and plan.info["lns_iterations"] > 0
+
+
+def test_the_dense_solver_by_name_with_its_options():
+    grid = GridMap.from_rows(POCKET)
+    plan = get_planner("dense").plan(grid, POCKET_ROBOTS)
+    assert plan.planner == "dense" and "LaCAM" in plan.info["solver"]
+    assert check_plan(grid, POCKET_ROBOTS, plan) == []
+    quick = get_planner("dense", time_limit=5.0, refine_s=0.0).plan(grid, POCKET_ROBOTS)
+    assert "lns_iterations" not in quick.info and check_plan(grid, POCKET_ROBOTS, quick) == []
+    assert type(get_planner("crowd")) is type(get_planner("dense"))
+    with pytest.raises(ValueError, match="time_limit"):
+        get_planner("dense", time_limit=0.0)
 
 
 def test_refusals_name_the_robots():
