@@ -213,17 +213,20 @@ def crowds(draw):
     if len(free) < n:
         return grid, []
     starts, goals = rng.permutation(len(free))[:n], rng.permutation(len(free))[:n]
+    accel = draw(st.sampled_from([None, 0.5]))   # instant speed changes, or trapezoids
     robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(0.7, 1.0)),
-                        grid.centre(*free[starts[k]]), grid.centre(*free[goals[k]])) for k in range(n)]
+                        grid.centre(*free[starts[k]]), grid.centre(*free[goals[k]]),
+                        max_accel=None if accel is None else float(rng.uniform(0.3, 1.0)))
+              for k in range(n)]
     return grid, robots
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=crowds())
 def test_every_crowd_plan_is_valid(case):
-    """Dense random crowds (2-12 discs of mixed radii on a quarter to half of the free cells, goals
-    a random permutation, so robots must pass each other): a plan is valid by the checker, or a
-    refusal names robots."""
+    """Dense random crowds (2-12 discs of mixed radii and speeds, some with acceleration limits, on a
+    quarter to half of the free cells, goals a random permutation, so robots must pass each other):
+    a plan is valid by the checker, or a refusal names robots."""
     grid, robots = case
     try:
         plan = CrowdPlanner(time_limit_s=2.0).plan(grid, robots)
@@ -231,3 +234,29 @@ def test_every_crowd_plan_is_valid(case):
         assert err.failures and set(err.failures) <= {r.id for r in robots}
         return
     assert check_plan(grid, robots, plan) == []
+
+
+def test_acceleration_limits_give_trapezoids_and_stops_only_at_run_ends():
+    """A robot with max_accel drives each straight run from standstill to standstill: 0.5 m/s^2 and
+    1 m/s over 4 cells of 1 m ramp up over the first cell (2 s), cruise 2 cells (2 s, one merged
+    segment) and brake over the last (2 s): 6 s instead of 4 s. In a crowd with accelerations the
+    plan stays valid, and every hold follows a braking piece (no stop from cruise speed)."""
+    grid = GridMap.from_rows(["." * 5])
+    alone = [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), (4.5, 0.5), max_accel=0.5)]
+    plan = CrowdPlanner().plan(grid, alone)
+    assert np.allclose(plan.paths[0].waypoints, [[0.5, 0.5, 0.0], [1.5, 0.5, 2.0], [3.5, 0.5, 4.0], [4.5, 0.5, 6.0]])
+    assert check_plan(grid, alone, plan) == []
+    crowd_grid = GridMap.from_rows(POCKET)
+    robots = [RobotSpec(r.id, r.radius, r.max_speed, r.start, r.goal, max_accel=0.6) for r in POCKET_ROBOTS]
+    plan = CrowdPlanner().plan(crowd_grid, robots)
+    assert check_plan(crowd_grid, robots, plan) == []
+    holds = 0
+    for path, r in zip(plan.paths, robots):
+        wp = path.waypoints
+        speed = np.hypot(*np.diff(wp[:, :2], axis=0).T) / np.maximum(np.diff(wp[:, 2]), 1e-12)
+        for k in range(1, len(speed) - 1):
+            if speed[k] == 0.0:          # a hold: the piece before it brakes, the piece after it ramps up
+                holds += 1
+                # (0.6 m/s^2 brakes from top speed within 0.83 m: the cell before a stop is slower)
+                assert speed[k - 1] < r.max_speed - 0.05 and speed[k + 1] < r.max_speed - 0.05
+    assert holds > 0

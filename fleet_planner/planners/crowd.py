@@ -111,7 +111,7 @@ class CrowdPlanner(Planner):
             progress(2, 3, "timing by precedence")
         centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
         radii = [r.radius for r in robots]
-        timing = time_moves(remove_loops(configs), durations, centres, radii, res)
+        timing = time_moves(remove_loops(configs), durations, centres, radii, res, [r.max_accel for r in robots])
         paths = timed_paths(timing, centres, starts, [r.id for r in robots], radii)
         net = network(timing, [r.id for r in robots], res) if self.with_network else None
         if progress:

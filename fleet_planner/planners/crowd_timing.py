@@ -61,10 +61,18 @@ class Timing:
 
 
 def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, centres: np.ndarray | None = None,
-               radii: Sequence[float] | None = None, step_m: float = 1.0) -> Timing:
+               radii: Sequence[float] | None = None, step_m: float = 1.0,
+               accels: Sequence[float | None] | None = None) -> Timing:
     """Earliest start and end of every move of the discrete plan ``configs`` ((steps + 1, robots)
     cell indices) under the precedences of the module docstring; ``durations[i]`` is how long
-    robot i takes for one move of ``step_m`` metres.
+    robot i takes for one move of ``step_m`` metres at its top speed.
+
+    With ``accels`` (per robot, None: instant speed changes) a robot drives each *run* (moves in
+    one direction without a stop) as a trapezoid from standstill to standstill, each move at the
+    ramp's average speed over that cell (the plan contract has constant speed between waypoints).
+    Where a precedence makes a robot stop inside a run, the run is split there and the pass
+    repeated, until every stop is at the end of a run (a fixed point: runs only split; at worst
+    every move is a run of its own).
 
     With ``centres`` ((cells, 2) metres) and ``radii``, a robot that follows another in the same
     direction (its move into the cell is collinear with the other's move out of it) may start
@@ -105,46 +113,97 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
         if np.all(depth[src_c] >= new):
             break
         depth[src_c] = np.maximum(depth[src_c], new)
-    dur = np.asarray(durations, dtype=float)[robot]
-    # slack[m]: how long before the previous holder's arrival move m may start (it follows that robot)
-    slack = np.zeros(m)
-    if centres is not None and radii is not None:
-        has = after_cell != NIL
-        p = after_cell[has]
-        mine = np.nonzero(has)[0]
-        d_in = (centres[dst[mine]] - centres[src[mine]]) / step_m
-        d_out = (centres[dst[p]] - centres[src[p]]) / step_m
-        same_way = np.all(np.abs(d_in - d_out) < 1e-9, axis=1)
-        turn = np.abs(np.sum(d_in * d_out, axis=1)) < 1e-9
-        rad = np.asarray(radii, dtype=float)
-        reach = (rad[robot[mine]] + rad[robot[p]] + GAP_M) / step_m
-        ahead = np.where(same_way, np.maximum(2.0 - reach, 0.0) * dur[mine], 0.0)
-        # a turn: the leader leaves the cell at right angles to the follower's way in. In cell units,
-        # with the leader a = (t - S_j) / dur_j along its way out and the follower b = (t - S_i) / dur_i
-        # along its way in, their gap is |(a, 1 - b)|; from the follower's start on it is the
-        # distance of the origin to a line, smallest (a0 / dur_i + 1 / dur_j) / |(1 / dur_j, 1 / dur_i)|
-        # for the leader's progress a0 at that start: a0 >= (reach |(..)| - 1 / dur_j) dur_i keeps it
-        # >= r_i + r_j (the leader's arrival clips the line, which only widens the gap)
-        v_out, v_in = 1.0 / dur[p], 1.0 / dur[mine]
-        a0 = np.clip((reach * np.hypot(v_out, v_in) - v_out) / v_in, 0.0, 1.0)
-        # the follower may start once the leader has done a0 of its move: (1 - a0) dur_j before its end
-        corner = (1.0 - a0) * dur[p]
-        slack[mine] = np.where(same_way, ahead, np.where(turn, corner, 0.0))
-    start = np.zeros(m)
-    end = np.zeros(m)
-    level = step * (int(depth.max(initial=0)) + 1) + depth
-    by_level = np.argsort(level, kind="stable")
-    bounds = np.flatnonzero(np.diff(level[by_level])) + 1
-    for group in np.split(by_level, bounds):
-        own, cell = after_own[group], after_cell[group]
-        t = np.zeros(len(group))
-        t = np.where(own != NIL, np.maximum(t, end[np.maximum(own, 0)]), t)
-        c = np.maximum(cell, 0)
-        t = np.where(cell != NIL, np.maximum(t, np.maximum(start[c], end[c] - slack[group])), t)
-        # (a same-way follower's slack is in its own move time: see time_moves' docstring)
-        start[group] = t
-        end[group] = t + dur[group]
+    base = np.asarray(durations, dtype=float)[robot]
+
+    def schedule(dur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # slack[m]: how long before the previous holder's arrival move m may start (it follows that robot)
+        slack = np.zeros(m)
+        if centres is not None and radii is not None:
+            has = after_cell != NIL
+            p = after_cell[has]
+            mine = np.nonzero(has)[0]
+            d_in = (centres[dst[mine]] - centres[src[mine]]) / step_m
+            d_out = (centres[dst[p]] - centres[src[p]]) / step_m
+            same_way = np.all(np.abs(d_in - d_out) < 1e-9, axis=1)
+            turn = np.abs(np.sum(d_in * d_out, axis=1)) < 1e-9
+            rad = np.asarray(radii, dtype=float)
+            reach = (rad[robot[mine]] + rad[robot[p]] + GAP_M) / step_m
+            ahead = np.where(same_way, np.maximum(2.0 - reach, 0.0) * dur[mine], 0.0)
+            # a turn: the leader leaves the cell at right angles to the follower's way in. In cell units,
+            # with the leader a = (t - S_j) / dur_j along its way out and the follower b = (t - S_i) / dur_i
+            # along its way in, their gap is |(a, 1 - b)|; from the follower's start on it is the
+            # distance of the origin to a line, smallest (a0 / dur_i + 1 / dur_j) / |(1 / dur_j, 1 / dur_i)|
+            # for the leader's progress a0 at that start: a0 >= (reach |(..)| - 1 / dur_j) dur_i keeps it
+            # >= r_i + r_j (the leader's arrival clips the line, which only widens the gap)
+            v_out, v_in = 1.0 / dur[p], 1.0 / dur[mine]
+            a0 = np.clip((reach * np.hypot(v_out, v_in) - v_out) / v_in, 0.0, 1.0)
+            # the follower may start once the leader has done a0 of its move: (1 - a0) dur_j before its end
+            corner = (1.0 - a0) * dur[p]
+            slack[mine] = np.where(same_way, ahead, np.where(turn, corner, 0.0))
+        start = np.zeros(m)
+        end = np.zeros(m)
+        level = step * (int(depth.max(initial=0)) + 1) + depth
+        by_level = np.argsort(level, kind="stable")
+        bounds = np.flatnonzero(np.diff(level[by_level])) + 1
+        for group in np.split(by_level, bounds):
+            own, cell = after_own[group], after_cell[group]
+            t = np.zeros(len(group))
+            t = np.where(own != NIL, np.maximum(t, end[np.maximum(own, 0)]), t)
+            c = np.maximum(cell, 0)
+            t = np.where(cell != NIL, np.maximum(t, np.maximum(start[c], end[c] - slack[group])), t)
+            # (a same-way follower's slack is in its own move time: see time_moves' docstring)
+            start[group] = t
+            end[group] = t + dur[group]
+        return start, end
+
+    acc = np.array([np.inf if a is None else float(a) for a in accels], dtype=float) if accels is not None \
+        else np.full(n, np.inf)
+    if not np.any(np.isfinite(acc)) or m == 0:
+        start, end = schedule(base)
+        return Timing(robot, step, src, dst, start, end, after_cell, first, visits)
+    # runs: a robot's moves at consecutive steps in one direction
+    direction = (centres[dst] - centres[src]) if centres is not None else (dst - src)[:, None]
+    breaks = np.ones(m, dtype=bool)
+    if m > 1:
+        turns = np.any(np.abs(direction[1:] - direction[:-1]) > 1e-9, axis=1)
+        breaks[1:] = (robot[1:] != robot[:-1]) | (step[1:] != step[:-1] + 1) | turns
+    for _ in range(50):
+        dur = _ramp_durations(breaks, base, acc[robot], step_m)
+        start, end = schedule(dur)
+        inner_stop = ~breaks & (start > np.concatenate([[0.0], end[:-1]]) + 1e-9)
+        if not inner_stop.any():
+            break
+        breaks |= inner_stop
+    else:   # pragma: no cover - every move its own run: no stop can be inside one
+        breaks[:] = True
+        start, end = schedule(_ramp_durations(breaks, base, acc[robot], step_m))
     return Timing(robot, step, src, dst, start, end, after_cell, first, visits)
+
+
+def _ramp_durations(breaks: np.ndarray, base: np.ndarray, accel: np.ndarray, step_m: float) -> np.ndarray:
+    """Per move: its time in its run driven as a trapezoid (a triangle on short runs) from standstill
+    to standstill at top speed ``step_m / base`` and acceleration ``accel`` (inf: at top speed)."""
+    m = len(base)
+    run = np.cumsum(breaks) - 1
+    run_first = np.flatnonzero(breaks)
+    pos = np.arange(m) - run_first[run]
+    length = np.bincount(run, minlength=len(run_first))[run] * step_m
+    v = step_m / base
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tri = length < v * v / accel
+        peak = np.where(tri, np.sqrt(accel * length), v)
+        t_ramp = np.where(np.isfinite(accel), peak / accel, 0.0)
+        s_ramp = np.where(np.isfinite(accel), peak * peak / (2 * accel), 0.0)
+        total = np.where(tri, 2 * t_ramp, length / v + t_ramp)
+
+        def at(s: np.ndarray) -> np.ndarray:
+            up = np.sqrt(np.maximum(2 * s / accel, 0.0))
+            down = total - np.sqrt(np.maximum(2 * (length - s) / accel, 0.0))
+            cruise = t_ramp + (s - s_ramp) / peak
+            return np.where(s <= s_ramp, up, np.where(s <= length - s_ramp, cruise, down))
+
+        dur = at((pos + 1) * step_m) - at(pos * step_m)
+    return np.where(np.isfinite(accel), dur, base)
 
 
 def timed_paths(timing: Timing, centres: np.ndarray, starts: Sequence[int], ids: Sequence[str],
@@ -166,7 +225,9 @@ def timed_paths(timing: Timing, centres: np.ndarray, starts: Sequence[int], ids:
     direction = centres[timing.dst] - centres[timing.src]
     same_dir = np.zeros(m, dtype=bool)
     if m > 1:
-        same_dir[1:] = np.all(np.abs(direction[1:] - direction[:-1]) < 1e-12, axis=1)
+        took = end - start
+        same_dir[1:] = (np.all(np.abs(direction[1:] - direction[:-1]) < 1e-12, axis=1)
+                        & (np.abs(took[1:] - took[:-1]) < 1e-9))   # and the same speed
     merge = ~is_first & ~hold & same_dir          # move k replaces the end waypoint of move k - 1
     emit_end = np.ones(m, dtype=bool)
     emit_end[:-1] = ~merge[1:]
