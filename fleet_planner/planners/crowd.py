@@ -1,4 +1,5 @@
-"""The crowd planner: dense crowds of disc robots on the grid graph (issue 11, deliverables 1-2).
+"""The dense-crowd solver (registered as ``dense`` and ``crowd``): dense crowds of disc robots on the
+grid graph (issue 11).
 
 Prioritized planning (md, PRIOR) fails by construction where robots must step aside for each other
 in 1-cell aisles. This planner searches the space of configurations instead and makes the result
@@ -8,19 +9,26 @@ safe for discs in continuous time:
    for Quick Multi-Agent Pathfinding", AAAI 2023) with PIBT (Okumura et al., "Priority Inheritance
    with Backtracking for Iterative Multi-agent Path Finding", AIJ 2022) as the successor generator,
    on the 4-connected graph of cell centres, with transition rules for discs (no vertex or swap
-   conflicts, no rings of robots following each other); then detours are cut where a robot could
-   have waited instead (:func:`.crowd_pibt.remove_loops`).
-2. **Timing by precedence** (:mod:`.crowd_timing`): the order in which the discrete plan visits each
+   conflicts, no rings of robots following each other). The PIBT step is compiled
+   (:mod:`.crowd_kernels`, numba).
+2. **Refinement** (:mod:`.crowd_lns`): large neighbourhood search (Li et al., IJCAI 2021) re-plans
+   a few robots at a time in space-time against the others under the same rules and keeps what
+   lowers the speed-weighted sum of arrivals, for ``refine_s`` CPU seconds; then detours are cut
+   where a robot could have waited instead (:func:`.crowd_pibt.remove_loops`).
+3. **Timing by precedence** (:mod:`.crowd_timing`): the order in which the discrete plan visits each
    cell is kept as (M,D)-network links with a chosen order (docs/ARCHITECTURE.md, "The (M,D)
    vocabulary"); each robot's earliest times along its cell path follow by a longest-path pass
-   over those precedences at its own top speed; collinear moves without a stop are merged.
+   over those precedences at its own top speed, with trapezoids where it has ``max_accel``; a
+   robot following another into a cell starts as soon as their gap provably stays >= r_i + r_j
+   (closed forms for the same direction and for the corner case); collinear moves at one speed
+   without a stop are merged.
 
 Why the result is valid (the independent checker, ``checker.check_plan``, is the judge of every
-test and benchmark): no cell is ever held by two robots at once, and two robots on distinct cells
-of the lattice are at least one cell step apart, which is >= r_i + r_j - the planner refuses
-(PlanningError) pairs with a larger sum, starts and goals off cell centres, and goals that cannot
-be reached. Robots drive at constant speed between waypoints (``max_accel`` is not used yet: speed
-changes are instantaneous, which the plan contract allows).
+test and benchmark): no cell is ever held by two robots at once except by a follower whose gap is
+computed exactly, and two robots on distinct cells of the lattice are at least one cell step
+apart, which is >= r_i + r_j - the planner refuses (PlanningError) pairs with a larger sum, starts
+and goals off cell centres, and goals that cannot be reached. The plan's info names the solver
+(``solver``) and how it went (first plan's steps, configurations, LNS iterations).
 
 ``plan_incremental`` plans new legs around driven trajectories with PRIOR's space-time search
 (the fixed robots as moving obstacles): a configuration search cannot move robots that are not its
