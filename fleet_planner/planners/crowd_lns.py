@@ -35,7 +35,7 @@ class Refiner:
     (:func:`.crowd_st.lns_iterations`); :meth:`run` calls them in small batches until its deadline."""
 
     def __init__(self, graph, fields: np.ndarray, grow: np.ndarray, goals: np.ndarray, configs: np.ndarray,
-                 weights: np.ndarray, seed: int = 0, size: int = 8):
+                 weights: np.ndarray, seed: int = 0, size: int = 4):
         self.graph = graph
         self.fields, self.grow = fields, grow
         self.goals = np.asarray(goals, dtype=np.int32)
@@ -59,7 +59,7 @@ class Refiner:
         self.stats = np.zeros(2, dtype=np.int64)      # iterations, accepted
         self.strategy = np.ones(2)
         self.expansion_limit = 4 * graph.n
-        self.weight10 = 20        # the space-time search's heuristic weight x 10 (bounded suboptimal)
+        self.weight10 = 15        # the space-time search's heuristic weight x 10 (bounded suboptimal)
         st.seed_rng(int(seed))
 
     @property
