@@ -60,24 +60,24 @@ class CrowdPlanner(Planner):
     ``time_limit`` (alias ``time_limit_s``): budget of the whole plan in seconds (the configuration
     search must find a first plan within it); ``refine_s``: at most this much CPU time (seconds: the
     same on a loaded machine) is spent improving the first plan (large neighbourhood search,
-    :mod:`.crowd_lns`; 0 switches it off); ``seed``:
+    :mod:`.crowd_lns`; 0 switches it off; None: 1 s up to 400 robots, 1 s more per 150 beyond); ``seed``:
     tie-breaking; ``network``: also return the (M,D) network of the chosen order (``Plan.network``).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
     name = "dense"
 
-    def __init__(self, time_limit: float | None = None, refine_s: float = 1.0, seed: int = 0,
+    def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
                  network: bool = True, time_limit_s: float | None = None):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
         if not limit > 0:
             raise ValueError(f"time_limit: must be > 0 (got {limit!r})")
-        if not refine_s >= 0:
+        if refine_s is not None and not refine_s >= 0:
             raise ValueError(f"refine_s: must be >= 0 (got {refine_s!r})")
         self.time_limit_s = float(limit)
-        self.refine_s = float(refine_s)
+        self.refine_s = None if refine_s is None else float(refine_s)
         self.seed = int(seed)
         self.with_network = bool(network)
 
@@ -108,11 +108,12 @@ class CrowdPlanner(Planner):
         durations = np.array([res / r.max_speed for r in robots])
         info: dict = {"solver": SOLVER, "steps_first": int(configs.shape[0] - 1),
                       "configurations": search.expanded, "search_s": round(t_search, 3)}
-        if self.refine_s > 0 and len(robots) > 1:
+        refine_s = self.refine_s if self.refine_s is not None else 1.0 + max(0, len(robots) - 400) / 150.0
+        if refine_s > 0 and len(robots) > 1:
             if progress:
                 progress(1, 3, "refinement (LNS)")
             refiner = Refiner(graph, search.fields, search.grow, search.goals, configs, durations, self.seed)
-            refiner.run(deadline, cpu_s=self.refine_s)
+            refiner.run(deadline, cpu_s=refine_s)
             configs = refiner.configs()
             info.update(lns_iterations=refiner.iterations, lns_accepted=refiner.accepted)
         if progress:
