@@ -30,6 +30,7 @@ Collinear moves driven without a stop in between are merged into one segment.
 """
 from __future__ import annotations
 
+import gc
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -271,9 +272,15 @@ def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
         t3 = np.where(has_next, end[np.minimum(in_move + 1, len(end) - 1)], math.inf)
         ls = (in_move - first[lo]) * step_m
         le = ls + np.where(has_next, 2.0, 1.0) * step_m
-        links = [Link(ids[a], ids[b], kk, m_, d_, k1, k4, l1, l2) for a, b, kk, m_, d_, k1, k4, l1, l2 in
-                 zip(hi.tolist(), lo.tolist(), k.tolist(), (t3 - t1).tolist(), (t4 - t2).tolist(), t1.tolist(),
-                     t4.tolist(), ls.tolist(), le.tolist())]
+        collecting = gc.isenabled()
+        gc.disable()   # 10^5 small objects, none cyclic: the collector would only re-scan them
+        try:
+            links = [Link(ids[a], ids[b], kk, m_, d_, k1, k4, l1, l2) for a, b, kk, m_, d_, k1, k4, l1, l2 in
+                     zip(hi.tolist(), lo.tolist(), k.tolist(), (t3 - t1).tolist(), (t4 - t2).tolist(), t1.tolist(),
+                         t4.tolist(), ls.tolist(), le.tolist())]
+        finally:
+            if collecting:
+                gc.enable()
     else:
         links = []
     moves = first[1:] > first[:-1]
