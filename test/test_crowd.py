@@ -66,7 +66,7 @@ def test_the_corner_case_point_agents_collide_our_discs_do_not(v_j):
     lockstep = Plan("points", [TimedPath("i", 0.4, [[*a, 0.0], [*b, 1.0]]),
                                TimedPath("j", 0.4, [[*b, 0.0], [*c, 1.0 / v_j]])])
     assert [v.kind for v in check_plan(grid, robots, lockstep)] == ["collision"]
-    plan = CrowdPlanner().plan(grid, robots)
+    plan = CrowdPlanner(margin=0.0).plan(grid, robots)
     assert check_plan(grid, robots, plan) == []
     i, j = plan.by_id()["i"], plan.by_id()["j"]
     assert j.start_time == 0.0 and j.arrival_time == pytest.approx(1.0 / v_j)
@@ -79,6 +79,10 @@ def test_the_corner_case_point_agents_collide_our_discs_do_not(v_j):
     # one step earlier and they would overlap: the rule is tight
     early = Plan("early", [TimedPath("i", 0.4, [[*a, i.start_time - 0.01], [*b, i.arrival_time - 0.01]]), j])
     assert [v.kind for v in check_plan(grid, robots, early)] == ["collision"]
+    # with the default margin (0.02 m) the follower starts later and they never touch
+    kept = CrowdPlanner().plan(grid, robots)
+    assert kept.by_id()["i"].start_time > i.start_time
+    assert min_separation(kept.paths)[0] == pytest.approx(0.02, abs=1e-4)
 
 
 def test_trains_follow_and_collinear_moves_are_merged():

@@ -61,14 +61,16 @@ class CrowdPlanner(Planner):
     search must find a first plan within it); ``refine_s``: at most this much CPU time (seconds: the
     same on a loaded machine) is spent improving the first plan (large neighbourhood search,
     :mod:`.crowd_lns`; 0 switches it off; None: 1 s up to 400 robots, 1 s more per 150 beyond); ``seed``:
-    tie-breaking; ``network``: also return the (M,D) network of the chosen order (``Plan.network``).
+    tie-breaking; ``network``: also return the (M,D) network of the chosen order (``Plan.network``);
+    ``margin``: what a robot following another into a cell keeps on top of r_i + r_j (robots on
+    distinct cells keep the cell step, >= r_i + r_j).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
     name = "dense"
 
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
-                 network: bool = True, time_limit_s: float | None = None):
+                 network: bool = True, time_limit_s: float | None = None, margin: float = 0.02):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
@@ -80,6 +82,9 @@ class CrowdPlanner(Planner):
         self.refine_s = None if refine_s is None else float(refine_s)
         self.seed = int(seed)
         self.with_network = bool(network)
+        if not (margin >= 0 and np.isfinite(margin)):
+            raise ValueError(f"margin: must be a finite number >= 0 (got {margin!r})")
+        self.margin = float(margin)
 
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
@@ -120,7 +125,8 @@ class CrowdPlanner(Planner):
             progress(2, 3, "timing by precedence")
         centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
         radii = [r.radius for r in robots]
-        timing = time_moves(remove_loops(configs), durations, centres, radii, res, [r.max_accel for r in robots])
+        timing = time_moves(remove_loops(configs), durations, centres, radii, res, [r.max_accel for r in robots],
+                            self.margin)
         paths = timed_paths(timing, centres, starts, [r.id for r in robots], radii)
         net = network(timing, [r.id for r in robots], res) if self.with_network else None
         if progress:
@@ -147,7 +153,7 @@ def _check_radii(grid: GridMap, robots: Sequence[RobotSpec]) -> None:
         for r in robots:
             other = second if r.radius == widest else widest
             if r.radius + other > step + 1e-9:
-                wide[r.id] = (f"radius {r.radius:g} m: the crowd planner needs r_i + r_j <= the cell step "
+                wide[r.id] = (f"radius {r.radius:g} m: the dense solver needs r_i + r_j <= the cell step "
                               f"{step:g} m for every pair")
         raise PlanningError(wide)
 

@@ -63,7 +63,7 @@ class Timing:
 
 def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, centres: np.ndarray | None = None,
                radii: Sequence[float] | None = None, step_m: float = 1.0,
-               accels: Sequence[float | None] | None = None) -> Timing:
+               accels: Sequence[float | None] | None = None, gap_m: float = GAP_M) -> Timing:
     """Earliest start and end of every move of the discrete plan ``configs`` ((steps + 1, robots)
     cell indices) under the precedences of the module docstring; ``durations[i]`` is how long
     robot i takes for one move of ``step_m`` metres at its top speed.
@@ -73,7 +73,7 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
     ramp's average speed over that cell (the plan contract has constant speed between waypoints).
     Where a precedence makes a robot stop inside a run, the run is split there and the pass
     repeated, until every stop is at the end of a run (a fixed point: runs only split; at worst
-    every move is a run of its own).
+    every move is a run of its own). A follower keeps ``gap_m`` on top of r_i + r_j.
 
     With ``centres`` ((cells, 2) metres) and ``radii``, a robot that follows another in the same
     direction (its move into the cell is collinear with the other's move out of it) may start
@@ -128,7 +128,7 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
             same_way = np.all(np.abs(d_in - d_out) < 1e-9, axis=1)
             turn = np.abs(np.sum(d_in * d_out, axis=1)) < 1e-9
             rad = np.asarray(radii, dtype=float)
-            reach = (rad[robot[mine]] + rad[robot[p]] + GAP_M) / step_m
+            reach = (rad[robot[mine]] + rad[robot[p]] + max(gap_m, GAP_M)) / step_m
             ahead = np.where(same_way, np.maximum(2.0 - reach, 0.0) * dur[mine], 0.0)
             # a turn: the leader leaves the cell at right angles to the follower's way in. In cell units,
             # with the leader a = (t - S_j) / dur_j along its way out and the follower b = (t - S_i) / dur_i
