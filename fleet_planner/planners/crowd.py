@@ -46,7 +46,7 @@ from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from . import crowd_kernels as kern
 from . import crowd_st
 from .base import Planner, Progress
-from .crowd_lns import Refiner
+from .crowd_lns import MAX_HORIZON, Refiner
 from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
 from .crowd_timing import network, time_moves, timed_paths
 
@@ -114,7 +114,7 @@ class CrowdPlanner(Planner):
         info: dict = {"solver": SOLVER, "steps_first": int(configs.shape[0] - 1),
                       "configurations": search.expanded, "search_s": round(t_search, 3)}
         refine_s = self.refine_s if self.refine_s is not None else 1.0 + max(0, len(robots) - 400) / 150.0
-        if refine_s > 0 and len(robots) > 1:
+        if refine_s > 0 and len(robots) > 1 and configs.shape[0] + 64 < MAX_HORIZON:
             if progress:
                 progress(1, 3, "refinement (LNS)")
             refiner = Refiner(graph, search.fields, search.grow, search.goals, configs, durations, self.seed)
