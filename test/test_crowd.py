@@ -3,6 +3,8 @@
 The independent checker is the oracle of every case."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -13,6 +15,7 @@ from fleet_planner.grid import GridMap
 from fleet_planner.model import Plan, PlanningError, RobotSpec, TimedPath
 from fleet_planner.planners import get_planner
 from fleet_planner.planners.crowd import CrowdPlanner
+from fleet_planner.planners.crowd_lns import Refiner
 from fleet_planner.planners.crowd_pibt import CellGraph, ConfigSearch, _valid_step, remove_loops
 from fleet_planner.planners.crowd_timing import time_moves
 
@@ -23,11 +26,16 @@ POCKET_ROBOTS = [RobotSpec("a", 0.40, 1.0, (0.5, 1.5), (6.5, 1.5)), RobotSpec("b
 
 
 def test_a_dense_aisle_that_prioritized_planning_refuses_is_solved():
+    """Two robots each way in a 1-cell aisle with one side pocket: robots must step aside into the
+    pocket and back, which no priority order can ask for (PRIOR fails in all 24 orders, md too)."""
     grid = GridMap.from_rows(POCKET)
     with pytest.raises(PlanningError):   # md v2 without its dense fallback (which is crowd)
         get_planner("md", fallback=None).plan(grid, POCKET_ROBOTS)
+    for order in itertools.permutations(POCKET_ROBOTS):
+        with pytest.raises(PlanningError):
+            get_planner("prior", order="given", max_reorders=0, time_limit_s=5.0).plan(grid, list(order))
     plan = get_planner("crowd").plan(grid, POCKET_ROBOTS)
-    assert plan.planner == "crowd"
+    assert plan.planner == "dense" and plan.info["solver"].startswith("dense")
     assert check_plan(grid, POCKET_ROBOTS, plan) == []
     # somebody stepped aside into the pocket
     assert any(np.any(np.isclose(p.waypoints[:, 1], 0.5)) for p in plan.paths)
@@ -39,27 +47,42 @@ def test_a_dense_aisle_that_prioritized_planning_refuses_is_solved():
     assert all(link.D <= 1.0 / speed[link.i] + 1e-9 for link in plan.network.links)
 
 
-def test_the_corner_case_point_agents_collide_our_discs_do_not():
+@pytest.mark.parametrize("v_j", [1.0, 0.5])
+def test_the_corner_case_point_agents_collide_our_discs_do_not(v_j):
     """j turns out of the cell B that i enters in the same step: driven in lock-step (what a
-    point-agent MAPF plan means) the centres come 0.707 m close against r_i + r_j = 0.8 m; the
-    precedence pass lets i start only once j has arrived."""
+    point-agent MAPF plan means) the centres come 0.707 m close against r_i + r_j = 0.8 m. The
+    precedence pass lets i start once j is far enough round the corner: with j a = (t - S_j) v_j
+    along its way out and i b = t v_i along its way in (cells of 1 m, B at the origin), their gap
+    is |(a, 1 - b)|, a line in t whose distance from the origin is (a0 v_i + v_j) / |(v_j, v_i)| for
+    j's progress a0 when i starts; so i starts at a0 = (0.8 |(v_j, v_i)| - v_j) / v_i, and the two
+    then touch exactly once (never closer)."""
     grid = GridMap.from_rows(["..", ".."])
     a, b, c = (0.5, 1.5), (1.5, 1.5), (1.5, 0.5)     # i: A -> B, j: B -> C (a right-angle turn)
-    robots = [RobotSpec("i", 0.4, 1.0, a, b), RobotSpec("j", 0.4, 1.0, b, c)]
+    robots = [RobotSpec("i", 0.4, 1.0, a, b), RobotSpec("j", 0.4, v_j, b, c)]
     graph = CellGraph(grid, 0.4)
     starts, goals = [graph.cell(*a), graph.cell(*b)], [graph.cell(*b), graph.cell(*c)]
     configs = ConfigSearch(graph, starts, goals).solve(float("inf"))
     assert configs == [tuple(starts), tuple(goals)]   # one step: i follows j round the corner
     lockstep = Plan("points", [TimedPath("i", 0.4, [[*a, 0.0], [*b, 1.0]]),
-                               TimedPath("j", 0.4, [[*b, 0.0], [*c, 1.0]])])
+                               TimedPath("j", 0.4, [[*b, 0.0], [*c, 1.0 / v_j]])])
     assert [v.kind for v in check_plan(grid, robots, lockstep)] == ["collision"]
-    assert min_separation(lockstep.paths)[0] == pytest.approx(np.sqrt(0.5) - 0.8)
-    plan = CrowdPlanner().plan(grid, robots)
+    plan = CrowdPlanner(margin=0.0).plan(grid, robots)
     assert check_plan(grid, robots, plan) == []
     i, j = plan.by_id()["i"], plan.by_id()["j"]
-    assert j.arrival_time == pytest.approx(1.0)
-    assert i.start_time == pytest.approx(j.arrival_time) and i.arrival_time == pytest.approx(2.0)
-    assert min_separation(plan.paths)[0] >= -1e-9
+    assert j.start_time == 0.0 and j.arrival_time == pytest.approx(1.0 / v_j)
+    a0 = (0.8 * np.hypot(v_j, 1.0) - v_j) / 1.0       # 0.1314 of j's move at 1 m/s, 0.3944 at 0.5 m/s
+    assert i.start_time == pytest.approx(a0 / v_j, abs=1e-5)            # 0.131 s, 0.789 s
+    assert i.arrival_time == pytest.approx(a0 / v_j + 1.0, abs=1e-5)
+    assert i.start_time < j.arrival_time                                 # no waiting for j's arrival
+    gap = min_separation(plan.paths)[0]
+    assert 0.0 <= gap < 1e-4                                            # they touch, never overlap
+    # one step earlier and they would overlap: the rule is tight
+    early = Plan("early", [TimedPath("i", 0.4, [[*a, i.start_time - 0.01], [*b, i.arrival_time - 0.01]]), j])
+    assert [v.kind for v in check_plan(grid, robots, early)] == ["collision"]
+    # with the default margin (0.02 m) the follower starts later and they never touch
+    kept = CrowdPlanner().plan(grid, robots)
+    assert kept.by_id()["i"].start_time > i.start_time
+    assert min_separation(kept.paths)[0] == pytest.approx(0.02, abs=1e-4)
 
 
 def test_trains_follow_and_collinear_moves_are_merged():
@@ -82,7 +105,7 @@ def test_timing_keeps_each_cell_order_and_own_speed():
     # starts 2 - 0.8 m before the leader arrives
     centres = np.array([[0.5, 0.5], [1.5, 0.5], [2.5, 0.5]])
     close = time_moves(configs, [2.0, 1.0], centres, [0.4, 0.4], 1.0)
-    assert close.start.tolist() == pytest.approx([0.0, 0.8])
+    assert close.start.tolist() == pytest.approx([0.0, 0.8], abs=1e-5)
     grid = GridMap.from_rows(["..."])
     robots = [RobotSpec("r0", 0.4, 0.5, (1.5, 0.5), (2.5, 0.5)), RobotSpec("r1", 0.4, 1.0, (0.5, 0.5), (1.5, 0.5))]
     paths = [TimedPath("r0", 0.4, [[1.5, 0.5, 0.0], [2.5, 0.5, 2.0]]),
@@ -111,6 +134,48 @@ def _occ(config, n):
     for i, v in enumerate(config):
         occ[v] = i
     return occ
+
+
+def test_refinement_keeps_the_rules_and_never_lengthens_the_plan():
+    """LNS on a crowded room (20 robots on 44 cells): every step of the refined plan still obeys
+    the transition rules, every robot ends on its goal and stays there, and the weighted sum of
+    arrivals did not grow (here it shrinks)."""
+    grid = GridMap.from_rows(["........", "..@..@..", "........", "..@..@..", "........", "........"])
+    graph = CellGraph(grid, 0.45)
+    rng = np.random.default_rng(3)
+    starts, goals = rng.permutation(graph.n)[:20].tolist(), rng.permutation(graph.n)[:20].tolist()
+    search = ConfigSearch(graph, starts, goals, seed=1)
+    first = search.solve_array(float("inf"))
+    weights = rng.uniform(1.0, 1.43, 20)
+    ref = Refiner(graph, search.fields, search.grow, search.goals, first, weights, seed=2)
+    before = ref.weighted_cost()
+    ref.run(float("inf"), max_iterations=300)
+    after = ref.configs()
+    assert ref.iterations > 0 and ref.weighted_cost() <= before
+    assert ref.weighted_cost() < before            # this instance has room to improve
+    assert after[0].tolist() == starts and after[-1].tolist() == goals
+    for q_from, q_to in zip(after[:-1], after[1:]):
+        assert _valid_step(q_from.tolist(), q_to.tolist(), _occ(q_from.tolist(), graph.n))
+    cost = ref.cost
+    for i in range(20):
+        assert np.all(after[cost[i]:, i] == goals[i]) and (cost[i] == 0 or after[cost[i] - 1, i] != goals[i])
+    # and the timed plan of the refined steps is valid for discs
+    robots = [RobotSpec(f"r{i}", 0.45 - 0.1 * (i % 2), 1.0 / weights[i], graph.centre(starts[i]),
+                        graph.centre(goals[i])) for i in range(20)]
+    plan = CrowdPlanner(refine_s=0.5).plan(grid, robots)
+    assert check_plan(grid, robots, plan) == [] and plan.info["lns_iterations"] > 0
+
+
+def test_the_dense_solver_by_name_with_its_options():
+    grid = GridMap.from_rows(POCKET)
+    plan = get_planner("dense").plan(grid, POCKET_ROBOTS)
+    assert plan.planner == "dense" and "LaCAM" in plan.info["solver"]
+    assert check_plan(grid, POCKET_ROBOTS, plan) == []
+    quick = get_planner("dense", time_limit=5.0, refine_s=0.0).plan(grid, POCKET_ROBOTS)
+    assert "lns_iterations" not in quick.info and check_plan(grid, POCKET_ROBOTS, quick) == []
+    assert type(get_planner("crowd")) is type(get_planner("dense"))
+    with pytest.raises(ValueError, match="time_limit"):
+        get_planner("dense", time_limit=0.0)
 
 
 def test_refusals_name_the_robots():
@@ -152,17 +217,20 @@ def crowds(draw):
     if len(free) < n:
         return grid, []
     starts, goals = rng.permutation(len(free))[:n], rng.permutation(len(free))[:n]
+    accel = draw(st.sampled_from([None, 0.5]))   # instant speed changes, or trapezoids
     robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(0.7, 1.0)),
-                        grid.centre(*free[starts[k]]), grid.centre(*free[goals[k]])) for k in range(n)]
+                        grid.centre(*free[starts[k]]), grid.centre(*free[goals[k]]),
+                        max_accel=None if accel is None else float(rng.uniform(0.3, 1.0)))
+              for k in range(n)]
     return grid, robots
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=crowds())
 def test_every_crowd_plan_is_valid(case):
-    """Dense random crowds (2-12 discs of mixed radii on a quarter to half of the free cells, goals
-    a random permutation, so robots must pass each other): a plan is valid by the checker, or a
-    refusal names robots."""
+    """Dense random crowds (2-12 discs of mixed radii and speeds, some with acceleration limits, on a
+    quarter to half of the free cells, goals a random permutation, so robots must pass each other):
+    a plan is valid by the checker, or a refusal names robots."""
     grid, robots = case
     try:
         plan = CrowdPlanner(time_limit_s=2.0).plan(grid, robots)
@@ -170,3 +238,29 @@ def test_every_crowd_plan_is_valid(case):
         assert err.failures and set(err.failures) <= {r.id for r in robots}
         return
     assert check_plan(grid, robots, plan) == []
+
+
+def test_acceleration_limits_give_trapezoids_and_stops_only_at_run_ends():
+    """A robot with max_accel drives each straight run from standstill to standstill: 0.5 m/s^2 and
+    1 m/s over 4 cells of 1 m ramp up over the first cell (2 s), cruise 2 cells (2 s, one merged
+    segment) and brake over the last (2 s): 6 s instead of 4 s. In a crowd with accelerations the
+    plan stays valid, and every hold follows a braking piece (no stop from cruise speed)."""
+    grid = GridMap.from_rows(["." * 5])
+    alone = [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), (4.5, 0.5), max_accel=0.5)]
+    plan = CrowdPlanner().plan(grid, alone)
+    assert np.allclose(plan.paths[0].waypoints, [[0.5, 0.5, 0.0], [1.5, 0.5, 2.0], [3.5, 0.5, 4.0], [4.5, 0.5, 6.0]])
+    assert check_plan(grid, alone, plan) == []
+    crowd_grid = GridMap.from_rows(POCKET)
+    robots = [RobotSpec(r.id, r.radius, r.max_speed, r.start, r.goal, max_accel=0.6) for r in POCKET_ROBOTS]
+    plan = CrowdPlanner().plan(crowd_grid, robots)
+    assert check_plan(crowd_grid, robots, plan) == []
+    holds = 0
+    for path, r in zip(plan.paths, robots):
+        wp = path.waypoints
+        speed = np.hypot(*np.diff(wp[:, :2], axis=0).T) / np.maximum(np.diff(wp[:, 2]), 1e-12)
+        for k in range(1, len(speed) - 1):
+            if speed[k] == 0.0:          # a hold: the piece before it brakes, the piece after it ramps up
+                holds += 1
+                # (0.6 m/s^2 brakes from top speed within 0.83 m: the cell before a stop is slower)
+                assert speed[k - 1] < r.max_speed - 0.05 and speed[k + 1] < r.max_speed - 0.05
+    assert holds > 0

@@ -12,7 +12,7 @@ from fleet_planner.planners.prior import PriorPlanner
 
 
 def test_the_registered_variants():
-    assert planner_names() == ["md", "md-box", "prior", "md-departure", "md-holds", "md-routes", "crowd"]
+    assert planner_names() == ["md", "md-box", "prior", "md-departure", "md-holds", "md-routes", "crowd", "dense"]
     assert all(planner_summary(name) for name in planner_names())
 
 
@@ -31,7 +31,7 @@ def test_a_variant_refuses_options_that_contradict_it():
     with pytest.raises(ValueError, match=r"planner 'md-box': mode is 'box' in this variant \(got mode='exact'\)"):
         get_planner("md-box", mode="exact")
     with pytest.raises(ValueError, match=r"unknown planner 'nope'; choose one of md, md-box, prior, md-departure, "
-                                         r"md-holds, md-routes, crowd"):
+                                         r"md-holds, md-routes, crowd, dense"):
         get_planner("nope")
     with pytest.raises(TypeError):
         get_planner("prior", mode="box")

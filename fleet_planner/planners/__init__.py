@@ -61,6 +61,7 @@ register("md-routes", "fleet_planner.planners.md:MDPlanner",
          "md with route choice in time: robots that wait long try detours, the earliest arrival wins",
          mode="exact", holds="anywhere", detours=2)
 register("crowd", "fleet_planner.planners.crowd:CrowdPlanner", "LaCAM/PIBT for dense crowds, timed by precedence")
+register("dense", "fleet_planner.planners.crowd:DensePlanner", "the dense-crowd solver (LaCAM/PIBT + LNS; = crowd)")
 
 
 def planner_names() -> list[str]:

@@ -1,4 +1,5 @@
-"""The crowd planner: dense crowds of disc robots on the grid graph (issue 11, deliverables 1-2).
+"""The dense-crowd solver (registered as ``dense`` and ``crowd``): dense crowds of disc robots on the
+grid graph (issue 11).
 
 Prioritized planning (md, PRIOR) fails by construction where robots must step aside for each other
 in 1-cell aisles. This planner searches the space of configurations instead and makes the result
@@ -8,19 +9,26 @@ safe for discs in continuous time:
    for Quick Multi-Agent Pathfinding", AAAI 2023) with PIBT (Okumura et al., "Priority Inheritance
    with Backtracking for Iterative Multi-agent Path Finding", AIJ 2022) as the successor generator,
    on the 4-connected graph of cell centres, with transition rules for discs (no vertex or swap
-   conflicts, no rings of robots following each other); then detours are cut where a robot could
-   have waited instead (:func:`.crowd_pibt.remove_loops`).
-2. **Timing by precedence** (:mod:`.crowd_timing`): the order in which the discrete plan visits each
+   conflicts, no rings of robots following each other). The PIBT step is compiled
+   (:mod:`.crowd_kernels`, numba).
+2. **Refinement** (:mod:`.crowd_lns`): large neighbourhood search (Li et al., IJCAI 2021) re-plans
+   a few robots at a time in space-time against the others under the same rules and keeps what
+   lowers the speed-weighted sum of arrivals, for ``refine_s`` CPU seconds; then detours are cut
+   where a robot could have waited instead (:func:`.crowd_pibt.remove_loops`).
+3. **Timing by precedence** (:mod:`.crowd_timing`): the order in which the discrete plan visits each
    cell is kept as (M,D)-network links with a chosen order (docs/ARCHITECTURE.md, "The (M,D)
    vocabulary"); each robot's earliest times along its cell path follow by a longest-path pass
-   over those precedences at its own top speed; collinear moves without a stop are merged.
+   over those precedences at its own top speed, with trapezoids where it has ``max_accel``; a
+   robot following another into a cell starts as soon as their gap provably stays >= r_i + r_j
+   (closed forms for the same direction and for the corner case); collinear moves at one speed
+   without a stop are merged.
 
 Why the result is valid (the independent checker, ``checker.check_plan``, is the judge of every
-test and benchmark): no cell is ever held by two robots at once, and two robots on distinct cells
-of the lattice are at least one cell step apart, which is >= r_i + r_j - the planner refuses
-(PlanningError) pairs with a larger sum, starts and goals off cell centres, and goals that cannot
-be reached. Robots drive at constant speed between waypoints (``max_accel`` is not used yet: speed
-changes are instantaneous, which the plan contract allows).
+test and benchmark): no cell is ever held by two robots at once except by a follower whose gap is
+computed exactly, and two robots on distinct cells of the lattice are at least one cell step
+apart, which is >= r_i + r_j - the planner refuses (PlanningError) pairs with a larger sum, starts
+and goals off cell centres, and goals that cannot be reached. The plan's info names the solver
+(``solver``) and how it went (first plan's steps, configurations, LNS iterations).
 
 ``plan_incremental`` plans new legs around driven trajectories with PRIOR's space-time search
 (the fixed robots as moving obstacles): a configuration search cannot move robots that are not its
@@ -35,58 +43,95 @@ import numpy as np
 
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
+from . import crowd_kernels as kern
+from . import crowd_st
 from .base import Planner, Progress
-from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, moves_of, remove_loops
+from .crowd_lns import MAX_HORIZON, Refiner
+from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
 from .crowd_timing import network, time_moves, timed_paths
+
+#: what the plan's info names as the solver that ran
+SOLVER = "dense: LaCAM/PIBT configuration search + LNS refinement, timed by precedence"
 
 
 class CrowdPlanner(Planner):
-    """LaCAM/PIBT on the grid graph, timed by precedence (see the module docstring).
+    """LaCAM/PIBT on the grid graph, refined by LNS, timed by precedence (see the module docstring).
 
-    ``time_limit_s``: budget of the configuration search; ``seed``: PIBT's tie-breaking;
-    ``network``: also return the (M,D) network of the chosen order (``Plan.network``).
+    ``time_limit`` (alias ``time_limit_s``): budget of the whole plan in seconds (the configuration
+    search must find a first plan within it); ``refine_s``: at most this much CPU time (seconds: the
+    same on a loaded machine) is spent improving the first plan (large neighbourhood search,
+    :mod:`.crowd_lns`; 0 switches it off; None: 1 s up to 400 robots, 1 s more per 150 beyond); ``seed``:
+    tie-breaking; ``network``: also return the (M,D) network of the chosen order (``Plan.network``);
+    ``margin``: what a robot following another into a cell keeps on top of r_i + r_j (robots on
+    distinct cells keep the cell step, >= r_i + r_j).
+    ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
-    name = "crowd"
+    name = "dense"
 
-    def __init__(self, time_limit_s: float = 30.0, seed: int = 0, network: bool = True):
-        if not time_limit_s > 0:
-            raise ValueError(f"time_limit_s: must be > 0 (got {time_limit_s!r})")
-        self.time_limit_s = float(time_limit_s)
+    def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
+                 network: bool = True, time_limit_s: float | None = None, margin: float = 0.02):
+        if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
+            raise ValueError("time_limit and time_limit_s: give one of them")
+        limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
+        if not limit > 0:
+            raise ValueError(f"time_limit: must be > 0 (got {limit!r})")
+        if refine_s is not None and not refine_s >= 0:
+            raise ValueError(f"refine_s: must be >= 0 (got {refine_s!r})")
+        self.time_limit_s = float(limit)
+        self.refine_s = None if refine_s is None else float(refine_s)
         self.seed = int(seed)
         self.with_network = bool(network)
+        if not (margin >= 0 and np.isfinite(margin)):
+            raise ValueError(f"margin: must be a finite number >= 0 (got {margin!r})")
+        self.margin = float(margin)
 
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
+        kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
+        crowd_st.warm_up()
         t_start = time.perf_counter()
+        deadline = t_start + self.time_limit_s
         robots = list(robots)
         if not robots:
-            return Plan(self.name, [], 0.0, {"steps": 0, "configurations": 0})
+            return Plan(self.name, [], 0.0, {"solver": SOLVER, "steps": 0, "configurations": 0})
         _check_radii(grid, robots)
         graph = CellGraph(grid, max(r.radius for r in robots))
         starts, goals = _cells(graph, robots)
         if progress:
-            progress(0, 2, "configuration search")
+            progress(0, 3, "configuration search")
         search = ConfigSearch(graph, starts, goals, self.seed)
         cut = search.unreachable()
         if cut:
             raise PlanningError({robots[i].id: "its goal cannot be reached from its start on the grid graph "
                                  "of cells its disc fits on" for i in cut})
         try:
-            configs = search.solve(t_start + self.time_limit_s)
+            configs = search.solve_array(deadline)
         except SearchFailed as exc:
-            raise PlanningError({r.id: f"crowd planner: {exc.reason}" for r in robots}) from None
-        if progress:
-            progress(1, 2, "timing by precedence")
+            raise PlanningError({r.id: f"dense solver: {exc.reason}" for r in robots}) from None
+        t_search = time.perf_counter() - t_start
         res = grid.resolution
+        durations = np.array([res / r.max_speed for r in robots])
+        info: dict = {"solver": SOLVER, "steps_first": int(configs.shape[0] - 1),
+                      "configurations": search.expanded, "search_s": round(t_search, 3)}
+        refine_s = self.refine_s if self.refine_s is not None else 1.0 + max(0, len(robots) - 400) / 150.0
+        if refine_s > 0 and len(robots) > 1 and configs.shape[0] + 64 < MAX_HORIZON:
+            if progress:
+                progress(1, 3, "refinement (LNS)")
+            refiner = Refiner(graph, search.fields, search.grow, search.goals, configs, durations, self.seed)
+            refiner.run(deadline, cpu_s=refine_s)
+            configs = refiner.configs()
+            info.update(lns_iterations=refiner.iterations, lns_accepted=refiner.accepted)
+        if progress:
+            progress(2, 3, "timing by precedence")
         centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
-        timing = time_moves(remove_loops(moves_of(configs)), [res / r.max_speed for r in robots], centres,
-                            [r.radius for r in robots], res)
-        paths = timed_paths(timing, centres, starts, [r.id for r in robots], [r.radius for r in robots])
+        radii = [r.radius for r in robots]
+        timing = time_moves(remove_loops(configs), durations, centres, radii, res, [r.max_accel for r in robots],
+                            self.margin)
+        paths = timed_paths(timing, centres, starts, [r.id for r in robots], radii)
         net = network(timing, [r.id for r in robots], res) if self.with_network else None
         if progress:
-            progress(2, 2, "done")
-        info = {"steps": len(configs) - 1, "configurations": search.expanded,
-                "precedences": len(timing.visits)}
+            progress(3, 3, "done")
+        info.update(steps=int(configs.shape[0] - 1), precedences=len(timing.visits))
         return Plan(self.name, paths, time.perf_counter() - t_start, info, net)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
@@ -108,7 +153,7 @@ def _check_radii(grid: GridMap, robots: Sequence[RobotSpec]) -> None:
         for r in robots:
             other = second if r.radius == widest else widest
             if r.radius + other > step + 1e-9:
-                wide[r.id] = (f"radius {r.radius:g} m: the crowd planner needs r_i + r_j <= the cell step "
+                wide[r.id] = (f"radius {r.radius:g} m: the dense solver needs r_i + r_j <= the cell step "
                               f"{step:g} m for every pair")
         raise PlanningError(wide)
 
@@ -135,4 +180,7 @@ def _cells(graph: CellGraph, robots: Sequence[RobotSpec]) -> tuple[list[int], li
     return starts, goals
 
 
-__all__ = ["CrowdPlanner"]
+#: the dense solver's name in the registry (``crowd`` is the same planner under its first name)
+DensePlanner = CrowdPlanner
+
+__all__ = ["SOLVER", "CrowdPlanner", "DensePlanner"]

@@ -30,6 +30,7 @@ Collinear moves driven without a stop in between are merged into one segment.
 """
 from __future__ import annotations
 
+import gc
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -39,6 +40,8 @@ import numpy as np
 from ..model import Link, Network, TimedPath
 
 NIL = -1
+#: what a follower keeps on top of r_i + r_j (metres): rounding, not a safety margin
+GAP_M = 1e-6
 
 
 @dataclass
@@ -58,11 +61,19 @@ class Timing:
     visits: list[tuple[int, int]]   # consecutive visits of a cell by two robots: (move out, move in)
 
 
-def time_moves(configs: np.ndarray, durations: Sequence[float], centres: np.ndarray | None = None,
-               radii: Sequence[float] | None = None, step_m: float = 1.0) -> Timing:
+def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, centres: np.ndarray | None = None,
+               radii: Sequence[float] | None = None, step_m: float = 1.0,
+               accels: Sequence[float | None] | None = None, gap_m: float = GAP_M) -> Timing:
     """Earliest start and end of every move of the discrete plan ``configs`` ((steps + 1, robots)
     cell indices) under the precedences of the module docstring; ``durations[i]`` is how long
-    robot i takes for one move of ``step_m`` metres.
+    robot i takes for one move of ``step_m`` metres at its top speed.
+
+    With ``accels`` (per robot, None: instant speed changes) a robot drives each *run* (moves in
+    one direction without a stop) as a trapezoid from standstill to standstill, each move at the
+    ramp's average speed over that cell (the plan contract has constant speed between waypoints).
+    Where a precedence makes a robot stop inside a run, the run is split there and the pass
+    repeated, until every stop is at the end of a run (a fixed point: runs only split; at worst
+    every move is a run of its own). A follower keeps ``gap_m`` on top of r_i + r_j.
 
     With ``centres`` ((cells, 2) metres) and ``radii``, a robot that follows another in the same
     direction (its move into the cell is collinear with the other's move out of it) may start
@@ -103,61 +114,138 @@ def time_moves(configs: np.ndarray, durations: Sequence[float], centres: np.ndar
         if np.all(depth[src_c] >= new):
             break
         depth[src_c] = np.maximum(depth[src_c], new)
-    dur = np.asarray(durations, dtype=float)[robot]
-    # slack[m]: how long before the previous holder's arrival move m may start (same direction only)
-    slack = np.zeros(m)
-    if centres is not None and radii is not None:
-        has = after_cell != NIL
-        p = after_cell[has]
-        mine = np.nonzero(has)[0]
-        d_in = centres[dst[mine]] - centres[src[mine]]
-        d_out = centres[dst[p]] - centres[src[p]]
-        same_way = np.all(np.abs(d_in - d_out) < 1e-9, axis=1)
-        rad = np.asarray(radii, dtype=float)
-        reach = rad[robot[mine]] + rad[robot[p]]
-        slack[mine] = np.where(same_way, np.maximum(2 * step_m - reach, 0.0) * dur[mine] / step_m, 0.0)
-    start = np.zeros(m)
-    end = np.zeros(m)
-    level = step * (int(depth.max(initial=0)) + 1) + depth
-    by_level = np.argsort(level, kind="stable")
-    bounds = np.flatnonzero(np.diff(level[by_level])) + 1
-    for group in np.split(by_level, bounds):
-        own, cell = after_own[group], after_cell[group]
-        t = np.zeros(len(group))
-        t = np.where(own != NIL, np.maximum(t, end[np.maximum(own, 0)]), t)
-        c = np.maximum(cell, 0)
-        t = np.where(cell != NIL, np.maximum(t, np.maximum(start[c], end[c] - slack[group])), t)
-        start[group] = t
-        end[group] = t + dur[group]
+    base = np.asarray(durations, dtype=float)[robot]
+
+    def schedule(dur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # slack[m]: how long before the previous holder's arrival move m may start (it follows that robot)
+        slack = np.zeros(m)
+        if centres is not None and radii is not None:
+            has = after_cell != NIL
+            p = after_cell[has]
+            mine = np.nonzero(has)[0]
+            d_in = (centres[dst[mine]] - centres[src[mine]]) / step_m
+            d_out = (centres[dst[p]] - centres[src[p]]) / step_m
+            same_way = np.all(np.abs(d_in - d_out) < 1e-9, axis=1)
+            turn = np.abs(np.sum(d_in * d_out, axis=1)) < 1e-9
+            rad = np.asarray(radii, dtype=float)
+            reach = (rad[robot[mine]] + rad[robot[p]] + max(gap_m, GAP_M)) / step_m
+            ahead = np.where(same_way, np.maximum(2.0 - reach, 0.0) * dur[mine], 0.0)
+            # a turn: the leader leaves the cell at right angles to the follower's way in. In cell units,
+            # with the leader a = (t - S_j) / dur_j along its way out and the follower b = (t - S_i) / dur_i
+            # along its way in, their gap is |(a, 1 - b)|; from the follower's start on it is the
+            # distance of the origin to a line, smallest (a0 / dur_i + 1 / dur_j) / |(1 / dur_j, 1 / dur_i)|
+            # for the leader's progress a0 at that start: a0 >= (reach |(..)| - 1 / dur_j) dur_i keeps it
+            # >= r_i + r_j (the leader's arrival clips the line, which only widens the gap)
+            v_out, v_in = 1.0 / dur[p], 1.0 / dur[mine]
+            a0 = np.clip((reach * np.hypot(v_out, v_in) - v_out) / v_in, 0.0, 1.0)
+            # the follower may start once the leader has done a0 of its move: (1 - a0) dur_j before its end
+            corner = (1.0 - a0) * dur[p]
+            slack[mine] = np.where(same_way, ahead, np.where(turn, corner, 0.0))
+        start = np.zeros(m)
+        end = np.zeros(m)
+        level = step * (int(depth.max(initial=0)) + 1) + depth
+        by_level = np.argsort(level, kind="stable")
+        bounds = np.flatnonzero(np.diff(level[by_level])) + 1
+        for group in np.split(by_level, bounds):
+            own, cell = after_own[group], after_cell[group]
+            t = np.zeros(len(group))
+            t = np.where(own != NIL, np.maximum(t, end[np.maximum(own, 0)]), t)
+            c = np.maximum(cell, 0)
+            t = np.where(cell != NIL, np.maximum(t, np.maximum(start[c], end[c] - slack[group])), t)
+            # (a same-way follower's slack is in its own move time: see time_moves' docstring)
+            start[group] = t
+            end[group] = t + dur[group]
+        return start, end
+
+    acc = np.array([np.inf if a is None else float(a) for a in accels], dtype=float) if accels is not None \
+        else np.full(n, np.inf)
+    if not np.any(np.isfinite(acc)) or m == 0:
+        start, end = schedule(base)
+        return Timing(robot, step, src, dst, start, end, after_cell, first, visits)
+    # runs: a robot's moves at consecutive steps in one direction
+    direction = (centres[dst] - centres[src]) if centres is not None else (dst - src)[:, None]
+    breaks = np.ones(m, dtype=bool)
+    if m > 1:
+        turns = np.any(np.abs(direction[1:] - direction[:-1]) > 1e-9, axis=1)
+        breaks[1:] = (robot[1:] != robot[:-1]) | (step[1:] != step[:-1] + 1) | turns
+    for _ in range(50):
+        dur = _ramp_durations(breaks, base, acc[robot], step_m)
+        start, end = schedule(dur)
+        inner_stop = ~breaks & (start > np.concatenate([[0.0], end[:-1]]) + 1e-9)
+        if not inner_stop.any():
+            break
+        breaks |= inner_stop
+    else:   # pragma: no cover - every move its own run: no stop can be inside one
+        breaks[:] = True
+        start, end = schedule(_ramp_durations(breaks, base, acc[robot], step_m))
     return Timing(robot, step, src, dst, start, end, after_cell, first, visits)
+
+
+def _ramp_durations(breaks: np.ndarray, base: np.ndarray, accel: np.ndarray, step_m: float) -> np.ndarray:
+    """Per move: its time in its run driven as a trapezoid (a triangle on short runs) from standstill
+    to standstill at top speed ``step_m / base`` and acceleration ``accel`` (inf: at top speed)."""
+    m = len(base)
+    run = np.cumsum(breaks) - 1
+    run_first = np.flatnonzero(breaks)
+    pos = np.arange(m) - run_first[run]
+    length = np.bincount(run, minlength=len(run_first))[run] * step_m
+    v = step_m / base
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tri = length < v * v / accel
+        peak = np.where(tri, np.sqrt(accel * length), v)
+        t_ramp = np.where(np.isfinite(accel), peak / accel, 0.0)
+        s_ramp = np.where(np.isfinite(accel), peak * peak / (2 * accel), 0.0)
+        total = np.where(tri, 2 * t_ramp, length / v + t_ramp)
+
+        def at(s: np.ndarray) -> np.ndarray:
+            up = np.sqrt(np.maximum(2 * s / accel, 0.0))
+            down = total - np.sqrt(np.maximum(2 * (length - s) / accel, 0.0))
+            cruise = t_ramp + (s - s_ramp) / peak
+            return np.where(s <= s_ramp, up, np.where(s <= length - s_ramp, cruise, down))
+
+        dur = at((pos + 1) * step_m) - at(pos * step_m)
+    return np.where(np.isfinite(accel), dur, base)
 
 
 def timed_paths(timing: Timing, centres: np.ndarray, starts: Sequence[int], ids: Sequence[str],
                 radii: Sequence[float]) -> list[TimedPath]:
     """One timed path per robot: holds where a precedence makes it wait, collinear moves driven
-    without a stop merged into one segment. ``centres`` is (cells, 2)."""
-    out = []
-    start, end = timing.start.tolist(), timing.end.tolist()
-    src, dst = centres[timing.src].tolist(), centres[timing.dst].tolist()
-    first = timing.first.tolist()
-    xy = centres[np.asarray(starts)].tolist()
-    for i, rid in enumerate(ids):
-        lo, hi = first[i], first[i + 1]
-        wp: list[list[float]] = [[xy[i][0], xy[i][1], 0.0]]
-        last_dir: tuple[float, float] | None = None
-        for k in range(lo, hi):
-            s, e = start[k], end[k]
-            p, q = src[k], dst[k]
-            direction = (q[0] - p[0], q[1] - p[1])
-            if s > wp[-1][2]:
-                wp.append([float(p[0]), float(p[1]), s])
-                last_dir = None
-            elif last_dir == direction and len(wp) > 1:
-                wp.pop()   # a straight run without a stop: one segment
-            wp.append([float(q[0]), float(q[1]), e])
-            last_dir = direction
-        out.append(TimedPath(rid, float(radii[i]), np.asarray(wp)))
-    return out
+    without a stop merged into one segment. ``centres`` is (cells, 2).
+
+    Built for all robots at once: move k adds a hold waypoint (its source, its start) when it starts
+    later than the robot's previous waypoint, and its end waypoint unless the robot's next move goes
+    on in the same direction without a stop (then that one's end replaces it)."""
+    n = len(ids)
+    robot, start, end = timing.robot, timing.start, timing.end
+    m = len(robot)
+    first = timing.first
+    idx = np.arange(m)
+    is_first = idx == first[robot] if m else np.zeros(0, dtype=bool)
+    prev_end = np.where(is_first, 0.0, np.concatenate([[0.0], end[:-1]]))
+    hold = start > prev_end
+    direction = centres[timing.dst] - centres[timing.src]
+    same_dir = np.zeros(m, dtype=bool)
+    if m > 1:
+        took = end - start
+        same_dir[1:] = (np.all(np.abs(direction[1:] - direction[:-1]) < 1e-12, axis=1)
+                        & (np.abs(took[1:] - took[:-1]) < 1e-9))   # and the same speed
+    merge = ~is_first & ~hold & same_dir          # move k replaces the end waypoint of move k - 1
+    emit_end = np.ones(m, dtype=bool)
+    emit_end[:-1] = ~merge[1:]
+    src_xy, dst_xy = centres[timing.src], centres[timing.dst]
+    start_xy = centres[np.asarray(starts, dtype=np.int64)]
+    # rows: (robot, move, sub) with sub 0 = the start (move -1), 1 = a hold, 2 = a move's end
+    rob = np.concatenate([np.arange(n), robot[hold], robot[emit_end]])
+    mov = np.concatenate([np.full(n, -1), idx[hold], idx[emit_end]])
+    sub = np.concatenate([np.zeros(n, dtype=np.int64), np.ones(int(hold.sum()), dtype=np.int64),
+                          np.full(int(emit_end.sum()), 2)])
+    xy = np.concatenate([start_xy, src_xy[hold], dst_xy[emit_end]])
+    t = np.concatenate([np.zeros(n), start[hold], end[emit_end]])
+    order = np.lexsort((sub, mov, rob))
+    rows = np.column_stack([xy[order], t[order]])
+    counts = np.bincount(rob, minlength=n)
+    pieces = np.split(rows, np.cumsum(counts)[:-1])
+    return [TimedPath(rid, float(radii[i]), pieces[i]) for i, rid in enumerate(ids)]
 
 
 def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
@@ -166,25 +254,38 @@ def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
     k-th such cell along j's path. T1 = i starts to move into the cell (0 for its start cell),
     T4 = i has arrived in its next cell, T2 = j starts to move in, T3 = j has arrived in its next
     cell (inf when the cell is j's goal)."""
-    first, robot = timing.first.tolist(), timing.robot.tolist()
-    start, end = timing.start.tolist(), timing.end.tolist()
-    links = []
-    count: dict[int, int] = {}
-    for out_move, in_move in sorted(timing.visits, key=lambda p: p[1]):
+    first, robot = timing.first, timing.robot
+    start, end = timing.start, timing.end
+    if timing.visits:
+        pairs = np.asarray(sorted(timing.visits, key=lambda p: p[1]), dtype=np.int64)
+        out_move, in_move = pairs[:, 0], pairs[:, 1]
         hi, lo = robot[out_move], robot[in_move]
-        k = count[lo] = count.get(lo, 0) + 1
-        entry_hi = out_move - 1 if out_move > first[hi] else NIL
-        t1 = start[entry_hi] if entry_hi != NIL else 0.0
+        # k: 1, 2, ... along each lower robot's path (pairs are sorted by its move, robot-major)
+        new_lo = np.concatenate([[True], lo[1:] != lo[:-1]])
+        run_start = np.maximum.accumulate(np.where(new_lo, np.arange(len(lo)), 0))
+        k = np.arange(len(lo)) - run_start + 1
+        entry_hi = out_move - 1
+        t1 = np.where(out_move > first[hi], start[np.maximum(entry_hi, 0)], 0.0)
         t4 = end[out_move]
         t2 = start[in_move]
-        t3 = end[in_move + 1] if in_move + 1 < first[lo + 1] else math.inf
+        has_next = in_move + 1 < first[lo + 1]
+        t3 = np.where(has_next, end[np.minimum(in_move + 1, len(end) - 1)], math.inf)
         ls = (in_move - first[lo]) * step_m
-        le = ls + (2 if math.isfinite(t3) else 1) * step_m
-        links.append(Link(ids[hi], ids[lo], k, t3 - t1, t4 - t2, t1, t4, float(ls), float(le)))
-    n = len(ids)
-    delay, travel = {}, {}
-    for i in range(n):
-        lo, hi_ = first[i], first[i + 1]
-        delay[ids[i]] = start[lo] if hi_ > lo else 0.0
-        travel[ids[i]] = end[hi_ - 1] - delay[ids[i]] if hi_ > lo else 0.0
+        le = ls + np.where(has_next, 2.0, 1.0) * step_m
+        collecting = gc.isenabled()
+        gc.disable()   # 10^5 small objects, none cyclic: the collector would only re-scan them
+        try:
+            links = [Link(ids[a], ids[b], kk, m_, d_, k1, k4, l1, l2) for a, b, kk, m_, d_, k1, k4, l1, l2 in
+                     zip(hi.tolist(), lo.tolist(), k.tolist(), (t3 - t1).tolist(), (t4 - t2).tolist(), t1.tolist(),
+                         t4.tolist(), ls.tolist(), le.tolist())]
+        finally:
+            if collecting:
+                gc.enable()
+    else:
+        links = []
+    moves = first[1:] > first[:-1]
+    d0 = np.where(moves, start[np.minimum(first[:-1], max(len(start) - 1, 0))] if len(start) else 0.0, 0.0)
+    tr = np.where(moves, end[np.maximum(first[1:] - 1, 0)] - d0 if len(end) else 0.0, 0.0)
+    delay = dict(zip(ids, d0.tolist()))
+    travel = dict(zip(ids, tr.tolist()))
     return Network(list(ids), delay, travel, links, None)
