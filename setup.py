@@ -33,6 +33,7 @@ setup(
             "robot_agent = robot_agent.agent_node:main",
             "fleet-demo = fleet_planner.ros.demo:main",
             "fleet-submit = fleet_planner.ros.submit:main",
+            "fleet-sim = fleet_planner.ros.fleet_sim:main",
         ],
     },
 )
