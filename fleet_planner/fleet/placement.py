@@ -3,11 +3,11 @@ warehouse, and :func:`warehouse_for` generates a warehouse large enough for them
 (``fleet-demo --robots N --warehouse large``).
 
 Where robots stand at the start: first on the chargers, then side by side along the outer wall
-away from the chutes, then along the wall of the chutes (the main aisles of a generated warehouse, which stay passable beside a row of
-parked robots), clear of every station by :data:`STATION_CLEARANCE_M` so nobody blocks a chute,
-storing site or charger; where the walls run out, on any spot with room around it. The spots off
-the chargers are where idle robots wait: give them to the planner as its ``parking``
-(:func:`parking_spots`).
+away from the chutes, then along the wall of the chutes (the main aisles of a generated
+warehouse, which stay passable beside a row of parked robots), clear of every station by
+:data:`STATION_CLEARANCE_M` so nobody blocks a chute, storing site or charger; where the walls
+run out, on any spot with room around it. The spots off the chargers are where idle robots wait:
+give them to the planner as its ``parking`` (:func:`parking_spots`).
 """
 from __future__ import annotations
 
