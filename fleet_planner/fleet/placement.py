@@ -11,6 +11,7 @@ give them to the planner as its ``parking`` (:func:`parking_spots`).
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -91,15 +92,15 @@ def parking_spots(warehouse: Warehouse, members: Sequence[FleetMember]) -> list[
 
 
 def warehouse_for(robots: int, name: str = "large") -> Warehouse:
-    """A generated warehouse for about ``robots`` robots: rack blocks 20 m long in rows of 2 m
-    aisles, wide enough that the robots fit along its walls and one chute and one charger serve
-    about every eight robots."""
-    blocks_x = max(2, min(12, round(robots / 25) + 1))
-    blocks_y = 6
+    """A generated warehouse for about ``robots`` robots: six rows of rack blocks 20 m long with
+    2 m aisles, 25 m deep, as wide as it takes for the robots to start on the chargers and along
+    the wall away from the chutes (about 1.75 m of wall per robot), with one chute and one charger
+    for about every eight robots."""
+    blocks_x = max(2, math.ceil(1.75 * robots / 23.0))
     width_cells = 2 + 8 + blocks_x * 40 + (blocks_x - 1) * 6
     chargers = min(max(6, robots // 8), len(range(4, width_cells - 4, 4)))
     chutes = min(max(6, robots // 8), (width_cells - 2) // 8)
-    return generate_warehouse(blocks_x, blocks_y, 40, 2, 4, 0.5, name, chutes=chutes, chargers=chargers)
+    return generate_warehouse(blocks_x, 6, 40, 2, 4, 0.5, name, chutes=chutes, chargers=chargers)
 
 
 __all__ = ["GAP_M", "STATION_CLEARANCE_M", "parking_spots", "place_robots", "warehouse_for"]
