@@ -30,9 +30,10 @@ GAP_M = 0.25
 WALL_BAND_M = 1.6
 
 
-def _spots(warehouse: Warehouse, radius: float, spacing: float) -> list[tuple[float, float]]:
-    """Spots for robots of up to ``radius``, ``spacing`` apart: along the top and bottom walls first
-    (left to right), then anywhere with room (most room first)."""
+def _spots(warehouse: Warehouse, radius: float, spacing: float, need: int) -> list[tuple[float, float]]:
+    """Up to ``need`` spots for robots of up to ``radius``, ``spacing`` apart: along the wall away from
+    the chutes first (left to right), then along the chutes' wall, then anywhere with room (most
+    room first)."""
     grid = warehouse.grid
     res = grid.resolution
     free = ~grid.blocked
@@ -52,11 +53,22 @@ def _spots(warehouse: Warehouse, radius: float, spacing: float) -> list[tuple[fl
     rest = xy[~wall]
     room = clear[rows[~wall], (rest[:, 0] / res).astype(int)] if len(rest) else np.zeros(0)
     candidates = np.vstack([xy[wall][order_wall], rest[np.argsort(-room, kind="stable")]])
+    # spacing kept on a raster: each chosen spot blocks the cells within ``spacing`` of it
+    taken = np.zeros(grid.blocked.shape, dtype=bool)
+    reach = int(np.ceil(spacing / res))
+    dr, dc = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+    disc = (dr * res) ** 2 + (dc * res) ** 2 < spacing ** 2 - 1e-9
     chosen: list[tuple[float, float]] = []
     for x, y in candidates:
-        if all((x - cx) ** 2 + (y - cy) ** 2 >= spacing ** 2 for cx, cy in chosen) \
-                and grid.disc_is_free(float(x), float(y), radius + 0.05):
-            chosen.append((float(x), float(y)))
+        if len(chosen) >= need:
+            break
+        col, row = int(x / res), int(y / res)
+        if taken[row, col] or not grid.disc_is_free(float(x), float(y), radius + 0.05):
+            continue
+        chosen.append((float(x), float(y)))
+        rr, cc = dr[disc] + row, dc[disc] + col
+        ok = (rr >= 0) & (rr < taken.shape[0]) & (cc >= 0) & (cc < taken.shape[1])
+        taken[rr[ok], cc[ok]] = True
     return chosen
 
 
@@ -72,7 +84,7 @@ def place_robots(warehouse: Warehouse, kinds: Mapping[str, RobotKind], n: int, b
     spots = [s.pose for s in warehouse.stations_of("charger")]
     if len(spots) < n:
         taken = np.array(spots, dtype=float).reshape(-1, 2)
-        for x, y in _spots(warehouse, largest, spacing):
+        for x, y in _spots(warehouse, largest, spacing, 2 * n):
             if len(spots) >= n:
                 break
             if not len(taken) or np.min(np.hypot(taken[:, 0] - x, taken[:, 1] - y)) >= spacing:

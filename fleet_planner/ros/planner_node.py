@@ -25,6 +25,7 @@ from visualization_msgs.msg import MarkerArray
 
 from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetManager
 from fleet_planner.fleet.coordination import AGENT_BEHAVIOR
+from fleet_planner.fleet.inbox import StatusInbox
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
@@ -90,6 +91,9 @@ class PlannerNode(Node):
         relay_period = self.declare_parameter("neighbour_period_s", RELAY_PERIOD_S, _range(
             "s of ROS time between the neighbours records sent to each robot (/robots/<id>/neighbours)",
             0.02, 2.0)).value
+        self._markers_period = self.declare_parameter("markers_period_s", 1.0, _range(
+            "s of ROS time between two RViz marker arrays at most (they cost time in proportion to the fleet)",
+            0.0, 60.0)).value
         skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
             "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
         defaults = DispatchParams()
@@ -115,6 +119,8 @@ class PlannerNode(Node):
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
         self._paths: dict[str, Publisher] = {}
+        self._inbox = StatusInbox()  # only the latest status of each robot is parsed (fleet/inbox.py)
+        self._markers_at = -float("inf")
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
         create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
@@ -122,7 +128,8 @@ class PlannerNode(Node):
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py); the lead wires
         # ``neighbour_relay.watch`` to the execution gate
         self.neighbour_relay = NeighbourPublisher(
-            self, self.fleet, relay_period, AGENT_BEHAVIOR.comm_range if coordination == "behavior" else 0.0)
+            self, self.fleet, relay_period, AGENT_BEHAVIOR.comm_range if coordination == "behavior" else 0.0,
+            refresh=self._take_statuses)
         self._map.publish(grid_to_msg(warehouse.grid, self.frame_id, self._now()))
         self.get_logger().info(
             f"planning for warehouse {warehouse.name!r} ({len(warehouse.stations)} stations), {coordination} "
@@ -146,14 +153,27 @@ class PlannerNode(Node):
         self._publish_events(events)
 
     def _on_status(self, msg: String) -> None:
+        at_once = self._inbox.offer(msg.data, self._now())
+        if at_once is not None:
+            self._status(*at_once)
+
+    def _take_statuses(self) -> None:
+        for raw, arrived in self._inbox.take():
+            self._status(raw, arrived)
+
+    def _status(self, raw: str, arrived: float) -> None:
+        msg = String(data=raw)
         try:
-            self.fleet.on_status(string_to_record(msg, RobotStatus), self._now())
+            status = string_to_record(msg, RobotStatus)
+            self.fleet.on_status(status, arrived)
+            self.neighbour_relay.relay.offer_json(status, raw)
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
         except Exception as exc:
             self.get_logger().error(f"robot status {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
 
     def _on_timer(self) -> None:
+        self._take_statuses()
         now = self._now()
         try:
             decisions = self.fleet.step(now)
@@ -188,7 +208,9 @@ class PlannerNode(Node):
         self._publish_events(d.events)
         if d.legs:
             self._schedule.publish(record_to_string(self.fleet.schedule(now)))
-        self._markers.publish(plan_markers(self.fleet.trajectories(), self.fleet.statuses(), self.frame_id, now))
+        if not 0.0 <= now - self._markers_at < self._markers_period:
+            self._markers_at = now
+            self._markers.publish(plan_markers(self.fleet.trajectories(), self.fleet.statuses(), self.frame_id, now))
 
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:
