@@ -104,7 +104,7 @@ def publish(spec_file: str, hz: float, seconds: float) -> None:
 # -- the planner side --------------------------------------------------------------------------------------
 def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path) -> dict:
     kinds = load_kinds()
-    warehouse = warehouse_for(n)
+    warehouse = warehouse_for(min(n, 200))  # synthetic robots stand anywhere there is room
     members = place_robots(warehouse, kinds, n)
     parking = [v for p in parking_spots(warehouse, members) for v in p]
     node = PlannerNode(f"bench_load_planner_{n}", context=context, warehouse=warehouse, kinds=kinds,
