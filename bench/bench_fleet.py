@@ -51,11 +51,14 @@ def _rss_mb(pid: int) -> float:
 
 
 def _role(cmd: str) -> str:
-    for key, role in (("sim_clock", "clock"), ("planner", "planner"), ("fleet_sim", "fleet-sim"),
-                      ("fleet-sim", "fleet-sim"), ("robot_agent", "agent"), ("agent_node", "agent")):
+    if "fleet_planner.ros.demo" in cmd or "fleet-demo" in cmd:
+        return "demo"
+    for key, role in (("sim_clock", "clock"), ("fleet_sim", "fleet-sim"), ("fleet-sim", "fleet-sim"),
+                      ("robot_agent", "agent"), ("agent_node", "agent"), ("__node:=agent", "agent"),
+                      ("planner", "planner")):
         if key in cmd:
             return role
-    return "demo" if "demo" in cmd else "other"
+    return "other"
 
 
 def descendants(root: int) -> list[int]:

@@ -67,7 +67,8 @@ def _spots(warehouse: Warehouse, radius: float, spacing: float, need: int) -> li
             continue
         chosen.append((float(x), float(y)))
         rr, cc = dr[disc] + row, dc[disc] + col
-        ok = (rr >= 0) & (rr < taken.shape[0]) & (cc >= 0) & (cc < taken.shape[1])
+        rows_n, cols_n = grid.blocked.shape
+        ok = (rr >= 0) & (rr < rows_n) & (cc >= 0) & (cc < cols_n)
         taken[rr[ok], cc[ok]] = True
     return chosen
 
