@@ -41,6 +41,7 @@ setup(
             "fleet-people = fleet_planner.ros.people:main",
             "fleet-record = fleet_planner.ros.record:main",
             "fleet-replay = fleet_planner.ros.replay:main",
+            "fleet-sim = fleet_planner.ros.fleet_sim:main",
         ],
     },
 )

@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parent.parent
 EXEC_DEPENDS = {"rclpy", "std_msgs", "geometry_msgs", "nav_msgs", "visualization_msgs", "python3-numpy",
                 "python3-shapely", "python3-yaml", "python3-matplotlib", "python3-scipy", "python3-tqdm"}
 CONSOLE_SCRIPTS = {"fleet-plan", "planner", "robot_agent", "fleet-demo", "fleet-submit", "fleet-op", "sim_clock",
-                   "fleet-console", "fleet-people", "fleet-record", "fleet-replay"}
+                   "fleet-console", "fleet-people", "fleet-record", "fleet-replay", "fleet-sim"}
 ENTRY_POINT = re.compile(r"^(?P<name>[\w-]+) = (?P<module>\w+(\.\w+)*):(?P<func>\w+)$")
 
 

@@ -60,7 +60,10 @@ from .intake import Roster
 from .jobstore import DuplicateJob, JobStore
 from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import ObstacleMap, ObstacleParams
-from .state import FleetRobot, Job, Target, can_do
+from .state import FleetRobot, Job, Occupancy, Target, can_do
+
+#: a free robot that could not get a leg to a charger or parking spot tries again this much (s) later
+SPOT_RETRY_S = 2.0
 
 
 class FleetManager:
@@ -114,6 +117,11 @@ class FleetManager:
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
         #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
         self.gates = GateBook() if self.strategy.sends_gates else None
+        # indexes valid for one step (docs/ARCHITECTURE.md: every step proportional to what changed)
+        self._occ: Occupancy | None = None
+        self._free_spots: dict[tuple[int, float], list[tuple[str, Point]]] = {}
+        self._reserved_at: list[Point] | None = None
+        self._spot_trees: dict[int, Any] = {}
         if store is not None:
             self._reload(store)
 
@@ -329,6 +337,16 @@ class FleetManager:
         (re)plan, jobs to assign, robots to send charging or parking."""
         d = Decisions(notes=self._notes)
         self._notes = []
+        self._occ, self._free_spots, self._reserved_at = None, {}, None
+        try:
+            self._decide(now, d)
+        finally:
+            self._occ, self._free_spots, self._reserved_at = None, {}, None
+        if d.legs:
+            self._plan_id += 1
+        return d
+
+    def _decide(self, now: float, d: Decisions) -> None:
         self._find_immobile(now, d)
         self._watch_obstacles(now, d)
         self._find_rejected(d)
@@ -346,9 +364,6 @@ class FleetManager:
             self._replan(now, d)
             self._allocate(now, d)
             self._housekeeping(now, d)
-        if d.legs:
-            self._plan_id += 1
-        return d
 
     def _find_immobile(self, now: float, d: Decisions) -> None:
         for r in self.robots.values():
@@ -372,6 +387,7 @@ class FleetManager:
         (or fails, if it holds the goods and is out of battery) and legs passing near it re-plan."""
         r.immobile = True
         r.leg, r.target, r.replan, r.conflict, r.arrived_at = None, None, False, False, None
+        self._changed(r)
         d.notes.append(f"robot {r.id} {why}; it is an obstacle at ({r.status.x:.2f}, {r.status.y:.2f})")
         if r.job is not None:
             job = self.jobs[r.job]
@@ -449,8 +465,8 @@ class FleetManager:
         for r, target in waiting:
             if self._plan_leg(r, target, now, d) is not None:
                 r.replan = r.conflict = False
-            elif r.conflict and r.on_leg:
-                self._hold(r, now, d)
+            elif r.on_leg:  # late or in conflict and no new leg yet: stand still, so the others
+                self._hold(r, now, d)  # plan around where it is, not around a leg it no longer keeps
 
     def _hold(self, r: FleetRobot, now: float, d: Decisions) -> None:
         """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
@@ -480,12 +496,16 @@ class FleetManager:
         queued = sorted((j for j in self.jobs.values() if j.state == "queued"),  # earliest deadline among equals
                         key=lambda j: (-j.task.priority, math.inf if j.task.deadline is None else j.task.deadline,
                                        j.seq))
+        if not queued:
+            return
+        free = [r for r in self.robots.values() if r.free and r.status.battery >= self.params.min_task_battery]
         for job in queued:
             pose = job.pick.pose
+            if not free:
+                return
             if self._reserved(pose):
                 continue
-            able = [r for r in self.robots.values() if r.free and can_do(r.kind, job.task)
-                    and r.status.battery >= self.params.min_task_battery]
+            able = [r for r in free if r.free and can_do(r.kind, job.task)]
             if not able:
                 continue
             r = min(able, key=lambda r: (math.dist(r.pos, pose), -r.status.battery, r.id))
@@ -502,7 +522,8 @@ class FleetManager:
             d.events.append(_event(job.task.id, "assigned", now, r.id))
 
     def _housekeeping(self, now: float, d: Decisions) -> None:
-        for r in sorted(self.robots.values(), key=lambda r: r.status.battery):
+        for r in sorted((r for r in self.robots.values() if r.free and now >= r.retry_at),
+                        key=lambda r: r.status.battery):
             if not r.free or self._at(r.pos, self.chargers):
                 continue
             low = r.status.battery < self.params.low_battery
@@ -511,7 +532,8 @@ class FleetManager:
                 continue
             spot = self._free_spot(r, self.chargers)
             if spot is not None:
-                self._plan_leg(r, Target("charge", *spot), now, d)
+                if self._plan_leg(r, Target("charge", *spot), now, d) is None:
+                    r.retry_at = now + SPOT_RETRY_S  # not planned again at every step
             elif idle and self._at(r.pos, self.work_stops):
                 self._send_away(r, now, d)
 
@@ -525,9 +547,13 @@ class FleetManager:
         if spot is None:
             spot, purpose = self._free_spot(r, self.parking), "park"
         if spot is None:
-            d.notes.append(f"robot {r.id} is in the way but no charger or parking spot is free")
+            why = "in the way but no charger or parking spot is free"
+            if r.trouble != why:  # noted once, not at every step
+                d.notes.append(f"robot {r.id} is {why}")
+            r.trouble = why
             return
-        self._plan_leg(r, Target(purpose, *spot), now, d, clear_way=False)
+        if self._plan_leg(r, Target(purpose, *spot), now, d, clear_way=False) is None:
+            r.retry_at = now + SPOT_RETRY_S
 
     def _plan_leg(self, r: FleetRobot, target: Target, now: float, d: Decisions,
                   clear_way: bool = True) -> Leg | None:
@@ -556,6 +582,8 @@ class FleetManager:
         leg = Leg(r.id, path, path_id, target.purpose, target.name)
         self._give(r, leg, d, now)
         r.target, r.trouble = target, ""
+        if self._reserved_at is not None:
+            self._reserved_at.append(target.pose)
         return leg
 
     def _give(self, r: FleetRobot, leg: Leg, d: Decisions, now: float) -> None:
@@ -564,6 +592,13 @@ class FleetManager:
         r.leg, r.last_path_id = leg, leg.path_id
         r.arrived_at, r.saw_action = None, False
         d.legs.append(leg)
+        self._changed(r)
+
+    def _changed(self, r: FleetRobot) -> None:
+        """``r``'s leg changed during this step: the step's indexes learn it."""
+        if self._occ is not None:
+            self._occ.touch(r)
+        self._free_spots.clear()
 
     def _next_path_id(self, r: FleetRobot, now: float) -> int:
         lead = self.params.lead_s
@@ -574,30 +609,42 @@ class FleetManager:
         return max(round((now + lead) * 1e9), r.last_path_id + 1)
 
     def _occupant(self, pose: Point, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:
-        """A robot standing on, or bound for, a disc of ``radius`` at ``pose``."""
-        for o in self.robots.values():
-            if o is exclude:
-                continue
-            near = o.radius + radius
-            ends = [o.pos] + ([tuple(o.leg.path.waypoints[-1, :2])] if o.leg is not None and not o.immobile else [])
-            if any(math.dist(p, pose) < near for p in ends):
-                return o
-        return None
+        """A robot standing on, or bound for, a disc of ``radius`` at ``pose`` (from the step's
+        index, :class:`~.state.Occupancy`)."""
+        if self._occ is None:
+            self._occ = Occupancy(list(self.robots.values()))
+        return self._occ.occupant(pose, radius, exclude)
 
     def _reserved(self, pose: Point) -> bool:
-        """Some robot is working at ``pose`` or has it as its target."""
-        return any(o.target is not None and math.dist(o.target.pose, pose) < AT_STATION_M
-                   or o.status.mode in ("picking", "placing") and math.dist(o.pos, pose) < AT_STATION_M
-                   for o in self.robots.values())
+        """Some robot is working at ``pose`` or has it as its target (the places are gathered once a step)."""
+        if self._reserved_at is None:
+            self._reserved_at = [o.target.pose for o in self.robots.values() if o.target is not None]
+            self._reserved_at += [o.pos for o in self.robots.values() if o.status.mode in ("picking", "placing")]
+        if not self._reserved_at:
+            return False
+        at = np.asarray(self._reserved_at, dtype=float)
+        return bool(np.any(np.hypot(at[:, 0] - pose[0], at[:, 1] - pose[1]) < AT_STATION_M))
 
     def _free_spot(self, r: FleetRobot, spots: Mapping[str, Point]) -> tuple[str, Point] | None:
-        """The nearest spot no other robot stands on or is bound for."""
-        free = [(name, p) for name, p in spots.items() if self._occupant(p, r.radius, exclude=r) is None]
+        """The nearest spot no other robot stands on or is bound for. The free spots are found once
+        per step and robot size (until a leg changes): ``r`` is free and stands on none of them
+        (its callers ask only then), so leaving it out changes nothing."""
+        key = (id(spots), r.radius)
+        free = self._free_spots.get(key)
+        if free is None:
+            free = self._free_spots[key] = [(name, p) for name, p in spots.items()
+                                            if self._occupant(p, r.radius, exclude=r) is None]
         return min(free, key=lambda item: math.dist(item[1], r.pos), default=None)
 
-    @staticmethod
-    def _at(pos: Point, spots: Mapping[str, Point]) -> bool:
-        return any(math.dist(pos, p) < AT_STATION_M for p in spots.values())
+    def _at(self, pos: Point, spots: Mapping[str, Point]) -> bool:
+        """``pos`` is at one of ``spots`` (a fixed table of the manager's: chargers, parking, work stops)."""
+        if not spots:
+            return False
+        table = self._spot_trees.get(id(spots))
+        if table is None:  # the table itself is kept too, so its id stays its own
+            table = self._spot_trees[id(spots)] = (spots, np.asarray(list(spots.values()), dtype=float))
+        at = table[1]
+        return bool(np.min(np.hypot(at[:, 0] - pos[0], at[:, 1] - pos[1])) < AT_STATION_M)
 
     # -- views for tools -------------------------------------------------------------------------------
     def trajectories(self) -> list[TimedPath]:

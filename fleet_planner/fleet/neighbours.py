@@ -173,6 +173,12 @@ class NeighbourRelay:
             del self._json[gone]
         return {rid: self.encode(rid, now, [by_id[o] for o in others]) for rid, others in chosen.items()}
 
+    def offer_json(self, status: RobotStatus, text: str) -> None:
+        """``text`` is the JSON ``status`` came in as (it parsed to exactly that record): records carry
+        it as it is, without encoding the status again."""
+        if len(text) <= 2048:
+            self._json[status.id] = _Cached(status.stamp, text)
+
     def encode(self, robot_id: str, now: float, statuses: Sequence[RobotStatus]) -> str:
         """The JSON of ``Neighbours(robot_id, now, statuses)``, from each status's cached JSON."""
         parts = []

@@ -3,6 +3,7 @@ jobs (:class:`Job`) and where a robot is bound (:class:`Target`); :func:`can_do`
 kinds may take a job."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +69,7 @@ class FleetRobot:
     stop: bool = False                # back online: stop it wherever it is heading
     paused: bool = False              # the operator paused it: it holds, others plan around it (.operator)
     manual: bool = False              # driven by the operator's cmd_vel: a moving obstacle (.operator)
+    retry_at: float = -math.inf       # a spot it could not get a leg to is tried again from then on
 
     @property
     def id(self) -> str:
@@ -100,3 +102,50 @@ class FleetRobot:
         # driven by hand: where it is, grown by what it may drive before the others re-plan around it
         radius = self.radius + (MANUAL_GROWTH_M if self.manual else 0.0)
         return TimedPath(self.id, radius, np.array([[self.status.x, self.status.y, 0.0]]))
+
+
+class Occupancy:
+    """Where the robots stand and where they are bound, indexed for one planning step: a k-d tree
+    over every robot's position and the end of its leg (:meth:`occupant`), so spot and station
+    queries cost a logarithm of the fleet, not the fleet. Robots whose leg changes during the step
+    are :meth:`touch` ed and checked directly (they are few)."""
+
+    def __init__(self, robots: list[FleetRobot]):
+        from scipy.spatial import cKDTree
+
+        pts, owners = [], []
+        for o in robots:
+            pts.append(o.pos)
+            owners.append(o)
+            if o.leg is not None and not o.immobile:
+                pts.append(tuple(o.leg.path.waypoints[-1, :2]))
+                owners.append(o)
+        self._owners = owners
+        self._tree = cKDTree(np.asarray(pts, dtype=float).reshape(-1, 2)) if pts else None
+        self._largest = max((o.radius for o in robots), default=0.0)
+        self._touched: dict[str, FleetRobot] = {}
+
+    def touch(self, robot: FleetRobot) -> None:
+        """``robot``'s leg changed after the index was made."""
+        self._touched[robot.id] = robot
+        self._largest = max(self._largest, robot.radius)
+
+    def occupant(self, pose: Point, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:
+        """A robot standing on, or bound for, a disc of ``radius`` at ``pose`` (the first found)."""
+        if self._tree is not None:
+            for k in sorted(self._tree.query_ball_point(pose, radius + self._largest)):
+                o = self._owners[k]
+                if o is exclude or o.id in self._touched:
+                    continue
+                if _ends_near(o, pose, radius):
+                    return o
+        for o in self._touched.values():
+            if o is not exclude and _ends_near(o, pose, radius):
+                return o
+        return None
+
+
+def _ends_near(o: FleetRobot, pose: Point, radius: float) -> bool:
+    near = o.radius + radius
+    ends = [o.pos] + ([tuple(o.leg.path.waypoints[-1, :2])] if o.leg is not None and not o.immobile else [])
+    return any(math.dist(p, pose) < near for p in ends)

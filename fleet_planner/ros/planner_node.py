@@ -29,6 +29,7 @@ from fleet_planner.fleet import COORDINATION, Decisions, DispatchParams, FleetMa
 from fleet_planner.fleet.coordination import AGENT_BEHAVIOR
 from fleet_planner.fleet.fleet_file import load_fleet
 from fleet_planner.fleet.gate import watched_robots
+from fleet_planner.fleet.inbox import StatusInbox
 from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
@@ -105,6 +106,9 @@ class PlannerNode(Node):
         relay_period = self.declare_parameter("neighbour_period_s", RELAY_PERIOD_S, _range(
             "s of ROS time between the neighbours records sent to each robot (/robots/<id>/neighbours)",
             0.02, 2.0)).value
+        self._markers_period = self.declare_parameter("markers_period_s", 1.0, _range(
+            "s of ROS time between two RViz marker arrays at most (they cost time in proportion to the fleet)",
+            0.0, 60.0)).value
         skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
             "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
         self._max_age = self.declare_parameter("max_status_age_s", MAX_STATUS_AGE_S, _range(
@@ -148,6 +152,8 @@ class PlannerNode(Node):
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
         self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
         self._gates: dict[str, Publisher] = {}
+        self._inbox = StatusInbox()  # only the latest status of each robot is parsed (fleet/inbox.py)
+        self._markers_at = -float("inf")
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
         self._tasks = create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
@@ -158,7 +164,8 @@ class PlannerNode(Node):
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py) and the robots its
         # execution gate watches (fleet_planner/fleet/gate.py)
         self.neighbour_relay = NeighbourPublisher(
-            self, self.fleet, relay_period, AGENT_BEHAVIOR.comm_range if coordination == "behavior" else 0.0)
+            self, self.fleet, relay_period, AGENT_BEHAVIOR.comm_range if coordination == "behavior" else 0.0,
+            refresh=self._take_statuses)
         gates = self.fleet.gates
         if gates is not None:  # a gated robot hears every robot its links name, however far
             self.neighbour_relay.watch = lambda rid: watched_robots(gates.records.get(rid))
@@ -198,12 +205,23 @@ class PlannerNode(Node):
         return self.fleet.submit(replace(task, auth=None), now)
 
     def _on_status(self, msg: String) -> None:
+        at_once = self._inbox.offer(msg.data, self._now())
+        if at_once is not None:
+            self._status(*at_once)
+
+    def _take_statuses(self) -> None:
+        for raw, arrived in self._inbox.take():
+            self._status(raw, arrived)
+
+    def _status(self, raw: str, arrived: float) -> None:
+        msg = String(data=raw)
         try:
-            status, now = string_to_record(msg, RobotStatus), self._now()
-            problem = stamp_problem(f"robot {status.id!r}", status.stamp, now, float("inf"), self._max_age)
+            status = string_to_record(msg, RobotStatus)
+            problem = stamp_problem(f"robot {status.id!r}", status.stamp, arrived, float("inf"), self._max_age)
             if problem:  # (ahead: the fleet manager's max_clock_skew_s)
                 raise ValueError(problem)
-            self.fleet.on_status(status, now)
+            self.fleet.on_status(status, arrived)
+            self.neighbour_relay.relay.offer_json(status, raw)
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
         except Exception as exc:
@@ -218,6 +236,7 @@ class PlannerNode(Node):
             self.get_logger().error(f"obstacle {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
 
     def _on_timer(self) -> None:
+        self._take_statuses()
         now = self._now()
         try:
             decisions = self.operator.step(now)  # the fleet's step, with the operator's part
@@ -258,8 +277,10 @@ class PlannerNode(Node):
         self._publish_events(d.events)
         if d.legs:
             self._schedule.publish(record_to_string(self.fleet.schedule(now)))
-        self._markers.publish(plan_markers(self.fleet.trajectories() + self.fleet.obstacles.trajectories(now),
-                                           self.fleet.statuses(), self.frame_id, now))
+        if not 0.0 <= now - self._markers_at < self._markers_period:
+            self._markers_at = now
+            self._markers.publish(plan_markers(self.fleet.trajectories() + self.fleet.obstacles.trajectories(now),
+                                               self.fleet.statuses(), self.frame_id, now))
 
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:

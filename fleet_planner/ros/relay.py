@@ -6,6 +6,8 @@ record only when that changes and then once a second (so a quiet fleet costs lit
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from std_msgs.msg import String
@@ -23,13 +25,14 @@ class NeighbourPublisher:
     """Publishes the neighbours records of ``fleet``'s robots from ``node`` every ``period_s``."""
 
     def __init__(self, node: Node, fleet: FleetManager, period_s: float, sense_m: float = 0.0,
-                 watch: Watch = no_watch):
+                 watch: Watch = no_watch, refresh: Callable[[], None] | None = None):
         self.node = node
         self.fleet = fleet
         self.relay = NeighbourRelay({k.name: k.max_speed for k in fleet.kinds.values()}, period_s, sense_m, watch)
         self._pubs: dict[str, Publisher] = {}
         self._empty_at: dict[str, float] = {}   # when the last empty record went to a robot
         self.sent = 0
+        self._refresh = refresh   # called first at each tick (the planner takes in its waiting statuses)
         self._timer = node.create_timer(period_s, self._tick)
 
     @property
@@ -42,8 +45,10 @@ class NeighbourPublisher:
         self.relay.watch = fn
 
     def _tick(self) -> None:
-        now = self.node.get_clock().now().nanoseconds / 1e9
         try:
+            if self._refresh is not None:
+                self._refresh()
+            now = self.node.get_clock().now().nanoseconds / 1e9
             records = self.relay.records([r.status for r in self.fleet.robots.values()], now)
             for rid, text in records.items():
                 if text.endswith(_EMPTY_TAIL):
@@ -53,7 +58,10 @@ class NeighbourPublisher:
                     self._empty_at[rid] = now
                 else:
                     self._empty_at.pop(rid, None)
-                self._publisher(rid).publish(String(data=text))
+                pub = self._publisher(rid)
+                if pub.get_subscription_count() == 0:
+                    continue  # nobody hears this robot's record (a fleet-sim robot, a synthetic one)
+                pub.publish(String(data=text))
                 self.sent += 1
         except Exception as exc:  # the relay must never take the planner down
             self.node.get_logger().error(f"neighbour relay failed: {exc!r}", throttle_duration_sec=5.0)

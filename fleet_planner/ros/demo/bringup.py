@@ -25,6 +25,7 @@ from rclpy.parameter import Parameter
 from fleet_planner.fleet import FleetMember
 from fleet_planner.robots import RobotKind
 from fleet_planner.ros.demo.monitor import FleetMonitor
+from fleet_planner.ros.fleet_sim import FleetSimNode
 from fleet_planner.ros.planner_node import PlannerNode
 from fleet_planner.ros.sim_clock import SimClock
 from fleet_planner.warehouse import Warehouse
@@ -43,10 +44,11 @@ class Fleet:
     agents: dict[str, AgentNode]
     monitor: FleetMonitor
     executor: SingleThreadedExecutor
+    sim: FleetSimNode | None = None   # the robots, when fleet-sim drives them
 
     @property
     def nodes(self) -> list[Node]:
-        return [self.clock, self.planner, *self.agents.values(), self.monitor]
+        return [self.clock, self.planner, *self.agents.values(), *([self.sim] if self.sim else []), self.monitor]
 
     def destroy(self) -> None:
         self.executor.shutdown()
@@ -56,22 +58,25 @@ class Fleet:
 
 def bring_up(context: Context, warehouse: Warehouse, kinds: Mapping[str, RobotKind], members: Sequence[FleetMember],
              rate: float, planner_params: Sequence[Parameter] = (), params_file: str | Path | None = None,
-             coordination: str = "central", agent_overrides: Sequence[Parameter] = ()) -> Fleet:
-    """Sim clock, planner, one agent per fleet member and a monitor, all on simulated time in
-    ``context`` and on one executor. ``planner_params`` and ``params_file`` (a ros__parameters
-    YAML) configure the planner; ``coordination`` goes to the planner and every agent, and
-    ``agent_overrides`` to every agent."""
-    sim = [Parameter("use_sim_time", value=True)]
+             coordination: str = "central", agent_overrides: Sequence[Parameter] = (), sim: bool = False) -> Fleet:
+    """Sim clock, planner, one agent per fleet member (``sim``: one fleet-sim node driving them all)
+    and a monitor, all on simulated time in ``context`` and on one executor. ``planner_params`` and
+    ``params_file`` (a ros__parameters YAML) configure the planner; ``coordination`` goes to the
+    planner and every agent, and ``agent_overrides`` to every agent."""
+    use_sim = [Parameter("use_sim_time", value=True)]
     mode = [Parameter("coordination", value=coordination)]
     clock = SimClock(context=context, parameter_overrides=[Parameter("rate", value=float(rate))])
     cli = ["--ros-args", "--params-file", str(params_file)] if params_file else None
     planner = PlannerNode(context=context, warehouse=warehouse, kinds=kinds, cli_args=cli,
-                          parameter_overrides=sim + mode + list(planner_params))
-    agents = {m.id: AgentNode(f"agent_{m.id}", context=context, warehouse=warehouse, kinds=kinds,
-                              parameter_overrides=sim + mode + agent_params(m) + list(agent_overrides))
-              for m in members}
-    monitor = FleetMonitor(context=context, parameter_overrides=sim)
-    fleet = Fleet(clock, planner, agents, monitor, SingleThreadedExecutor(context=context))
+                          parameter_overrides=use_sim + mode + list(planner_params))
+    agents = {} if sim else {
+        m.id: AgentNode(f"agent_{m.id}", context=context, warehouse=warehouse, kinds=kinds,
+                        parameter_overrides=use_sim + mode + agent_params(m) + list(agent_overrides))
+        for m in members}
+    robots = FleetSimNode(context=context, warehouse=warehouse, kinds=kinds, members=members,
+                          parameter_overrides=use_sim + mode) if sim else None
+    monitor = FleetMonitor(context=context, parameter_overrides=use_sim)
+    fleet = Fleet(clock, planner, agents, monitor, SingleThreadedExecutor(context=context), robots)
     for node in fleet.nodes:
         fleet.executor.add_node(node)
     return fleet
@@ -94,8 +99,10 @@ def node_command(script: str, module: str) -> list[str]:
 
 def start_processes(members: Sequence[FleetMember], rate: float, params_file: Path, warehouse_file: Path | None,
                     kinds_file: Path | None = None, log_dir: Path | None = None,
-                    coordination: str = "central") -> list[subprocess.Popen]:
-    """Sim clock, planner and agents as processes in this environment (stop them with stop_processes)."""
+                    coordination: str = "central", fleet_file: Path | None = None) -> list[subprocess.Popen]:
+    """Sim clock, planner and agents as processes in this environment (stop them with stop_processes).
+    With ``fleet_file`` (holding ``members``) one ``fleet-sim`` process drives all the robots
+    instead of one agent process each."""
     common = ["-p", f"coordination:={coordination}"]
     if warehouse_file:
         common += ["-p", f"warehouse_file:={warehouse_file}"]
@@ -105,19 +112,23 @@ def start_processes(members: Sequence[FleetMember], rate: float, params_file: Pa
     commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)],
                 "planner": node_command("planner", "fleet_planner.ros.planner_node")
                 + ["--ros-args", "--params-file", str(params_file)] + sim + common}
-    for m in members:
+    if fleet_file is not None:
+        commands["fleet_sim"] = node_command("fleet-sim", "fleet_planner.ros.fleet_sim") + [
+            "--ros-args", "-p", f"fleet_file:={fleet_file}"] + sim + common
+    for m in members if fleet_file is None else ():
         commands[f"agent_{m.id}"] = node_command("robot_agent", "robot_agent.agent_node") + [
             "--ros-args", "-r", f"__node:=agent_{m.id}", "-p", f"id:={m.id}", "-p", f"kind:={m.kind}",
             "-p", f"x:={m.x!r}", "-p", f"y:={m.y!r}", "-p", f"yaw:={m.yaw!r}", "-p", f"battery:={m.battery!r}"] \
             + sim + common
     procs: list[subprocess.Popen] = []
+    env = {**os.environ, "RCUTILS_LOGGING_BUFFERED_STREAM": "1"}  # a log line reaches the file when written
     try:
         for name, cmd in commands.items():
             if log_dir is None:
-                procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT))
+                procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, env=env))
                 continue
             with open(log_dir / f"{name}.log", "w") as log:  # the child keeps its own copy open
-                procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT))
+                procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env))
     except BaseException:
         stop_processes(procs)
         raise
@@ -144,3 +155,10 @@ def parking_of(params_file: Path) -> list[tuple[float, float]]:
     flat: list[float] = next((v["ros__parameters"].get("parking", []) for v in data.values()
                               if isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict)), [])
     return [(flat[i], flat[i + 1]) for i in range(0, len(flat) - 1, 2)]
+
+
+def write_fleet_file(members: Sequence[FleetMember], path: Path) -> Path:
+    """``members`` as a fleet file (config/fleet.yaml's format) at ``path``."""
+    robots = [{"id": m.id, "kind": m.kind, "x": m.x, "y": m.y, "yaw": m.yaw, "battery": m.battery} for m in members]
+    Path(path).write_text(yaml.safe_dump({"robots": robots}, sort_keys=False))
+    return Path(path)

@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import rclpy
+import yaml
 from rclpy.context import Context
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.logging import LoggingSeverity
@@ -36,16 +37,28 @@ from rclpy.parameter import Parameter
 from tqdm import tqdm
 
 from fleet_planner.fleet import COORDINATION, FleetMember, load_fleet
+from fleet_planner.fleet.placement import parking_spots, place_robots, warehouse_for
 from fleet_planner.robots import load_kinds
-from fleet_planner.ros.demo.bringup import Fleet, bring_up, parking_of, start_processes, stop_processes
+from fleet_planner.ros.demo.bringup import (
+    Fleet,
+    bring_up,
+    parking_of,
+    start_processes,
+    stop_processes,
+    write_fleet_file,
+)
 from fleet_planner.ros.demo.jobs import TERMINAL, random_jobs
 from fleet_planner.ros.demo.monitor import FleetMonitor, spin_until
 from fleet_planner.ros.demo.summary import Summary, plot_run, summarise
 from fleet_planner.ros.entry import ros_session
-from fleet_planner.warehouse import Warehouse, config_path, load_warehouse
+from fleet_planner.warehouse import Warehouse, config_path, load_warehouse, save_warehouse
 from msg_schemas.records import Task
 
 DEMO_PARAMS = "planner_params.yaml"
+#: with --sim auto, fleets larger than this are driven by fleet-sim
+SIM_ABOVE = 15
+#: the default job stream: 20 jobs, one every 4 s, for the default nine robots
+JOBS_PER_ROBOT, INTERVAL_ROBOT_S = 20 / 9, 4.0 * 9
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -55,11 +68,18 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--coordination", choices=COORDINATION, default="central",
                    help="central: timed paths planned around each other (default); behavior: the robots "
                         "get only goals and avoid each other by BBMRCA behaviours")
-    p.add_argument("--jobs", type=int, default=20, help="how many jobs to submit (default 20)")
-    p.add_argument("--interval", type=float, default=4.0, help="simulated seconds between jobs (default 4)")
+    p.add_argument("--jobs", type=int, help="how many jobs to submit (default 20, scaled with --robots)")
+    p.add_argument("--interval", type=float,
+                   help="simulated seconds between jobs (default 4, scaled down with --robots)")
     p.add_argument("--rate", type=float, default=10.0, help="simulated seconds per wall second, at most (default 10)")
     p.add_argument("--fleet", type=Path, help="fleet file (default: config/fleet.yaml)")
-    p.add_argument("--warehouse", type=Path, help="warehouse YAML (default: config/warehouse.yaml)")
+    p.add_argument("--robots", type=int, help="N robots of the four kinds on free spots instead of a fleet file "
+                                                "(their start spots become the planner's parking spots)")
+    p.add_argument("--warehouse", help="warehouse YAML (default: config/warehouse.yaml), or 'large' (a generated "
+                                       "warehouse sized for the robots), or a number of robots to size one for")
+    p.add_argument("--sim", choices=("auto", "on", "off"), default="auto",
+                   help="robots simulated together in one fleet-sim node/process (on), one agent each (off), or "
+                        f"fleet-sim above {SIM_ABOVE} robots (auto, the default)")
     p.add_argument("--params", type=Path, help="planner ros__parameters YAML (default: config/planner_params.yaml)")
     p.add_argument("--people", type=int, default=0,
                    help="simulated people walking between random points, reported on /fleet/obstacles (default 0)")
@@ -84,15 +104,37 @@ def main(args: list[str] | None = None) -> None:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
     opts = _parser().parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    if opts.robots is not None and opts.robots < 1:
+        _parser().error("--robots must be >= 1")
+    n = opts.robots or 9
+    opts.jobs = opts.jobs if opts.jobs is not None else max(1, round(JOBS_PER_ROBOT * n))
+    opts.interval = opts.interval if opts.interval is not None else INTERVAL_ROBOT_S / n
     if opts.jobs < 1 or not opts.rate > 0 or not opts.interval >= 0 or not 0 <= opts.people <= 100:
         _parser().error("--jobs must be >= 1, --rate > 0, --interval >= 0 and --people in 0..100")
 
-    warehouse = load_warehouse(opts.warehouse)
-    kinds = load_kinds()
-    members = load_fleet(opts.fleet, kinds, warehouse)
-    params_file = opts.params or config_path(DEMO_PARAMS)
-    jobs = random_jobs(warehouse, kinds, members, opts.jobs, opts.seed)
     opts.out.mkdir(parents=True, exist_ok=True)
+    kinds = load_kinds()
+    warehouse_file: Path | None = None
+    if opts.warehouse in ("large",) or (opts.warehouse or "").isdigit():
+        warehouse = warehouse_for(int(opts.warehouse) if opts.warehouse.isdigit() else max(n, 50))
+        warehouse_file = save_warehouse(warehouse, opts.out / "warehouse_generated.yaml",
+                                        f"generated by fleet-demo --warehouse {opts.warehouse}")
+    else:
+        warehouse_file = Path(opts.warehouse) if opts.warehouse else None
+        warehouse = load_warehouse(warehouse_file)
+    params_file = Path(opts.params) if opts.params else config_path(DEMO_PARAMS)
+    planner_params: list[Parameter] = []
+    if opts.robots is not None:
+        members = place_robots(warehouse, kinds, opts.robots)
+        spots = [v for p in parking_spots(warehouse, members) for v in p]
+        if spots:
+            planner_params = [Parameter("parking", value=spots)]
+            params_file = _with_parking(params_file, spots, opts.out / "planner_params_generated.yaml")
+    else:
+        members = load_fleet(opts.fleet, kinds, warehouse)
+    use_sim = opts.sim == "on" or opts.sim == "auto" and len(members) > SIM_ABOVE
+    fleet_file = write_fleet_file(members, opts.out / "fleet_generated.yaml") if use_sim else None
+    jobs = random_jobs(warehouse, kinds, members, opts.jobs, opts.seed)
 
     context = Context()
     procs: list[subprocess.Popen] = []
@@ -105,8 +147,8 @@ def main(args: list[str] | None = None) -> None:
         try:
             executor: Executor
             if opts.mode == "inproc":
-                fleet = bring_up(context, warehouse, kinds, members, opts.rate, params_file=params_file,
-                                 coordination=opts.coordination)
+                fleet = bring_up(context, warehouse, kinds, members, opts.rate, planner_params, params_file=params_file,
+                                 coordination=opts.coordination, sim=use_sim)
                 executor, monitor = fleet.executor, fleet.monitor
                 parking = list(fleet.planner.fleet.parking.values())
                 if not opts.verbose:
@@ -115,8 +157,8 @@ def main(args: list[str] | None = None) -> None:
             else:
                 log_dir = opts.out / "logs"
                 log_dir.mkdir(exist_ok=True)
-                procs = start_processes(members, opts.rate, params_file, opts.warehouse, log_dir=log_dir,
-                                        coordination=opts.coordination)
+                procs = start_processes(members, opts.rate, params_file, warehouse_file, log_dir=log_dir,
+                                        coordination=opts.coordination, fleet_file=fleet_file)
                 monitor = FleetMonitor(context=context, parameter_overrides=[Parameter("use_sim_time", value=True)])
                 executor, parking = SingleThreadedExecutor(context=context), parking_of(params_file)
                 executor.add_node(monitor)
@@ -137,7 +179,7 @@ def main(args: list[str] | None = None) -> None:
             for _ in range(20):   # what is still on its way to the recorder
                 executor.spin_once(timeout_sec=0.02)
             plot_run(warehouse, monitor.trajectories(), png, title, parking, monitor.obstacle_trajectories())
-            lines = summary.lines(monitor.radius)
+            lines = summary.lines(monitor.radius, opts.rate)
             gap, robot, person, t = monitor.obstacle_separation()
             if robot is not None and t is not None:
                 lines.append(f"closest approach to an obstacle: {gap:+.3f} m beyond the sum of radii ({robot} and "
@@ -148,6 +190,8 @@ def main(args: list[str] | None = None) -> None:
             extras = []
             if opts.record:
                 lines.append(f"recording: {opts.record} (fleet-replay {opts.record} --plot out.png draws it)")
+            lines.append(f"robots: {len(members)} ({'fleet-sim' if use_sim else 'one agent each'}, {opts.mode}) on "
+                         f"{warehouse.name} ({warehouse.grid.size_m[0]:g} m x {warehouse.grid.size_m[1]:g} m)")
             print("\n".join(lines + [f"picture: {png}"]))
             if summary.done < summary.jobs:
                 sys.exit(1)
@@ -181,6 +225,16 @@ def _extras(context: Context, opts: argparse.Namespace, warehouse: Warehouse,
                                 avoid=[(m.x, m.y) for m in members] + [s.pose for s in warehouse.stations.values()])
         nodes.append(PeopleNode(context=context, walkers=walkers, parameter_overrides=sim))
     return nodes
+
+
+def _with_parking(params_file: Path, spots: list[float], out: Path) -> Path:
+    """A copy of a planner ros__parameters file with ``parking`` replaced by ``spots``."""
+    data = yaml.safe_load(Path(params_file).read_text()) or {}
+    for value in data.values():
+        if isinstance(value, dict) and isinstance(value.get("ros__parameters"), dict):
+            value["ros__parameters"]["parking"] = spots
+    out.write_text(yaml.safe_dump(data))
+    return out
 
 
 def run_jobs(executor: Executor, monitor: FleetMonitor, robot_ids: Sequence[str], jobs: Sequence[Task], *,

@@ -29,11 +29,23 @@ class Summary:
     closest: tuple[str | None, str | None, float | None]
     wall_s: float
 
-    def lines(self, radius: Mapping[str, float]) -> list[str]:
+    @property
+    def jobs_per_hour(self) -> float:
+        """Throughput: jobs done per simulated hour, from the first submission to the last job done."""
+        return 3600.0 * self.done / self.completion_s if self.completion_s else 0.0
+
+    @property
+    def sim_rate(self) -> float:
+        """Simulated seconds per wall second reached (over the same span)."""
+        return self.completion_s / self.wall_s if self.completion_s and self.wall_s > 0 else 0.0
+
+    def lines(self, radius: Mapping[str, float], asked_rate: float | None = None) -> list[str]:
         out = [f"jobs: {self.done} done, {self.failed} failed, {self.rejected} rejected of {self.jobs}"]
         if self.completion_s is not None:
             out.append(f"completion time: {self.completion_s:.1f} s simulated ({self.wall_s:.1f} s wall, "
-                       f"{self.completion_s / max(self.wall_s, 1e-9):.1f}x real time)")
+                       f"{self.sim_rate:.1f}x real time)")
+            out.append(f"throughput: {self.jobs_per_hour:.0f} jobs per simulated hour; simulated time ran at "
+                       f"{self.sim_rate:.1f}x real time" + (f" (asked {asked_rate:g}x)" if asked_rate else ""))
         out.append(f"average speed: {self.average_speed:.2f} m/s per robot over the run, {self.moving_speed:.2f} m/s "
                    f"while moving ({self.distance_m:.0f} m driven)")
         a, b, t = self.closest

@@ -1,0 +1,141 @@
+#!/usr/bin/env python3
+"""The live fleet at scale: ``fleet-demo --mode procs --robots N`` for each N, one row each.
+
+Fleets of ``--default`` sizes run on the default warehouse, of ``--large`` sizes on a generated one
+(``--warehouse large``); robots are driven by ``fleet-sim`` above 15 (the demo's ``--sim auto``),
+one agent process each below. Jobs: ``--jobs-per-robot`` x N, submitted as the demo scales them.
+Printed per run: wall time, the simulated-time rate reached (and asked), CPU (% of one core, over
+the run) and peak memory of each kind of process (planner, sim clock, fleet-sim or the agents,
+the demo's monitor), jobs done, jobs per simulated hour, and the closest approach of two robots
+beyond the sum of their radii (from the robots' status stream, as the demo measures it).
+
+Timings on a loaded machine are noisy; CPU time is the better figure.
+
+    nice .venv/bin/python bench/bench_fleet.py [--default 9 15 22 30] [--large 50 100] [--rate 10]
+        [--jobs-per-robot 1] [--timeout 600]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import re
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _stat(pid: int) -> tuple[int, float, str] | None:
+    """(parent pid, CPU seconds, command name) of a process, None if it is gone."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+        cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return None
+    fields = text.rsplit(")", 1)[1].split()
+    return int(fields[1]), (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"), cmd
+
+
+def _rss_mb(pid: int) -> float:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+def _role(cmd: str) -> str:
+    if "fleet_planner.ros.demo" in cmd or "fleet-demo" in cmd:
+        return "demo"
+    for key, role in (("sim_clock", "clock"), ("fleet_sim", "fleet-sim"), ("fleet-sim", "fleet-sim"),
+                      ("robot_agent", "agent"), ("agent_node", "agent"), ("__node:=agent", "agent"),
+                      ("planner", "planner")):
+        if key in cmd:
+            return role
+    return "other"
+
+
+def descendants(root: int) -> list[int]:
+    parents: dict[int, list[int]] = defaultdict(list)
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            st = _stat(int(entry.name))
+            if st is not None:
+                parents[st[0]].append(int(entry.name))
+    out, todo = [], [root]
+    while todo:
+        pid = todo.pop()
+        out.append(pid)
+        todo.extend(parents.get(pid, []))
+    return out
+
+
+def run(n: int, large: bool, opts: argparse.Namespace) -> dict:
+    out = REPO / "out" / "bench_fleet" / f"{'large' if large else 'default'}_{n}"
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = max(1, round(opts.jobs_per_robot * n))
+    cmd = [sys.executable, "-m", "fleet_planner.ros.demo", "--mode", "procs", "--robots", str(n), "--jobs", str(jobs),
+           "--rate", str(opts.rate), "--no-progress", "--out", str(out), "--timeout", str(opts.timeout)]
+    if large:
+        cmd += ["--warehouse", "large"]
+    env = {**os.environ, "PYTHONPATH": str(REPO), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+           "ROS_DOMAIN_ID": os.environ.get("ROS_DOMAIN_ID", str(random.randint(1, 100)))}
+    t0 = time.monotonic()
+    demo = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=REPO)
+    cpu: dict[int, tuple[str, float]] = {}
+    peak: dict[int, float] = {}
+    while demo.poll() is None:
+        for pid in descendants(demo.pid):
+            st = _stat(pid)
+            if st is not None:
+                cpu[pid] = (_role(st[2]), st[1])
+                peak[pid] = max(peak.get(pid, 0.0), _rss_mb(pid))
+        time.sleep(1.0)
+    wall = time.monotonic() - t0
+    text = demo.stdout.read() if demo.stdout else ""
+    roles: dict[str, list[int]] = defaultdict(list)
+    for pid, (role, _) in cpu.items():
+        roles[role].append(pid)
+    per_role = {role: (max(cpu[p][1] for p in pids) / wall * 100, max(peak[p] for p in pids), len(pids))
+                for role, pids in roles.items()}
+
+    def find(pattern: str, default: str = "?") -> str:
+        m = re.search(pattern, text)
+        return m.group(1) if m else default
+
+    return {"n": n, "where": "large" if large else "default", "wall": wall, "jobs": jobs,
+            "done": find(r"jobs: (\d+) done"), "rate": find(r"simulated time ran at ([\d.]+)x"),
+            "per_h": find(r"throughput: (\d+) jobs"), "gap": find(r"clearance ([+-][\d.]+) m\)"),
+            "roles": per_role, "tail": text[-600:]}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    p.add_argument("--default", type=int, nargs="*", default=[9, 15, 22, 30], help="fleet sizes, default warehouse")
+    p.add_argument("--large", type=int, nargs="*", default=[50, 100], help="fleet sizes, generated warehouse")
+    p.add_argument("--rate", type=float, default=10.0, help="simulated time rate asked (default 10)")
+    p.add_argument("--jobs-per-robot", type=float, default=1.0, help="jobs per robot (default 1)")
+    p.add_argument("--timeout", type=float, default=600.0, help="wall seconds per run at most (default 600)")
+    opts = p.parse_args()
+    print(f"fleet-demo --mode procs at {opts.rate:g}x asked, {opts.jobs_per_robot:g} jobs per robot")
+    print(f"{'N':>4} {'warehouse':>9} {'wall s':>7} {'sim rate':>8} {'done':>9} {'jobs/h':>7} {'closest':>8}  "
+          "CPU % of a core / peak MB per process (count)")
+    runs = [(n, False) for n in opts.default] + [(n, True) for n in opts.large]
+    for n, large in runs:
+        r = run(n, large, opts)
+        procs = "  ".join(f"{role} {c:.0f}%/{m:.0f}MB" + (f" (x{k})" if k > 1 else "")
+                          for role, (c, m, k) in sorted(r["roles"].items()))
+        print(f"{r['n']:>4} {r['where']:>9} {r['wall']:>7.0f} {r['rate']:>8} {r['done']:>4}/{r['jobs']:<4} "
+              f"{r['per_h']:>7} {r['gap']:>8}  {procs}", flush=True)
+        if r["done"] == "?":
+            print("     " + r["tail"].replace("\n", "\n     "))
+
+
+if __name__ == "__main__":
+    main()

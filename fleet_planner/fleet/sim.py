@@ -1,0 +1,97 @@
+"""Many simulated robots stepped together: :class:`SimFleet`, the core of ``fleet-sim``
+(:mod:`fleet_planner.ros.fleet_sim`).
+
+Each robot is a :class:`~.agent.RobotAgent` (the same as one agent process drives: its legs, its
+safety net or behaviour layer, its picks, places and charging), so a simulated robot behaves
+exactly as a real robot's agent does. What is shared is done once per step for all of them: who
+hears whom comes from one k-d tree query over the fleet's last statuses (:mod:`.neighbours`, the
+selection the planner's relay makes, here from statuses one step old), and robots of other
+processes can be added from the relay's records (:meth:`SimFleet.hear`).
+
+Times are seconds on one clock (ROS time): ``now`` is always passed in.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+
+from msg_schemas.records import RobotStatus, Task, TaskEvent, WaitMessageRecord
+
+from ..model import TimedPath
+from ..robots import RobotKind, RobotModel
+from ..warehouse import Warehouse
+from .agent import RobotAgent
+from .coordination import AGENT_BEHAVIOR, get_coordination
+from .fleet_file import FleetMember
+from .legs import CONTROL_PERIOD_S
+from .neighbours import NeighbourRelay
+
+
+class SimFleet:
+    """Simulated robots of ``members`` on ``warehouse`` under ``coordination``, stepped together."""
+
+    def __init__(self, members: Sequence[FleetMember], kinds: Mapping[str, RobotKind], warehouse: Warehouse,
+                 coordination: str = "central", period_s: float = CONTROL_PERIOD_S):
+        strategy = get_coordination(coordination)
+        chargers = [s.pose for s in warehouse.stations_of("charger")]
+        self.agents: dict[str, RobotAgent] = {}
+        for m in members:
+            if m.id in self.agents:
+                raise ValueError(f"robot {m.id!r}: listed twice")
+            model = RobotModel(m.id, kinds[m.kind], m.x, m.y, m.yaw, m.battery, chargers)
+            self.agents[m.id] = RobotAgent(model, warehouse, get_coordination(strategy.name))
+        sense = AGENT_BEHAVIOR.comm_range if strategy.exchanges_wait_messages else 0.0
+        # statuses of this fleet are one step old when heard, and heard at once
+        self.relay = NeighbourRelay({k.name: k.max_speed for k in kinds.values()}, period_s, sense,
+                                    latency_s=0.0)
+        self.last: dict[str, RobotStatus] = {}
+        self.foreign: dict[str, RobotStatus] = {}   # robots of other processes, from the relay
+
+    def __len__(self) -> int:
+        return len(self.agents)
+
+    # -- input, routed to the robots it is for -------------------------------------------------------
+    def on_path(self, robot_id: str, path: TimedPath, t0: float, path_id: int) -> None:
+        """A leg for one robot (ValueError if it cannot follow it, as RobotAgent.on_path)."""
+        self.agents[robot_id].on_path(path, t0, path_id)
+
+    def on_task(self, task: Task) -> None:
+        for a in self.agents.values():
+            a.on_task(task)
+
+    def on_event(self, event: TaskEvent, sender: str | None = None) -> None:
+        for a in self.agents.values():
+            a.on_event(event, sender)
+
+    def on_wait_message(self, msg: WaitMessageRecord) -> None:
+        agent = self.agents.get(msg.receiver)
+        if agent is not None:
+            agent.on_wait_message(msg)
+
+    def hear(self, statuses: Iterable[RobotStatus]) -> None:
+        """Statuses of robots that are not simulated here (relayed by the planner)."""
+        for st in statuses:
+            if st.id not in self.agents:
+                last = self.foreign.get(st.id)
+                if last is None or st.stamp >= last.stamp:
+                    self.foreign[st.id] = st
+
+    # -- the step ------------------------------------------------------------------------------------
+    def step(self, now: float) -> list[RobotStatus]:
+        """Every robot hears its neighbours (from the last statuses) and advances to ``now``;
+        their new statuses, to publish."""
+        known = list(self.last.values()) + [s for s in self.foreign.values() if s.id not in self.last]
+        by_id = {s.id: s for s in known}
+        chosen = self.relay.select(known) if known else {}
+        out = []
+        for rid, agent in self.agents.items():
+            agent.on_neighbours([by_id[o] for o in chosen.get(rid, ())], now)
+            st = agent.tick(now)
+            self.last[rid] = st
+            out.append(st)
+        return out
+
+    def take_wait_messages(self) -> list[WaitMessageRecord]:
+        return [w for a in self.agents.values() for w in a.take_wait_messages()]
+
+
+__all__ = ["SimFleet"]
