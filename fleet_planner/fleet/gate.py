@@ -324,6 +324,16 @@ class GateBook:
                                             watch={k: v for k, v in (rec.watch or {}).items() if k != r.id})))
         return out, stuck
 
+    def limit_of(self, r: FleetRobot, fleet: Iterable[FleetRobot]) -> float:
+        """How far (m along the path its status names) ``r``'s gate lets it drive, by the statuses
+        the planner heard (infinite if it has no gate on that path): a new leg never starts beyond
+        it (a robot takes a new leg from its first waypoint, and must not get there past a region
+        it waits for)."""
+        rec, st = self.records.get(r.id), r.status
+        if rec is None or st.path_id is None or rec.path_id != st.path_id:
+            return math.inf
+        return gate_limit(rec, st.path_id, {o.id: o.status for o in fleet})
+
     def _set(self, rec: GateRecord) -> GateRecord:
         self.records[rec.robot_id] = rec
         return rec

@@ -422,7 +422,7 @@ class FleetManager:
         that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
         more must stop at once, not drive on for another ``lead_s``."""
         path_id = max(round(now * 1e9), r.last_path_id + 1)
-        x, y = self.strategy.start_of(r, path_id / 1e9)
+        x, y = self.strategy.start_of(r, path_id / 1e9, self._gate_limit(r))
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
         self._give(r, leg, d, now)
         r.conflict = False
@@ -501,7 +501,7 @@ class FleetManager:
         robot named as the blocker is sent off."""
         path_id = self._next_path_id(r, now)
         t0 = path_id / 1e9
-        start = self.strategy.start_of(r, t0)
+        start = self.strategy.start_of(r, t0, self._gate_limit(r))
         if math.dist(start, target.pose) < 1e-6:
             path = TimedPath(r.id, r.radius, np.array([[*target.pose, t0]]))
         else:
@@ -528,6 +528,10 @@ class FleetManager:
         r.leg, r.last_path_id = leg, leg.path_id
         r.arrived_at, r.saw_action = None, False
         d.legs.append(leg)
+
+    def _gate_limit(self, r: FleetRobot) -> float:
+        """How far along its path ``r``'s gate lets it drive (a new leg never starts beyond it)."""
+        return self.gates.limit_of(r, self.robots.values()) if self.gates is not None else math.inf
 
     def _next_path_id(self, r: FleetRobot, now: float) -> int:
         return max(round((now + self.params.lead_s) * 1e9), r.last_path_id + 1)
