@@ -249,7 +249,9 @@ class GateBook:
     def on_leg(self, r: FleetRobot, path_id: int, path: TimedPath, fleet: Iterable[FleetRobot],
                now: float) -> list[GateRecord]:
         """``r`` gets leg ``path_id``: its gate record, and the records of others that grow (links
-        where the new leg passes first; the watch of robots whose links name ``r``). Returned to send."""
+        where the new leg passes first; the watch of robots whose links name ``r``; links the
+        planner heard satisfied are dropped from those). Returned to send."""
+        fleet = list(fleet)
         old = self._live(r)
         self.paths[r.id] = {pid: p for pid, p in old.items() if pid == r.status.path_id}
         self.paths[r.id][path_id] = path
@@ -288,15 +290,19 @@ class GateBook:
                             Link(r.id, path_id, ex, en) for ex, en in pieces(mine, theirs, i_mine, i_theirs))
         out = [self._set(GateRecord(robot_id=r.id, path_id=path_id, seq=0, stamp=float(now),
                                     links=tuple(lk.to_dict() for lk in links), watch=watch))]
+        heard = {o.id: o.status for o in fleet}
         for oid, rec in list(self.records.items()):
             if oid == r.id:
                 continue
             names_r = any(d["robot"] == r.id for d in rec.links)
             if oid not in grown and not names_r:
                 continue
+            watch = {**(rec.watch or {}), r.id: path_id}
+            # links the planner heard satisfied stay satisfied (progress and path ids only grow): dropped
+            kept = tuple(d for d in rec.links if not satisfied(Link.from_dict(d), heard, rec.watch or {}))
             added = tuple(lk.to_dict() for lk in grown.get(oid, []))
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
-                                            links=rec.links + added, watch={**(rec.watch or {}), r.id: path_id})))
+                                            links=kept + added, watch=watch)))
         return out
 
     def forget(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
