@@ -212,10 +212,11 @@ def test_a_gated_agent_waits_at_the_entry_whatever_the_clock_says_and_goes_once_
     for k in range(31, 200):  # 17 s: the clock says it should long be there
         st = a.tick(k * 0.1)
     assert 1.8 < st.travelled_m <= 2.0 and st.mode == "waiting" and a.waits_for == "other"
+    assert a.watches() == {"other"}
     a.on_status(said("other", 5, 4.5), 20.0)
     for k in range(200, 260):
         st = a.tick(k * 0.1)
-    assert st.travelled_m == pytest.approx(6.0) and st.progress == 1.0
+    assert st.travelled_m == pytest.approx(6.0) and st.progress == 1.0 and a.watches() == set()
 
 
 def test_a_halted_agent_stands_and_a_slowed_one_keeps_to_its_speed_limit():
