@@ -69,14 +69,15 @@ class FleetManager:
     :data:`~.coordination.COORDINATION` or a :class:`~.coordination.Coordination`;
     ``planner`` plans the legs of central coordination (anything with ``plan_incremental``, see
     :class:`~fleet_planner.planners.Planner`), by default the registry's ``md`` planner keeping
-    :attr:`margin` (one handed in should keep at least that much between discs).
+    :attr:`margin` (one handed in should keep at least that much between discs); ``gated``: send
+    each leg's precedence links (:mod:`.gate`; central coordination), for agents that respect them.
     """
 
     def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
                  params: DispatchParams | None = None, parking: Sequence[Point] = (),
                  coordination: str | Coordination = "central", planner: Planner | None = None,
                  store: JobStore | None = None, roster: Iterable[str] | None = None,
-                 max_clock_skew_s: float = MAX_CLOCK_SKEW_S):
+                 max_clock_skew_s: float = MAX_CLOCK_SKEW_S, gated: bool = True):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
         self.strategy = get_coordination(coordination)
@@ -108,7 +109,7 @@ class FleetManager:
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
         self._seq = 0
         #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
-        self.gates = GateBook() if self.strategy.sends_gates else None
+        self.gates = GateBook() if gated and self.strategy.sends_gates else None
         if store is not None:
             self._reload(store)
 

@@ -84,6 +84,10 @@ class PlannerNode(Node):
         store_file = self.declare_parameter("job_store", "", ParameterDescriptor(
             description="SQLite file keeping every accepted job across restarts (empty: jobs live in memory "
                         "only); restart with the same file and open jobs carry on", read_only=True)).value
+        gated = self.declare_parameter("gated", True, ParameterDescriptor(
+            description="central: send each robot its legs' precedence links on /robots/<id>/gate (for agents "
+                        "with gated:=true, which never enter a collision region before the robot above left it)",
+            read_only=True)).value
         skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
             "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
         defaults = DispatchParams()
@@ -101,7 +105,8 @@ class PlannerNode(Node):
             raise ValueError(f"parameter coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
                                   [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
-                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew)
+                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew,
+                                  gated=bool(gated))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
