@@ -32,11 +32,11 @@ from tqdm import tqdm  # noqa: E402
 MODES = {"gated": (True, 3600.0), "gated+replan": (True, 3.0), "clock+replan": (False, 3.0)}
 
 
-def pure(seed: int, gated: bool, lateness: float) -> tuple[bool, float, float, int, float]:
+def pure(seed: int, gated: bool, lateness: float, limit: float) -> tuple[bool, float, float, int, float]:
     from test_gate import gated_run
 
     cpu = time.process_time()
-    sim, done = gated_run(seed, gated=gated, limit=900.0, lateness_tolerance_s=lateness)
+    sim, done = gated_run(seed, gated=gated, limit=limit, lateness_tolerance_s=lateness)
     gap = sim.gap()[0]
     replans = sum("late: re-planning" in n for n in sim.notes)
     end = max((e.stamp for e in sim.events if e.event == "done"), default=sim.t)
@@ -45,18 +45,19 @@ def pure(seed: int, gated: bool, lateness: float) -> tuple[bool, float, float, i
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", default="0-3", help="pure runs: seeds a-b (inclusive) or a,b,c")
+    ap.add_argument("--seeds", default="0-3", help="pure runs: seeds a-b (inclusive) or a,b,c ('' for none)")
+    ap.add_argument("--limit", type=float, default=600.0, help="pure runs: simulated s before a run counts as stuck")
     ap.add_argument("--ros", action="store_true", help="also the ROS scenario (real DDS, about a minute per mode)")
     args = ap.parse_args()
     if "-" in args.seeds:
         a, b = args.seeds.split("-")
         seeds = list(range(int(a), int(b) + 1))
     else:
-        seeds = [int(s) for s in args.seeds.split(",")]
+        seeds = [int(s) for s in args.seeds.split(",") if s]
     rows = []
     for seed in tqdm(seeds, desc="pure fleets", file=sys.stderr):
         for mode, (gated, late) in MODES.items():
-            rows.append(("pure", seed, mode, *pure(seed, gated, late)))
+            rows.append(("pure", seed, mode, *pure(seed, gated, late, args.limit)))
     if args.ros:
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         import rclpy

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import random
 
-from test_dispatch import Sim
+from test_dispatch import FAST, PARKING, WH, Sim
 
 from fleet_planner.checker import min_separation
-from fleet_planner.fleet import RobotAgent
+from fleet_planner.fleet import DispatchParams, FleetManager, RobotAgent
 
 
 class GatedSim(Sim):
@@ -16,8 +16,9 @@ class GatedSim(Sim):
     the wire) and its gate records; ``gated`` agents respect them. ``slow`` holds
     ``(robot, from_s, to_s, scale)``: the robot drives at ``scale`` of its top speed meanwhile."""
 
-    def __init__(self, fleet, gated=True, slow=(), **kw):
-        super().__init__(fleet, **kw)
+    def __init__(self, fleet, gated=True, slow=(), wh=WH, parking=PARKING, kinds=FAST, **params):
+        super().__init__(fleet, wh, parking, kinds, **params)
+        self.fm = FleetManager(wh, kinds, DispatchParams(**params), parking, gated=gated)
         for rid, a in list(self.agents.items()):
             self.agents[rid] = RobotAgent(a.model, self.wh, gated=gated)
         self.slow = list(slow)

@@ -7,7 +7,7 @@ from test_dispatch import CHARGERS, FAST, WH, Sim, four_robots, manager, status,
 
 from fleet_planner.fleet import FleetManager, RobotAgent
 from fleet_planner.robots import RobotModel
-from msg_schemas.records import TaskEvent
+from msg_schemas.records import RobotStatus, TaskEvent
 
 
 def test_a_robot_that_dies_with_the_goods_fails_its_job_and_nobody_picks_again():
@@ -93,16 +93,17 @@ def test_a_pick_the_robot_reports_without_the_goods_on_board_is_not_done():
     sim = Sim([("r1", "cargo", *CHARGERS[0], 1.0)])
     sim.submit(task("J1", "chute_1", "B01-01"))
     robot = sim.agents["r1"]
-    tick, missed = robot.tick, []
+    tick, act, missed = robot.tick, robot._act, []
 
     def tick_missing_the_first_pick(now):
         st = tick(now)
-        if robot.loaded and not missed:  # the first pick ends without the goods: it reports so
+        if robot.loaded and not missed:  # the first pick ends without the goods: it says so, tries again later
             missed.append(now)
             robot.loaded = False
-            st = robot.tick(now)
+            st = RobotStatus.from_dict({**st.to_dict(), "loaded": False})
         return st
     robot.tick = tick_missing_the_first_pick
+    robot._act = lambda now: act(now) if not missed or now > missed[0] + 3.0 else None
     assert sim.run_until(lambda: sim.last("J1") == "picked", limit=200)
     assert missed and robot.loaded  # "picked" came only once it said it carries them (its second pick)
     assert sim.run_until(lambda: sim.last("J1") == "done", limit=200)

@@ -187,3 +187,69 @@ def test_gated_robots_slowed_and_halted_at_random_never_touch_and_do_every_job_w
 def test_without_the_gate_the_same_halts_and_no_re_planning_leave_jobs_undone():
     _, done = gated_run(2, gated=False, limit=300.0, lateness_tolerance_s=3600.0)
     assert not done  # the clock-driven fleet jams where the gated one gets through (seed 2 above)
+
+
+# -- the agent -----------------------------------------------------------------------------------
+def gated_agent():
+    from test_dispatch import CHARGERS
+
+    from fleet_planner.fleet import RobotAgent
+    from fleet_planner.robots import RobotModel
+    x, y = CHARGERS[0]
+    a = RobotAgent(RobotModel("me", FAST["cargo"], x, y, chargers=CHARGERS), WH, gated=True)
+    a.tick(0.0)
+    path = TimedPath("me", R, np.array([[x, y, 0.0], [x, y - 6.0, 6.0]]))  # 6 m north at 1 m/s
+    return a, path
+
+
+def test_a_gated_agent_waits_at_the_entry_whatever_the_clock_says_and_goes_once_the_other_is_out():
+    a, path = gated_agent()
+    a.on_path(path, 0.0, 10)
+    for k in range(1, 31):  # no record yet: it does not move
+        st = a.tick(k * 0.1)
+    assert st.travelled_m == 0.0 and st.path_id == 10
+    a.on_gate(record([Link("other", 5, 4.0, 2.0)], watch={"other": 5}))
+    for k in range(31, 200):  # 17 s: the clock says it should long be there
+        st = a.tick(k * 0.1)
+    assert 1.8 < st.travelled_m <= 2.0 and st.mode == "waiting" and a.waits_for == "other"
+    assert a.watches() == {"other"}
+    a.on_status(said("other", 5, 4.5), 20.0)
+    for k in range(200, 260):
+        st = a.tick(k * 0.1)
+    assert st.travelled_m == pytest.approx(6.0) and st.progress == 1.0 and a.watches() == set()
+
+
+def test_a_halted_agent_stands_and_a_slowed_one_keeps_to_its_speed_limit():
+    a, path = gated_agent()
+    a.on_gate(record([], path_id=10))
+    a.on_path(path, 0.0, 10)
+    a.speed_scale = 0.0
+    for k in range(1, 21):
+        st = a.tick(k * 0.1)
+    assert st.travelled_m == 0.0
+    a.speed_scale = 0.3
+    for k in range(21, 41):
+        st = a.tick(k * 0.1)
+    assert 0.0 < st.travelled_m <= 0.3 * FAST["cargo"].max_speed * 2.0 + 1e-6
+    with pytest.raises(ValueError, match="speed_scale"):
+        a.speed_scale = 1.5
+
+
+def test_a_leg_the_robot_cannot_take_stops_it_and_is_planned_again_from_where_it_is():
+    from test_dispatch import Sim
+    sim = Sim(four_robots())
+    sim.submit(task("J1", "chute_2", "B04-01"))
+    assert sim.run_until(lambda: sim.last("J1") == "assigned")
+    rid = next(e.robot_id for e in sim.events if e.event == "assigned")
+    agent = sim.agents[rid]
+    leg = sim.legs[rid][-1]
+    bad = TimedPath(rid, R, leg.relative().waypoints + [3.0, 0.0, 0.0])  # starts 3 m off the robot
+    with pytest.raises(ValueError, match="starts"):
+        agent.on_path(bad, leg.t0 + 1.0, leg.path_id + 1)
+    fake = type(leg)(rid, bad, leg.path_id + 1, leg.purpose, leg.goal)  # what the planner sent it
+    r = sim.fm.robots[rid]
+    r.leg, r.last_path_id = fake, fake.path_id
+    assert sim.run_until(lambda: any("could not take leg" in n for n in sim.notes), limit=5)
+    assert agent.model.speed == 0.0  # it stopped rather than drive on a leg nobody keeps clear of
+    assert sim.run_until(lambda: sim.legs[rid][-1].path_id > fake.path_id, limit=10)
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=300)

@@ -36,7 +36,8 @@ def slowed_run(ros_context, gated: bool, lateness_s: float, rate: float = RATE, 
     """The scenario: six jobs; once two robots drive, one at 30 % for 20 s, the other halted 10 s."""
     fleet = bring_up(ros_context, WH, KINDS, MEMBERS, rate,
                      planner_params=[Parameter("parking", value=PARKING), Parameter("offline_timeout_s", value=5.0),
-                                     Parameter("lateness_tolerance_s", value=float(lateness_s))],
+                                     Parameter("lateness_tolerance_s", value=float(lateness_s)),
+                                     Parameter("gated", value=gated)],
                      agent_overrides=[Parameter("gated", value=gated)])
     notes: list[str] = []
     step = fleet.planner.fleet.step

@@ -17,6 +17,7 @@ from ..model import TimedPath
 from ..robots import RobotModel
 from ..warehouse import Warehouse
 from .coordination import AGENT_BEHAVIOR, Coordination, get_coordination
+from .gate import watched_robots
 from .legs import MAX_CLOCK_SKEW_S, station_at
 from .manual import OperatorHand
 from .obstacles import ObstacleMap
@@ -102,6 +103,15 @@ class RobotAgent:
     def waits_for(self) -> str | None:
         """The robot its safety net stops for (central coordination), if any."""
         return self.driver.waits_for
+
+    @property
+    def gate(self) -> GateRecord | None:
+        """Its current gate record (central coordination), if any."""
+        return getattr(self.driver, "gate", None)
+
+    def watches(self) -> set[str]:
+        """The robots whose statuses its gate still needs (:func:`~.gate.watched_robots`)."""
+        return watched_robots(self.gate, self.heard)
 
     @property
     def job(self) -> str | None:

@@ -131,8 +131,9 @@ class Coordination(ABC):
 
     # -- the planner's end ------------------------------------------------------------------------
     @abstractmethod
-    def start_of(self, robot: FleetRobot, t0: float) -> Point:
-        """Where ``robot`` will be at ``t0``, the start of a new leg."""
+    def start_of(self, robot: FleetRobot, t0: float, limit: float = math.inf) -> Point:
+        """Where ``robot`` will be at ``t0``, the start of a new leg (``limit``: how far along the
+        path its status names its gate lets it drive)."""
 
     @abstractmethod
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
@@ -169,10 +170,10 @@ class CentralCoordination(Coordination):
     plans_around_obstacles = True
     sends_gates = True
 
-    def start_of(self, robot: FleetRobot, t0: float) -> Point:
+    def start_of(self, robot: FleetRobot, t0: float, limit: float = math.inf) -> Point:
         """Where it stands, or, driving its leg, a little further along it at the speed its status
-        shows (never beyond where its schedule is due); driving a path the manager does not know
-        (back from offline), straight on at its velocity."""
+        shows (never beyond where its schedule is due, nor beyond ``limit``, where its gate holds
+        it); driving a path the manager does not know (back from offline), straight on at its velocity."""
         st = robot.status
         if robot.leg is None or not robot.on_leg:
             ahead = max(0.0, t0 - st.stamp) if st.mode == "driving" else 0.0
@@ -180,7 +181,10 @@ class CentralCoordination(Coordination):
         wp = robot.leg.path.waypoints
         arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
         due = float(np.interp(t0, wp[:, 2], arc))
-        s = min(st.progress * arc[-1] + math.hypot(st.vx, st.vy) * max(0.0, t0 - st.stamp), due, arc[-1])
+        done = st.travelled_m if st.travelled_m is not None else st.progress * arc[-1]
+        s = min(done + math.hypot(st.vx, st.vy) * max(0.0, t0 - st.stamp), due, arc[-1])
+        if s > limit:
+            s = min(s, max(done, limit - 1e-3))
         return point_at_arc(wp[:, :2], arc, s)
 
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
@@ -343,7 +347,7 @@ class BehaviorCoordination(Coordination):
     def __init__(self) -> None:
         self._finders: dict[tuple[int, float], PathFinder] = {}  # (id of the map, radius) -> finder
 
-    def start_of(self, robot: FleetRobot, t0: float) -> Point:
+    def start_of(self, robot: FleetRobot, t0: float, limit: float = math.inf) -> Point:
         """Where its status says it is: it drives its own path, so where it is now is all that is known."""
         return robot.status.x, robot.status.y
 

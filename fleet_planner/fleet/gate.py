@@ -13,7 +13,7 @@ robot may follow another down an aisle (the exit grows along the entry, a stairc
 passes first comes from the plan's times (the curve of the two travelled lengths in time passes
 on one side of the region), except where reality decides: a robot that may already be in the
 region (its due position, which it is never ahead of, reaches it soon) passes first, and a robot
-whose new path starts inside a region passes it first.
+whose new path starts inside a region passes it first (unless the other may be in it already).
 
 The robot's end is pure and small: :func:`gate_limit` says how far the robot may drive along its
 path now, given its :class:`~msg_schemas.records.GateRecord` and the other robots' last statuses
@@ -249,7 +249,10 @@ class GateBook:
     def on_leg(self, r: FleetRobot, path_id: int, path: TimedPath, fleet: Iterable[FleetRobot],
                now: float) -> list[GateRecord]:
         """``r`` gets leg ``path_id``: its gate record, and the records of others that grow (links
-        where the new leg passes first; the watch of robots whose links name ``r``). Returned to send."""
+        where the new leg passes first; the watch of robots whose links name ``r``; links the
+        planner heard satisfied are dropped from those). Returned to send."""
+        fleet = list(fleet)
+        heard = {o.id: o.status for o in fleet}
         old = self._live(r)
         self.paths[r.id] = {pid: p for pid, p in old.items() if pid == r.status.path_id}
         self.paths[r.id][path_id] = path
@@ -269,7 +272,11 @@ class GateBook:
                 on_it = o.status.path_id == pid
                 done = travelled(o.status) if on_it else None
                 done = 0.0 if done is None else min(done, p.length)
-                reach = max(done, arc_at(p, now + self.reach_s))
+                # where it may be when a new link reaches it: never ahead of its plan, nor farther
+                # than its top speed takes it from its last report
+                since = max(0.0, now - o.status.stamp) + self.reach_s
+                cap = self._held_at(o, pid, done, heard)
+                reach = max(done, min(arc_at(p, now + self.reach_s), done + o.kind.max_speed * since, cap))
                 if pid == latest:
                     theirs = sample(p, done, step=self.sample_m)
                 elif on_it:  # the path it drives until it takes its latest one: only near where it is
@@ -294,10 +301,24 @@ class GateBook:
             names_r = any(d["robot"] == r.id for d in rec.links)
             if oid not in grown and not names_r:
                 continue
+            watch = {**(rec.watch or {}), r.id: path_id}
+            # links the planner heard satisfied stay satisfied (progress and path ids only grow): dropped
+            kept = tuple(d for d in rec.links if not satisfied(Link.from_dict(d), heard, rec.watch or {}))
             added = tuple(lk.to_dict() for lk in grown.get(oid, []))
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
-                                            links=rec.links + added, watch={**(rec.watch or {}), r.id: path_id})))
+                                            links=kept + added, watch=watch)))
         return out
+
+    def _held_at(self, o: FleetRobot, pid: int, done: float, heard: Mapping[str, RobotStatus]) -> float:
+        """How far along its path ``pid`` robot ``o``'s gate lets it drive until its record changes
+        (a record that grows also releases what held it before, in one message): its gate's limit
+        on that path, where it stands if its record is for another path, infinite without one."""
+        rec = self.records.get(o.id)
+        if rec is None:
+            return math.inf
+        if rec.path_id != pid:
+            return done
+        return gate_limit(rec, pid, heard)
 
     def forget(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
         """``r`` stopped for good where its status says: the records of robots whose way from where
@@ -323,6 +344,16 @@ class GateBook:
                                             links=tuple(d for d in rec.links if d["robot"] != r.id),
                                             watch={k: v for k, v in (rec.watch or {}).items() if k != r.id})))
         return out, stuck
+
+    def limit_of(self, r: FleetRobot, fleet: Iterable[FleetRobot]) -> float:
+        """How far (m along the path its status names) ``r``'s gate lets it drive, by the statuses
+        the planner heard (infinite if it has no gate on that path): a new leg never starts beyond
+        it (a robot takes a new leg from its first waypoint, and must not get there past a region
+        it waits for)."""
+        rec, st = self.records.get(r.id), r.status
+        if rec is None or st.path_id is None or rec.path_id != st.path_id:
+            return math.inf
+        return gate_limit(rec, st.path_id, {o.id: o.status for o in fleet})
 
     def _set(self, rec: GateRecord) -> GateRecord:
         self.records[rec.robot_id] = rec

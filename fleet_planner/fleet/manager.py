@@ -75,14 +75,16 @@ class FleetManager:
     :data:`~.coordination.COORDINATION` or a :class:`~.coordination.Coordination`;
     ``planner`` plans the legs of central coordination (anything with ``plan_incremental``, see
     :class:`~fleet_planner.planners.Planner`), by default the registry's ``md`` planner keeping
-    :attr:`margin` (one handed in should keep at least that much between discs).
+    :attr:`margin` (one handed in should keep at least that much between discs); ``gated``: send
+    each leg's precedence links (:mod:`.gate`; central coordination), for agents that respect them.
     """
 
     def __init__(self, warehouse: Warehouse, kinds: Mapping[str, RobotKind],
                  params: DispatchParams | None = None, parking: Sequence[Point] = (),
                  coordination: str | Coordination = "central", planner: Planner | None = None,
                  store: JobStore | None = None, roster: Iterable[str] | None = None,
-                 max_clock_skew_s: float = MAX_CLOCK_SKEW_S, obstacle_params: ObstacleParams | None = None):
+                 max_clock_skew_s: float = MAX_CLOCK_SKEW_S, obstacle_params: ObstacleParams | None = None,
+                 gated: bool = True):
         if not kinds:
             raise ValueError("kinds: at least one robot kind is needed")
         self.strategy = get_coordination(coordination)
@@ -116,7 +118,7 @@ class FleetManager:
         self._seq = 0
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
         #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
-        self.gates = GateBook() if self.strategy.sends_gates else None
+        self.gates = GateBook() if gated and self.strategy.sends_gates else None
         # indexes valid for one step (docs/ARCHITECTURE.md: every step proportional to what changed)
         self._occ: Occupancy | None = None
         self._free_spots: dict[tuple[int, float], list[tuple[str, Point]]] = {}
@@ -473,7 +475,7 @@ class FleetManager:
         that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
         more must stop at once, not drive on for another ``lead_s``."""
         path_id = max(round(now * 1e9), r.last_path_id + 1)
-        x, y = self.strategy.start_of(r, path_id / 1e9)
+        x, y = self.strategy.start_of(r, path_id / 1e9, self._gate_limit(r))
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
         self._give(r, leg, d, now)
         r.conflict = False
@@ -563,7 +565,7 @@ class FleetManager:
         robot named as the blocker is sent off."""
         path_id = self._next_path_id(r, now)
         t0 = path_id / 1e9
-        start = self.strategy.start_of(r, t0)
+        start = self.strategy.start_of(r, t0, self._gate_limit(r))
         if math.dist(start, target.pose) < 1e-6:
             path = TimedPath(r.id, r.radius, np.array([[*target.pose, t0]]))
         else:
@@ -599,6 +601,10 @@ class FleetManager:
         if self._occ is not None:
             self._occ.touch(r)
         self._free_spots.clear()
+
+    def _gate_limit(self, r: FleetRobot) -> float:
+        """How far along its path ``r``'s gate lets it drive (a new leg never starts beyond it)."""
+        return self.gates.limit_of(r, self.robots.values()) if self.gates is not None else math.inf
 
     def _next_path_id(self, r: FleetRobot, now: float) -> int:
         lead = self.params.lead_s

@@ -109,6 +109,10 @@ class PlannerNode(Node):
         self._markers_period = self.declare_parameter("markers_period_s", 1.0, _range(
             "s of ROS time between two RViz marker arrays at most (they cost time in proportion to the fleet)",
             0.0, 60.0)).value
+        gated = self.declare_parameter("gated", True, ParameterDescriptor(
+            description="central: send each robot its legs' precedence links on /robots/<id>/gate (for agents "
+                        "with gated:=true, which never enter a collision region before the robot above left it)",
+            read_only=True)).value
         skew = self.declare_parameter("max_clock_skew_s", MAX_CLOCK_SKEW_S, _range(
             "s a robot status may be stamped ahead of the planner's clock before it is refused", 0.0, 60.0)).value
         self._max_age = self.declare_parameter("max_status_age_s", MAX_STATUS_AGE_S, _range(
@@ -143,7 +147,7 @@ class PlannerNode(Node):
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
                                   [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
                                   store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew,
-                                  roster=roster, obstacle_params=ObstacleParams(**ob_values))
+                                  roster=roster, obstacle_params=ObstacleParams(**ob_values), gated=bool(gated))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._events = self.create_publisher(String, topics.TASK_EVENTS, topics.TASK_EVENTS_QOS)
