@@ -77,6 +77,7 @@ def feed_everywhere(planner, agent, sent, text: str) -> None:
     planner._on_task(msg)
     check_answer(sent)
     planner._on_status(msg)
+    planner._take_statuses()  # (a status may wait in the inbox for the next step: parse it now)
     for callback in (agent._on_task, agent._on_event, agent._on_status, agent._on_wait_message):
         callback(msg)
 
@@ -128,10 +129,12 @@ def test_strangers_stale_and_future_statuses_are_refused_and_the_roster_is_serve
         planner._on_status(status(f"intruder{i}", now))
     planner._on_status(status("r2", now - 3600.0, "manipulator", CHARGERS[1]))  # stale
     planner._on_status(status("r2", now + 3600.0, "manipulator", CHARGERS[1]))  # far ahead
+    planner._take_statuses()  # (statuses wait in the inbox until the next step or relay tick)
     assert not any(rid.startswith("intruder") for rid in planner.fleet.robots)
     assert "r2" not in planner.fleet.robots
     assert len(planner.fleet.roster.strangers) <= 1001
     planner._on_status(status("r1", planner._now()))
+    planner._take_statuses()
     assert "r1" in planner.fleet.robots
     planner._on_task(String(data=Task(id="after_the_flood", pick="chute_1", place="B01-01").to_json()))
     assert check_answer(sent).event == "accepted"
