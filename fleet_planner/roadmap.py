@@ -81,7 +81,8 @@ class RoadMap:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return tuple(self.allowed.shape)  # type: ignore[return-value]
+        h, w = self.allowed.shape
+        return int(h), int(w)
 
     def allows(self, col: int, row: int, dcol: int, drow: int) -> bool:
         """The orthogonal move (dcol, drow) out of cell (col, row) is allowed."""
@@ -256,8 +257,8 @@ def parse_lanes(data: object, grid: GridMap, radius: float | None = None, name: 
     dead = rm.dead_ends(free)
     if dead:
         c, rr = dead[0]
-        k = lane_of_cell.get((c, rr))
-        where = f"lanes[{k}]" if k is not None else "lanes"
+        owner_lane = lane_of_cell.get((c, rr))
+        where = f"lanes[{owner_lane}]" if owner_lane is not None else "lanes"
         _V.fail(where, f"cell [{c}, {rr}] is a dead end: the lanes lead in but not out")
     return rm
 
@@ -276,7 +277,7 @@ def lane_runs(rm: RoadMap, free: np.ndarray) -> list[tuple[tuple[int, int], tupl
     a = rm.allowed
     runs = []
     for dc, dr in _ORTHO:
-        def one_way(c: int, r: int) -> bool:
+        def one_way(c: int, r: int, dc: int = dc, dr: int = dr) -> bool:
             c2, r2 = c + dc, r + dr
             return (0 <= c2 < w and 0 <= r2 < h and bool(free[r, c]) and bool(free[r2, c2])
                     and bool(a[r, c] & _BIT[(dc, dr)]) and not a[r2, c2] & _BIT[(-dc, -dr)])
@@ -540,7 +541,7 @@ def draw_lanes(ax, grid: GridMap, lanes: RoadMap, radius: float | None = None, z
     free = free_cells(grid, radius if radius is not None else (lanes.radius or 0.354))
     one, two = lanes.arrows(free)
     if len(two):
-        ax.add_collection(LineCollection(two.reshape(-1, 2, 2), colors=[(0.6, 0.6, 0.6, 0.5)], linewidths=0.4,
+        ax.add_collection(LineCollection(list(two.reshape(-1, 2, 2)), colors=[(0.6, 0.6, 0.6, 0.5)], linewidths=0.4,
                                          zorder=zorder), autolim=False)
     if len(one):
         ax.quiver(one[:, 0], one[:, 1], one[:, 2], one[:, 3], angles="xy", scale_units="xy", scale=1.25,
@@ -560,7 +561,7 @@ def plot_roadmap(grid: GridMap, lanes: RoadMap, path_png: str | Path,
     ax.imshow(np.where(grid.blocked, 0.25, 0.97), cmap="gray", vmin=0, vmax=1, extent=(0, w, h, 0),
               origin="upper", interpolation="nearest")
     draw_lanes(ax, grid, lanes)
-    for s, (x, y) in (stations or {}).items():
+    for x, y in (stations or {}).values():
         ax.plot(x, y, "s", color="green", ms=5)
     ax.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title=title or f"road map {lanes.name}",
            xlabel="x [m]", ylabel="y [m] (downwards)")

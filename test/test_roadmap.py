@@ -121,7 +121,8 @@ def test_md_and_prior_plan_along_the_lanes_and_pass_the_checker(planner):
 def _no_westward_run(wp: np.ndarray) -> bool:
     """No piece of the path runs west along row 2 inside the aisle."""
     for (x0, y0, _), (x1, y1, _) in zip(wp, wp[1:]):
-        if abs(y0 - 2.5) < 1e-6 and abs(y1 - 2.5) < 1e-6 and x1 < x0 - 1e-6 and min(x0, x1) < 10.0 and max(x0, x1) > 2.0:
+        on_row = abs(y0 - 2.5) < 1e-6 and abs(y1 - 2.5) < 1e-6
+        if on_row and x1 < x0 - 1e-6 and min(x0, x1) < 10.0 and max(x0, x1) > 2.0:
             return False
     return True
 
