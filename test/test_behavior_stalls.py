@@ -108,3 +108,28 @@ def test_a_robot_whose_replan_finds_no_way_escapes_into_a_less_crowded_place():
     assert _drive(fleet, limit_s=90.0) >= 0.0
     assert fleet.arrived("a") and fleet.arrived("b"), fleet.behaviors()
     assert sum(fleet.controller(i).escapes for i in fleet.ids) >= 1
+
+
+def _waiting_in_a_docking_robots_way(params: BehaviorParams):
+    """A robot waiting (for some robot behind it) stands in the drive channel of a robot that
+    drives to its station (Dock: it keeps moving, the others give way, IV.B.5)."""
+    from fleet_planner.behavior import BehaviorController, RobotView
+
+    grid = GridMap.from_rows(["........", "........", "........"])
+    w = BehaviorController(grid, "w", 0.35, 0.8, (3.0, 1.5), params)
+    w.assign((0.5, 1.5))
+    w.behavior, w.partner = Behavior.WAIT_KEEP_DISTANCE, "x"
+    dock = RobotView("d", (4.2, 1.5), 0.35, Behavior.DOCK, next_waypoint=(0.5, 1.5), station="S")
+    return w, dock
+
+
+def test_a_waiting_robot_gives_way_to_a_docking_robot():
+    """Without giving way (control) the waiting robot holds in the Dock robot's channel for good;
+    with it, it leaves the channel."""
+    from fleet_planner.behavior import in_critical_area
+
+    for params, gives_way in ((BehaviorParams(give_way_reach=0.0), False), (BehaviorParams(), True)):
+        w, dock = _waiting_in_a_docking_robots_way(params)
+        for k in range(30):
+            w.move(0.1 * k, 0.1, [dock])
+        assert in_critical_area(dock, w.view(), params) is not gives_way

@@ -896,7 +896,8 @@ class BehaviorController:
         """Motions out of the way of a travelling Dock robot whose critical area I stand in."""
         me = self.view()
         for o in sensed:
-            if o.behavior is not B.DOCK or o.direction is None or math.dist(o.position, self.pos) > 2.0:
+            if (o.behavior is not B.DOCK or o.direction is None
+                    or math.dist(o.position, self.pos) > self.params.give_way_reach):
                 continue
             if not in_critical_area(o, me, self.params):
                 continue
