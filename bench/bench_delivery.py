@@ -301,6 +301,8 @@ def main(argv=None) -> int:
                 for method in args.methods:
                     rows.append(run(problem, m, method, args, bar))
                     bar.update()
+                    if args.csv:   # as it goes: a long run stopped early keeps what it measured
+                        write_csv(rows, args.csv)
     if not rows:
         print("bench_delivery: nothing ran", file=sys.stderr)
         return 1

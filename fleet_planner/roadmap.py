@@ -400,7 +400,7 @@ def _commodities(stations: Sequence[str], demand: Mapping[tuple[str, str], float
 
 def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
                  demand: Mapping[tuple[str, str], float], *, minor_share: float = 0.2, keep_right: float = 0.2,
-                 rounds: int = 3, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
+                 rounds: int = 3, time_limit_s: float = 300.0, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
     """ARMO's road map for discs of ``radius``: one-way runs where the demand allows.
 
     The program (ours, after the paper's summary): the demand-weighted multi-commodity min-cost
@@ -413,7 +413,8 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
     ``minor_share`` of the flow along it becomes one-way (its reverse moves removed) and the
     program is solved again on what is left (so the flows re-route along the lanes); a batch that
     makes the program infeasible (it would cut the space) is halved, the most balanced runs
-    staying two-way. Runs no flow uses stay two-way. ``demand[(a, b)]``: how often robots drive
+    staying two-way. Runs no flow uses stay two-way. No new round or halving starts after
+    ``time_limit_s`` (the lanes found so far are kept). ``demand[(a, b)]``: how often robots drive
     from station a to station b (any scale)."""
     import time
 
@@ -483,6 +484,8 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
     if not res.success:
         raise ValueError(f"armo: the free space of the stations is not connected ({res.message})")
     for _ in range(max(rounds, 0)):
+        if time.perf_counter() - t0 >= time_limit_s:
+            break
         status, objective = str(res.message), float(res.fun)
         flow = res.x[:n_cost * n_arcs].reshape(n_cost, n_arcs).sum(axis=0)
         fwd = np.bincount(run_of, weights=flow[:m], minlength=len(runs))
@@ -491,7 +494,7 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
         cand = [int(r) for r in np.nonzero((major > 1e-9) & (minor <= minor_share * major))[0]
                 if r not in one_way_runs]
         cand.sort(key=lambda r: minor[r] / major[r])          # the clearest first
-        while cand:
+        while cand and time.perf_counter() - t0 < time_limit_s:
             trial = open_arc.copy()
             for r in cand:
                 against = (arc_run == r) & (np.arange(n_arcs) >= m if fwd[r] >= back[r] else np.arange(n_arcs) < m)

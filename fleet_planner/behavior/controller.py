@@ -149,6 +149,8 @@ class BehaviorController:
             nxt = (float(self.path[self.wp, 0]), float(self.path[self.wp, 1]))
             ahead = math.dist(self.pos, nxt)
             remaining, straight = ahead + float(self.tail[self.wp]), ahead + float(self.run[self.wp])
+            if self.escape_to is not None and self.goal is not None:   # escaping: still bound for the goal
+                remaining += math.dist(self.escape_to, self.goal)
         return RobotView(self.id, self.position, self.radius, self.behavior, nxt, remaining, straight,
                          self.station, self.partner, self.no_space,
                          self.holds[0] if self.holds else None, self.dock_since, self.retreat)
