@@ -400,7 +400,7 @@ def _commodities(stations: Sequence[str], demand: Mapping[tuple[str, str], float
 
 def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
                  demand: Mapping[tuple[str, str], float], *, minor_share: float = 0.2, keep_right: float = 0.2,
-                 rounds: int = 3, time_limit_s: float = 300.0, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
+                 rounds: int = 3, time_limit_s: float = 120.0, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
     """ARMO's road map for discs of ``radius``: one-way runs where the demand allows.
 
     The program (ours, after the paper's summary): the demand-weighted multi-commodity min-cost
