@@ -20,7 +20,8 @@ and its wall time. Exit status 1 when any run had a collision (or an invalid tra
 
     .venv/bin/python bench/bench_delivery.py [--quick] [--maps warehouse,large,warehouse-10-20-10-2-1]
         [--sizes 20,40,50,100] [--methods md,prior,behavior] [--deliveries-per-robot 3] [--seed 0]
-        [--csv out/bench_delivery.csv] [--plot out/bench_delivery.png]
+        [--csv out/bench_delivery.csv] [--plot out/bench_delivery.png] [--lanes config/lanes_warehouse.yaml]
+    .venv/bin/python bench/bench_delivery.py --paper002     # paper 002's Tables I-III: ARMO, PRIOR, BBMRCA, md
 """
 from __future__ import annotations
 
@@ -49,6 +50,12 @@ from fleet_planner.warehouse import generate_warehouse, load_warehouse  # noqa: 
 
 BUILTIN_MAPS = ("warehouse", "large")
 QUICK = {"maps": "warehouse", "sizes": "20", "methods": "md,prior,behavior", "per_robot": 2}
+#: paper 002's comparison: the open default warehouse, `large` (long one-robot rack aisles) and the
+#: confined MovingAI warehouse, with its three methods and ours
+PAPER002 = {"maps": "warehouse,large,warehouse-10-20-10-2-1", "sizes": "20,50,100",
+            "methods": "armo,prior,behavior,md"}
+#: the paper's names of the methods
+PAPER_NAMES = {"armo": "ARMO", "prior": "PRIOR", "behavior": "BBMRCA", "md": "md"}
 
 
 @dataclass
@@ -70,6 +77,7 @@ class Row:
     failed_plans: int
     min_gap: float
     violations: int      # central: other breaches of the plan contract on the driven trajectories
+    precompute_s: float = 0.0   # armo: wall time of the road map's program
 
 
 def _args(argv=None) -> argparse.Namespace:
@@ -94,7 +102,19 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0, help="deliveries, homes, stations (default: %(default)s)")
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     p.add_argument("--plot", type=Path, help="also draw CTime per method and N to this PNG")
+    p.add_argument("--paper002", action="store_true",
+                   help="paper 002's comparison (its Tables I-III): ARMO, PRIOR, BBMRCA and md on "
+                        f"{PAPER002['maps']} at N={PAPER002['sizes']}, printed in the paper's layout "
+                        "(options given win; --plot defaults to out/paper002.png)")
+    p.add_argument("--lanes", type=Path, default=None,
+                   help="a lanes file (config/lanes_*.yaml): every method plans along its road map")
     args = p.parse_args(argv)
+    if args.paper002:
+        args.maps = args.maps or PAPER002["maps"]
+        for name in ("sizes", "methods"):
+            if getattr(args, name) == p.get_default(name):
+                setattr(args, name, PAPER002[name])
+        args.plot = args.plot or REPO / "out" / "paper002.png"
     if args.quick:   # what the command line leaves at its default
         args.maps = args.maps or QUICK["maps"]
         for name in ("sizes", "methods", "per_robot"):
@@ -165,6 +185,27 @@ def table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
+def paper_table(rows: list[Row]) -> str:
+    """The rows in the layout of paper 002's Tables I-III: per map, #R, M, #Del., avg. v, CTime
+    (and, ours, how many were done, collisions, robots deadlocked, ARMO's pre-computation)."""
+    out = []
+    for m in dict.fromkeys(r.map for r in rows):
+        out.append(f"{m}")
+        out.append(f"{'#R':>4}  {'M':<7} {'#Del.':>6} {'avg. v (m/s)':>13} {'CTime (s)':>10}   "
+                   f"{'done':>5} {'coll':>4} {'dead':>4} {'pre s':>6}")
+        for n in sorted({r.n for r in rows if r.map == m}):
+            for k, r in enumerate(r for r in rows if r.map == m and r.n == n):
+                ctime = f"{r.ctime:.0f}" + ("" if r.stop == "done" else "!")
+                pre = f"{r.precompute_s:.0f}" if r.method == "armo" else ""
+                out.append(f"{n if k == 0 else '':>4}  {PAPER_NAMES.get(r.method, r.method):<7} {r.deliveries:>6} "
+                           f"{r.avg_velocity:>13.2f} {ctime:>10}   {r.completed:>5} {r.collisions:>4} "
+                           f"{r.deadlocks:>4} {pre:>6}")
+        out.append("")
+    out.append("CTime with '!': unfinished (the stop time). pre s: wall time of ARMO's road map program "
+               "(loaded machine). ARMO = robots planning along ARMO's road map, kept apart by the behaviours.")
+    return "\n".join(out)
+
+
 def write_csv(rows: list[Row], path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as f:
@@ -215,6 +256,14 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
             shown[0] = now
             bar.set_postfix_str(f"{label}: {done}/{total} deliveries, t={t:.0f} s")
 
+    pre = 0.0
+    if method == "armo" and getattr(problem.grid, "lanes", None) is None:
+        from fleet_planner.delivery import armo_problem
+
+        bar.set_postfix_str(f"{label}: road map")
+        t0 = time.perf_counter()
+        problem = armo_problem(problem)[0]
+        pre = time.perf_counter() - t0
     res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress)
     if res.collisions or res.violations:
         bar.write(f"!!! FAIL: {label} seed={args.seed}: {res.collisions} overlapping pair(s), min gap "
@@ -223,7 +272,9 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
         bar.write(f"{label}: unfinished ({res.stop}) after {res.ctime:.0f} s simulated: "
                   f"{res.completed}/{res.n_deliveries} deliveries, {res.deadlocks} robot(s) deadlocked",
                   file=sys.stderr)
-    return to_row(m, res)
+    row = to_row(m, res)
+    row.precompute_s = pre
+    return row
 
 
 def main(argv=None) -> int:
@@ -238,6 +289,11 @@ def main(argv=None) -> int:
             for n in args.sizes:
                 try:
                     problem = make_problem(m, n, args)   # the same problem for every method
+                    if args.lanes is not None:
+                        from fleet_planner.delivery import lanes_problem
+                        from fleet_planner.roadmap import load_lanes
+
+                        problem = lanes_problem(problem, load_lanes(args.lanes, problem.grid, problem.radius))
                 except ValueError as exc:
                     bar.write(f"{m} N={n}: skipped: {exc}", file=sys.stderr)
                     bar.update(len(args.methods))
@@ -245,10 +301,15 @@ def main(argv=None) -> int:
                 for method in args.methods:
                     rows.append(run(problem, m, method, args, bar))
                     bar.update()
+                    if args.csv:   # as it goes: a long run stopped early keeps what it measured
+                        write_csv(rows, args.csv)
     if not rows:
         print("bench_delivery: nothing ran", file=sys.stderr)
         return 1
     print(table(rows))
+    if args.paper002:
+        print()
+        print(paper_table(rows))
     if args.csv:
         write_csv(rows, args.csv)
     if args.plot:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import math
 import sys
 from pathlib import Path
 
@@ -37,6 +38,7 @@ def main() -> None:
     p.add_argument("--stall", type=float, default=300.0)
     p.add_argument("--cap", type=float, default=4 * 3600.0)
     p.add_argument("--wall-cap", type=float, default=300.0)
+    p.add_argument("--near", action="store_true", help="also the robots near each stuck one")
     p.add_argument("--lanes", choices=("none", "armo"), default="none",
                    help="armo: the robots plan along ARMO's road map (the 'armo' method)")
     a = p.parse_args()
@@ -78,6 +80,13 @@ def main() -> None:
             kind = f"cycle{len(ids) - ids.index(end)}"
         kinds[(c.behavior.value, kind)] += 1
         blocked = f" blocked {t - c.blocked_since:.0f}s" if c.blocked_since is not None else ""
+        if a.near:
+            for o in fleet.ids:
+                co = fleet.controller(o)
+                if o != r.id and min(math.dist(co.pos, c.pos), math.dist(co.pos, c.goal or c.pos)) < 3.0:
+                    print(f"      near {o}: {co.behavior.value} @({co.pos[0]:.2f},{co.pos[1]:.2f}) "
+                          f"path={'none' if co.path is None else len(co.path)} goal={co.goal} esc={co.escapes}")
+            print(f"      goal {c.goal} escapes={c.escapes} escape_to={c.escape_to} yields={c.yields}")
         print(f"  {r.id} phase={r.phase} since-progress={t - r.progress_t:.0f}s replans={c.replans} "
               f"fails={c.replan_failures} dl={c.deadlocks} off_path={c.off_path}{blocked}: "
               + " => ".join(desc) + "  " + tail)

@@ -207,6 +207,11 @@ def _draw_map(ax, grid: GridMap, robots: Sequence[RobotSpec], plan: Plan, colour
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     ax.set_aspect("equal")
+    lanes = getattr(grid, "lanes", None)   # a road map of directed lanes (fleet_planner.roadmap)
+    if lanes is not None:
+        from .roadmap import draw_lanes
+
+        draw_lanes(ax, grid, lanes, radius=max((r.radius for r in robots), default=None))
     paths = plan.by_id()
     # line widths and fonts follow the drawn size of a metre (points per metre of the map)
     bbox = ax.get_window_extent()

@@ -81,7 +81,8 @@ class RoadMap:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return tuple(self.allowed.shape)  # type: ignore[return-value]
+        h, w = self.allowed.shape
+        return int(h), int(w)
 
     def allows(self, col: int, row: int, dcol: int, drow: int) -> bool:
         """The orthogonal move (dcol, drow) out of cell (col, row) is allowed."""
@@ -256,8 +257,8 @@ def parse_lanes(data: object, grid: GridMap, radius: float | None = None, name: 
     dead = rm.dead_ends(free)
     if dead:
         c, rr = dead[0]
-        k = lane_of_cell.get((c, rr))
-        where = f"lanes[{k}]" if k is not None else "lanes"
+        owner_lane = lane_of_cell.get((c, rr))
+        where = f"lanes[{owner_lane}]" if owner_lane is not None else "lanes"
         _V.fail(where, f"cell [{c}, {rr}] is a dead end: the lanes lead in but not out")
     return rm
 
@@ -276,7 +277,7 @@ def lane_runs(rm: RoadMap, free: np.ndarray) -> list[tuple[tuple[int, int], tupl
     a = rm.allowed
     runs = []
     for dc, dr in _ORTHO:
-        def one_way(c: int, r: int) -> bool:
+        def one_way(c: int, r: int, dc: int = dc, dr: int = dr) -> bool:
             c2, r2 = c + dc, r + dr
             return (0 <= c2 < w and 0 <= r2 < h and bool(free[r, c]) and bool(free[r2, c2])
                     and bool(a[r, c] & _BIT[(dc, dr)]) and not a[r2, c2] & _BIT[(-dc, -dr)])
@@ -399,7 +400,7 @@ def _commodities(stations: Sequence[str], demand: Mapping[tuple[str, str], float
 
 def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
                  demand: Mapping[tuple[str, str], float], *, minor_share: float = 0.2, keep_right: float = 0.2,
-                 rounds: int = 3, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
+                 rounds: int = 3, time_limit_s: float = 120.0, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
     """ARMO's road map for discs of ``radius``: one-way runs where the demand allows.
 
     The program (ours, after the paper's summary): the demand-weighted multi-commodity min-cost
@@ -412,7 +413,8 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
     ``minor_share`` of the flow along it becomes one-way (its reverse moves removed) and the
     program is solved again on what is left (so the flows re-route along the lanes); a batch that
     makes the program infeasible (it would cut the space) is halved, the most balanced runs
-    staying two-way. Runs no flow uses stay two-way. ``demand[(a, b)]``: how often robots drive
+    staying two-way. Runs no flow uses stay two-way. No new round or halving starts after
+    ``time_limit_s`` (the lanes found so far are kept). ``demand[(a, b)]``: how often robots drive
     from station a to station b (any scale)."""
     import time
 
@@ -482,6 +484,8 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
     if not res.success:
         raise ValueError(f"armo: the free space of the stations is not connected ({res.message})")
     for _ in range(max(rounds, 0)):
+        if time.perf_counter() - t0 >= time_limit_s:
+            break
         status, objective = str(res.message), float(res.fun)
         flow = res.x[:n_cost * n_arcs].reshape(n_cost, n_arcs).sum(axis=0)
         fwd = np.bincount(run_of, weights=flow[:m], minlength=len(runs))
@@ -490,7 +494,7 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
         cand = [int(r) for r in np.nonzero((major > 1e-9) & (minor <= minor_share * major))[0]
                 if r not in one_way_runs]
         cand.sort(key=lambda r: minor[r] / major[r])          # the clearest first
-        while cand:
+        while cand and time.perf_counter() - t0 < time_limit_s:
             trial = open_arc.copy()
             for r in cand:
                 against = (arc_run == r) & (np.arange(n_arcs) >= m if fwd[r] >= back[r] else np.arange(n_arcs) < m)
@@ -540,7 +544,7 @@ def draw_lanes(ax, grid: GridMap, lanes: RoadMap, radius: float | None = None, z
     free = free_cells(grid, radius if radius is not None else (lanes.radius or 0.354))
     one, two = lanes.arrows(free)
     if len(two):
-        ax.add_collection(LineCollection(two.reshape(-1, 2, 2), colors=[(0.6, 0.6, 0.6, 0.5)], linewidths=0.4,
+        ax.add_collection(LineCollection(list(two.reshape(-1, 2, 2)), colors=[(0.6, 0.6, 0.6, 0.5)], linewidths=0.4,
                                          zorder=zorder), autolim=False)
     if len(one):
         ax.quiver(one[:, 0], one[:, 1], one[:, 2], one[:, 3], angles="xy", scale_units="xy", scale=1.25,
@@ -560,7 +564,7 @@ def plot_roadmap(grid: GridMap, lanes: RoadMap, path_png: str | Path,
     ax.imshow(np.where(grid.blocked, 0.25, 0.97), cmap="gray", vmin=0, vmax=1, extent=(0, w, h, 0),
               origin="upper", interpolation="nearest")
     draw_lanes(ax, grid, lanes)
-    for s, (x, y) in (stations or {}).items():
+    for x, y in (stations or {}).values():
         ax.plot(x, y, "s", color="green", ms=5)
     ax.set(xlim=(0, w), ylim=(h, 0), aspect="equal", title=title or f"road map {lanes.name}",
            xlabel="x [m]", ylabel="y [m] (downwards)")

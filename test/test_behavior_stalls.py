@@ -80,3 +80,56 @@ def test_head_on_chains_in_a_one_cell_aisle_back_out_in_a_retreat_wave():
     assert control.stats().deadlocks > 0
     assert sum(control.controller(i).yields for i in control.ids) == 0
     assert control.time > waves.time   # and the waves finish sooner
+
+
+def _niche_corridor(params: BehaviorParams) -> BehaviorFleet:
+    """A one-cell corridor, the only way between its ends, with a one-cell niche above it: two
+    robots meet head-on in it. No re-plan finds a way round (there is none), so a virtual wall
+    does not help."""
+    grid = GridMap.from_rows(["@@@@.@@@@@@@@@",
+                              "..............",
+                              "@@@@@@@@@@@@@@"])
+    robots = [RobotSpec("a", 0.35, 0.8, (2.5, 1.5), (13.5, 1.5)), RobotSpec("b", 0.35, 0.8, (12.5, 1.5), (0.5, 1.5))]
+    fleet = BehaviorFleet(grid, robots, params)
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    return fleet
+
+
+def test_a_robot_whose_replan_finds_no_way_escapes_into_a_less_crowded_place():
+    """Head-on in a one-cell corridor without another way: the re-plan behind a virtual wall (IV.C)
+    finds no path; the robot drives into the niche (a less crowded place off the other's way,
+    ours after IV.B.8) and both reach their goals. Without escapes (control) they stay stuck."""
+    control = _niche_corridor(BehaviorParams(escape_after=0.0))
+    _drive(control, limit_s=90.0)
+    assert not (control.arrived("a") and control.arrived("b"))
+
+    fleet = _niche_corridor(BehaviorParams())
+    assert _drive(fleet, limit_s=90.0) >= 0.0
+    assert fleet.arrived("a") and fleet.arrived("b"), fleet.behaviors()
+    assert sum(fleet.controller(i).escapes for i in fleet.ids) >= 1
+
+
+def _waiting_in_a_docking_robots_way(params: BehaviorParams):
+    """A robot waiting (for some robot behind it) stands in the drive channel of a robot that
+    drives to its station (Dock: it keeps moving, the others give way, IV.B.5)."""
+    from fleet_planner.behavior import BehaviorController, RobotView
+
+    grid = GridMap.from_rows(["........", "........", "........"])
+    w = BehaviorController(grid, "w", 0.35, 0.8, (3.0, 1.5), params)
+    w.assign((0.5, 1.5))
+    w.behavior, w.partner = Behavior.WAIT_KEEP_DISTANCE, "x"
+    dock = RobotView("d", (4.2, 1.5), 0.35, Behavior.DOCK, next_waypoint=(0.5, 1.5), station="S")
+    return w, dock
+
+
+def test_a_waiting_robot_gives_way_to_a_docking_robot():
+    """Without giving way (control) the waiting robot holds in the Dock robot's channel for good;
+    with it, it leaves the channel."""
+    from fleet_planner.behavior import in_critical_area
+
+    for params, gives_way in ((BehaviorParams(give_way_reach=0.0), False), (BehaviorParams(), True)):
+        w, dock = _waiting_in_a_docking_robots_way(params)
+        for k in range(30):
+            w.move(0.1 * k, 0.1, [dock])
+        assert in_critical_area(dock, w.view(), params) is not gives_way

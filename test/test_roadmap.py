@@ -121,7 +121,8 @@ def test_md_and_prior_plan_along_the_lanes_and_pass_the_checker(planner):
 def _no_westward_run(wp: np.ndarray) -> bool:
     """No piece of the path runs west along row 2 inside the aisle."""
     for (x0, y0, _), (x1, y1, _) in zip(wp, wp[1:]):
-        if abs(y0 - 2.5) < 1e-6 and abs(y1 - 2.5) < 1e-6 and x1 < x0 - 1e-6 and min(x0, x1) < 10.0 and max(x0, x1) > 2.0:
+        on_row = abs(y0 - 2.5) < 1e-6 and abs(y1 - 2.5) < 1e-6
+        if on_row and x1 < x0 - 1e-6 and min(x0, x1) < 10.0 and max(x0, x1) > 2.0:
             return False
     return True
 
@@ -129,3 +130,15 @@ def _no_westward_run(wp: np.ndarray) -> bool:
 def test_a_road_map_of_another_map_is_refused():
     with pytest.raises(ValueError):
         with_lanes(_grid(), RoadMap.open(GridMap.from_rows(["...", "..."])))
+
+
+def test_the_shipped_lanes_file_of_the_default_warehouse_loads_and_connects_its_stations():
+    from fleet_planner.warehouse import config_path, load_warehouse
+
+    wh = load_warehouse()
+    lanes = load_lanes(config_path("lanes_warehouse.yaml"), wh.grid)
+    free = free_cells(wh.grid, lanes.radius)
+    assert lanes.one_way_moves() > 100
+    cells = [wh.grid.cell_of(s.x, s.y) for s in wh.stations.values() if s.type != "charger"]
+    cells = [c for c in cells if free[c[1], c[0]]]
+    assert len(cells) >= 20 and lanes.unreachable_pairs(free, cells) == []

@@ -19,7 +19,10 @@ controller, and many robots make a steppable fleet. By concern, innermost first:
 * :mod:`.controller` - :class:`BehaviorController`, one robot (the agent node in
   ``coordination:=behavior`` calls its ``step``); also our *retreat waves* (issue 13), which let
   chains of robots facing each other in a one-cell aisle back out robot by robot, where the
-  paper's WaitMessages and re-planning leave them re-planning back and forth;
+  paper's WaitMessages and re-planning leave them re-planning back and forth; *escapes* (ours,
+  after IV.B.8): a robot whose re-plan finds no way, or that made no progress for
+  ``escape_after``, moves into a less crowded place nearby and re-plans from there; and waiting
+  robots give way to a Dock robot (IV.B.5);
 * :mod:`.simulation` - :class:`BehaviorFleet`, the decentralised fleet as one simulation;
 * :mod:`.safety`     - :func:`safety_stop`, the critical area as the safety net of a robot that
   follows a central plan.

@@ -27,6 +27,7 @@ from .views import RobotView
 B = Behavior
 _COS_STRAIGHT = math.cos(math.radians(10.0))  # a path bending less than this at a waypoint goes on straight
 _PROGRESS = 0.05  # m: coming this much closer to the goal (straight line) is progress (stats)
+_ESCAPE_HOLD_S = 3.0  # s: an escaped robot stands in its less crowded place at least this long
 
 
 def _xy(p: np.ndarray) -> tuple[float, float]:
@@ -104,7 +105,11 @@ class BehaviorController:
         self.retreat: tuple[float, str] | None = None  # the retreat wave it belongs to (see RobotView.retreat)
         self.retreat_at = -math.inf           # when it joined that wave
         self.yield_after = -math.inf          # no new attempt to give way to a retreat before this time
-        self.deadlocks = self.replans = self.replan_failures = self.yields = 0
+        self.escape_to: np.ndarray | None = None  # the less crowded place it drives to (see _escape)
+        self.escape_end = -math.inf           # the escape ends then at the latest
+        self.escape_hold = -math.inf          # standing in the less crowded place at least until then
+        self.escape_ready = -math.inf         # no new escape before this time
+        self.deadlocks = self.replans = self.replan_failures = self.yields = self.escapes = 0
 
     # -- public ---------------------------------------------------------------------------
     @property
@@ -131,6 +136,7 @@ class BehaviorController:
             self.docking.withdraw(self.station, self.id)
             self.dock_since = None
         self.goal, self.station, self.arrived = (float(g[0]), float(g[1])), station, False
+        self.escape_to = None
         self._set_path(path)
         self.best_distance, self.progress_at = math.dist(self.pos, g), self.time
         self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
@@ -143,6 +149,8 @@ class BehaviorController:
             nxt = (float(self.path[self.wp, 0]), float(self.path[self.wp, 1]))
             ahead = math.dist(self.pos, nxt)
             remaining, straight = ahead + float(self.tail[self.wp]), ahead + float(self.run[self.wp])
+            if self.escape_to is not None and self.goal is not None:   # escaping: still bound for the goal
+                remaining += math.dist(self.escape_to, self.goal)
         return RobotView(self.id, self.position, self.radius, self.behavior, nxt, remaining, straight,
                          self.station, self.partner, self.no_space,
                          self.holds[0] if self.holds else None, self.dock_since, self.retreat)
@@ -316,6 +324,9 @@ class BehaviorController:
         behaviour, the traffic rules, and a re-plan when the behaviour failed."""
         if self.holds is not None and not self.docking.keeps(self.holds[0], self.id):
             self.holds = None                   # another robot asked to dock earlier: queue again
+        if self.escape_to is not None and (self.time >= self.escape_end or (
+                self.path is None and self.time >= self.escape_hold and not self._in_the_way(sensed))):
+            self._resume()                      # made room (or took too long): back to the goal
         if self.path is None:                   # idle, or parked on its goal (docked if it holds)
             self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
             return
@@ -339,6 +350,9 @@ class BehaviorController:
         me = self._apply_rules(me, in_front, sensed)
         if self._failed(me, sensed, in_front):
             self._replan(sensed)
+        elif (self.params.escape_after > 0 and self.escape_to is None and self.behavior is not B.WAIT_FOR_DOCKING
+              and self.time - self.progress_at > self.params.escape_after and self.time >= self.escape_ready):
+            self._escape(sensed)
 
     def _select_holding(self, me: RobotView, sensed: list[RobotView]) -> None:
         """A robot holding its station docks (IV.B.5), unless it leaves the station and must give
@@ -440,6 +454,101 @@ class BehaviorController:
         else:
             self.yields += 1
         return True
+
+    # -- escapes: into a less crowded place (ours) ----------------------------------------------
+    # Interpretation (ours, issue 13): the paper's way out of a deadlock is a re-plan behind a
+    # virtual wall, assuming "the robot that executed the re-planning can always find an
+    # alternative path" (IV.C). In a jam it finds none (measured: a robot failed 101 re-plans in a
+    # row at the crossing of the default warehouse, 40 robots), and a robot in an active behaviour
+    # (an Exchange without room) is not even reached by WaitMessages. The paper already lets a
+    # robot waiting to dock "move back or move into a less crowded area" (IV.B.8); we let any
+    # robot do that when its re-plan finds no way, or when it came no closer to its goal for
+    # ``escape_after`` seconds: it drives to the least crowded free place within
+    # ``escape_reach`` that it can reach without touching a robot it senses, then plans its path
+    # to the goal again. One escape per ``escape_after`` at most.
+
+    def _escape(self, sensed: Sequence[RobotView]) -> bool:
+        """Start an escape into a less crowded place; True when one was found."""
+        if self.goal is None or self.holds is not None:
+            return False
+        self.escape_ready = self.time + self.params.escape_after
+        free = self.finder.free
+        res = self.grid.resolution
+        reach = self.params.escape_reach
+        c0, r0 = self.grid.cell_of(*self.position)
+        k = int(math.ceil(reach / res))
+        rows, cols = np.nonzero(free[max(r0 - k, 0):r0 + k + 1, max(c0 - k, 0):c0 + k + 1])
+        if not len(rows):
+            return False
+        centres = np.column_stack([cols + max(c0 - k, 0) + 0.5, rows + max(r0 - k, 0) + 0.5]) * res
+        d_me = np.hypot(*(centres - self.pos).T)
+        keep = (d_me <= reach) & (d_me >= res)
+        centres, d_me = centres[keep], d_me[keep]
+        if not len(centres):
+            return False
+        others = np.array([o.position for o in sensed]).reshape(-1, 2)
+        if len(others):
+            room = np.min(np.hypot(centres[:, None, 0] - others[None, :, 0], centres[:, None, 1] - others[None, :, 1]),
+                          axis=1)
+        else:
+            room = np.full(len(centres), np.inf)
+        need = 2 * self.radius + self.params.critical_margin
+        ok = room >= need
+        # not in the way of the robots driving nearby (the channel from each to its next waypoint)
+        in_way = np.zeros(len(centres), dtype=bool)
+        for o in sensed:
+            if o.next_waypoint is None:
+                continue
+            a, b = np.asarray(o.position), np.asarray(o.next_waypoint)
+            ab = b - a
+            t = np.clip(((centres - a) @ ab) / max(float(ab @ ab), EPS), 0.0, 1.0)
+            clear = self.radius + o.radius + self.params.critical_margin
+            in_way |= np.hypot(*(centres - (a + t[:, None] * ab)).T) < clear
+        if (ok & ~in_way).any():
+            ok &= ~in_way
+        if not ok.any():
+            return False
+        centres, room, d_me = centres[ok], room[ok], d_me[ok]
+        order = np.lexsort((d_me, -np.minimum(room, 3 * need)))   # most room first (capped), then closest
+        avoid = [(o.position, self.radius + o.radius + self.params.safety_margin) for o in sensed]
+        for j in order[:4]:
+            target = (float(centres[j, 0]), float(centres[j, 1]))
+            path = self.finder.find(self.position, target, avoid=avoid)
+            if path is not None and len(path) >= 2:
+                self.escapes += 1
+                self.escape_to = np.array(target)
+                self.escape_end = self.time + self.params.escape_after / 2
+                self.retreat = None
+                self._set_path(path)
+                self._set(B.FOLLOW_WAYPOINT, None)
+                return True
+        return False
+
+    def _in_the_way(self, sensed: Sequence[RobotView]) -> bool:
+        """A robot driving nearby has me in its way (my disc near its channel to its next waypoint)."""
+        reach = self.params.front_length + self.radius
+        for o in sensed:
+            if o.next_waypoint is None or math.dist(o.position, self.pos) > reach + o.radius:
+                continue
+            a, b = np.asarray(o.position), np.asarray(o.next_waypoint)
+            ab = b - a
+            t = min(max(float((self.pos - a) @ ab) / max(float(ab @ ab), EPS), 0.0), 1.0)
+            if math.dist(self.pos, a + t * ab) < self.radius + o.radius + self.params.critical_margin:
+                return True
+        return False
+
+    def _resume(self) -> None:
+        """End an escape: the path to the goal from here (walls only; the robots it meets are the
+        behaviours' business)."""
+        assert self.goal is not None
+        path = self.finder.find(self.position, self.goal)
+        if path is None:               # no way from here (the map): stand, and try again in a second
+            self.path = self.tail = self.run = None
+            self.escape_end = self.time + 1.0
+            return
+        self.escape_to = None
+        self._set_path(path)
+        self._set(B.FOLLOW_WAYPOINT, None)
 
     def _leaving(self) -> bool:
         """Driving away from the station it still holds (until it is out of the docking region)."""
@@ -657,10 +766,13 @@ class BehaviorController:
             path = self._find_detour(sensed)
             self.replan_after = self.time + self.params.blocked_timeout
         if path is None:
+            if self.params.escape_after > 0 and self.time >= self.escape_ready and self._escape(sensed):
+                return
             if self.partner is not None and self.behavior.is_active:
                 self._set(B.WAIT_KEEP_DISTANCE, self.partner)
             return
         self.replans += 1
+        self.escape_to = None
         self._set_path(path)
         self._set(B.FOLLOW_WAYPOINT, None)
         # ours: the robot now backs away from what it could not pass (see _yield_to_retreat)
@@ -732,6 +844,11 @@ class BehaviorController:
         if self.path is None or wp < 0:
             return
         self.wp = wp
+        if wp >= len(self.path) and self.escape_to is not None:   # reached the less crowded place: stand there
+            self.path = self.tail = self.run = None
+            self.escape_hold = self.time + _ESCAPE_HOLD_S
+            self.escape_end = self.time + self.params.escape_after / 2
+            return
         if wp >= len(self.path):
             self.path = self.tail = self.run = None
             self.arrived = True
@@ -767,9 +884,30 @@ class BehaviorController:
             leave = self._leave_channel(partner, step)
             if leave is not None:
                 return leave
+        # Interpretation (ours, issue 13): "the other robots will automatically give way" to a Dock
+        # robot (IV.B.5): a waiting robot standing in the drive channel of a Dock robot close by
+        # leaves the channel sideways (or, where it cannot, drives on ahead of it), instead of
+        # holding in its way for ever (measured: a robot leaving its station blocked for 443 s by
+        # a queue waiting for it).
+        give_way = self._give_way_to_dock(sensed, step)
         # waits: hold, backing off from a robot closer than the kept gap
         others = [partner] if b is not B.WAIT_FOR_DOCKING and partner is not None else list(sensed)
-        return self._back_off(others, step / 2)
+        return give_way + self._back_off(others, step / 2)
+
+    def _give_way_to_dock(self, sensed: Sequence[RobotView], step: float) -> list[tuple[np.ndarray, int]]:
+        """Motions out of the way of a travelling Dock robot whose critical area I stand in."""
+        me = self.view()
+        for o in sensed:
+            if (o.behavior is not B.DOCK or o.direction is None
+                    or math.dist(o.position, self.pos) > self.params.give_way_reach):
+                continue
+            if not in_critical_area(o, me, self.params):
+                continue
+            out = self._leave_channel(o, step) or []
+            du = np.asarray(o.direction)
+            out.append((self.pos + du * step / 2, -1))     # ahead of it, along its way
+            return out
+        return []
 
     def _pass_motions(self, partner: RobotView, step: float) -> list[tuple[np.ndarray, int]]:
         """Avoid / Exchange: step aside towards the chosen side (at most ``step``), driving on with

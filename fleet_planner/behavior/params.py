@@ -31,6 +31,10 @@ class BehaviorParams:
     avoid_timeout: float = 15.0     # Avoid / Exchange / waiting for an obstacle this long without progress fails
     blocked_timeout: float = 5.0    # FollowWayPoint unable to move this long fails; also the re-plan cooldown
     retreat_timeout: float = 30.0   # a robot backing out of an aisle has right of way this long (ours; 0: none)
+    escape_after: float = 30.0      # no progress this long (or a re-plan that finds no way): move into a
+                                    # less crowded place nearby, then re-plan (ours; 0: never)
+    escape_reach: float = 4.0       # how far such a place may be
+    give_way_reach: float = 2.0     # a waiting robot this close to a Dock robot's channel gives way (ours; 0: never)
     stall_time: float = 60.0        # stats: a robot not closer to its goal for this long is stalled
 
     def __post_init__(self) -> None:
@@ -38,7 +42,8 @@ class BehaviorParams:
             value = getattr(self, f.name)
             if not (isinstance(value, (int, float)) and math.isfinite(value)):
                 raise ValueError(f"BehaviorParams.{f.name}: must be a finite number, got {value!r}")
-            may_be_zero = ("safety_margin", "avoid_margin", "critical_margin", "retreat_timeout")
+            may_be_zero = ("safety_margin", "avoid_margin", "critical_margin", "retreat_timeout", "escape_after",
+                           "give_way_reach")
             if value < 0 or (value == 0 and f.name not in may_be_zero):
                 raise ValueError(f"BehaviorParams.{f.name}: must be > 0, got {value!r}")
         if self.dock_give_up < self.dock_region:

@@ -112,6 +112,7 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
     return simulate_central(problem, method, limits, planner_options, progress)
 
 
-__all__ = ["DOCK_S", "METHODS", "armo_problem", "lanes_problem", "ROBOT_RADIUS", "TOP_SPEED", "Delivery", "DeliveryProblem", "DeliveryResult",
+__all__ = ["DOCK_S", "METHODS", "armo_problem", "lanes_problem",
+           "ROBOT_RADIUS", "TOP_SPEED", "Delivery", "DeliveryProblem", "DeliveryResult",
            "RunLimits", "SimProgress", "choose_spots", "delivery_problem", "driving_distances", "simulate",
            "spread_stations", "warehouse_problem"]
