@@ -86,6 +86,16 @@ def show_json(value: object) -> str:
     return printable(text, 60)
 
 
+def check_ranges(instance: Any, ranges: dict[str, tuple[float, float]]) -> None:
+    """Every dataclass field of ``instance`` is a number (not a bool) in ``ranges[name]``;
+    ValueError naming the first that is not (the parameter blocks: dispatch, obstacles)."""
+    for f in fields(instance):
+        value = getattr(instance, f.name)
+        lo, hi = ranges[f.name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+            raise ValueError(f"{f.name}: must be a number in [{lo:g}, {hi:g}] (got {value!r})")
+
+
 def robot_id_problem(robot_id: object) -> str | None:
     """Why ``robot_id`` cannot name a robot (it must fit in a ROS topic name), or None if it can."""
     if not isinstance(robot_id, str):
@@ -404,5 +414,5 @@ def in_file(path: object, error: type[ValidationError]) -> Iterator[None]:
         raise exc.within(str(path)) from None
 
 
-__all__ = ["Check", "ValidationError", "Vocabulary", "all_of", "anything", "check_fields", "in_file", "join",
-           "optional", "printable", "read_yaml", "robot_id_problem", "show_json", "spec"]
+__all__ = ["Check", "ValidationError", "Vocabulary", "all_of", "anything", "check_fields", "check_ranges", "in_file",
+           "join", "optional", "printable", "read_yaml", "robot_id_problem", "show_json", "spec"]

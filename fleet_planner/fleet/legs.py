@@ -5,12 +5,13 @@ ends of the fleet (:mod:`.manager`, :mod:`.agent`)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 from msg_schemas.records import GateRecord, TaskEvent
 
 from ..model import RAMP_PIECES, Point, TimedPath
 from ..robots import RobotKind
+from ..validation import check_ranges
 from ..warehouse import Station, Warehouse
 
 #: why a robot drives a leg
@@ -45,11 +46,7 @@ class DispatchParams:
               "low_battery": (0.0, 1.0), "min_task_battery": (0.0, 1.0), "idle_s": (0.0, 3600.0)}
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            lo, hi = self.RANGES[f.name]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
-                raise ValueError(f"{f.name}: must be a number in [{lo:g}, {hi:g}] (got {value!r})")
+        check_ranges(self, self.RANGES)
 
 
 def lag_allowance(kind: RobotKind, speed_factor: float) -> float:

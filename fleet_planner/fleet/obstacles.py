@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -42,6 +42,7 @@ from msg_schemas.records import ObstacleRecord
 from ..checker import min_separation
 from ..geometry import polyline_passes_near
 from ..model import Point, TimedPath
+from ..validation import check_ranges
 
 #: an obstacle slower than this (m/s) is static: it stands where it is
 STILL_MPS = 0.05
@@ -65,11 +66,7 @@ class ObstacleParams:
     RANGES = {"horizon_s": (0.0, 60.0), "growth": (0.0, 5.0), "stale_s": (0.05, 3600.0)}
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            lo, hi = self.RANGES[f.name]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
-                raise ValueError(f"{f.name}: must be a number in [{lo:g}, {hi:g}] (got {value!r})")
+        check_ranges(self, self.RANGES)
 
 
 def is_static(ob: ObstacleRecord) -> bool:
