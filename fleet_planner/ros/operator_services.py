@@ -22,10 +22,12 @@ with the reason naming the field.
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
 from geometry_msgs.msg import Twist
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.service import Service
 from std_msgs.msg import Bool, String
@@ -33,6 +35,7 @@ from std_srvs.srv import SetBool
 
 from fleet_planner.fleet import Decisions, FleetManager
 from fleet_planner.fleet.agent import RobotAgent
+from fleet_planner.fleet.manual import DEADMAN_S
 from fleet_planner.fleet.operator import Operator, Outcome
 from fleet_planner.ros.drain import create_draining_subscription
 from fleet_planner.validation import printable
@@ -160,6 +163,22 @@ class AgentOperator:
         node.create_subscription(Twist, topics.robot_topic(robot_id, "cmd_vel"), self._on_cmd_vel,
                                  topics.CMD_VEL_QOS)
         node.create_subscription(Bool, topics.ESTOPPED, self._on_estop, topics.ESTOPPED_QOS)
+        # the operator's hand keeps wall time: a command held fresh (DEADMAN_S of wall time) is given
+        # again on the robot's clock, which may run faster than real time (use_sim_time)
+        self._held: tuple[tuple[float, float, float], tuple[float, float, float], float] | None = None
+        node.create_timer(0.05, self._keep_alive, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _keep_alive(self) -> None:
+        held = self._held
+        if held is None:
+            return
+        if time.monotonic() - held[2] > DEADMAN_S:
+            self._held = None
+            return
+        try:
+            self.agent.hand.command(held[0], held[1], _now(self.node))
+        except Exception:   # (a command already passed the checks once; manual drive may be off now)
+            self._held = None
 
     def _on_manual(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
         try:
@@ -176,7 +195,10 @@ class AgentOperator:
     def _on_cmd_vel(self, msg: Twist) -> None:
         try:
             lin, ang = msg.linear, msg.angular
-            self.agent.hand.command((lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z), _now(self.node))
+            linear, angular = (lin.x, lin.y, lin.z), (ang.x, ang.y, ang.z)
+            self._held = None
+            self.agent.hand.command(linear, angular, _now(self.node))
+            self._held = (linear, angular, time.monotonic())
         except ValueError as exc:
             self.node.get_logger().warning(f"cmd_vel refused: {exc}", throttle_duration_sec=2.0)
         except Exception as exc:

@@ -259,7 +259,11 @@ for (const [id, f] of [["drive-fwd", () => drive(speed(), 0)], ["drive-back", ()
   const b = $(id);
   b.addEventListener("mousedown", f);
   b.addEventListener("touchstart", f);
-  for (const end of ["mouseup", "mouseleave", "touchend"]) b.addEventListener(end, stopDriving);
 }
+// released anywhere (the page re-lays itself out under a held pointer as it updates, so leaving the
+// button is not a release), or the window loses the pointer: stop; a lost release is caught by the
+// robot's dead man's switch
+for (const end of ["mouseup", "touchend", "touchcancel"]) document.addEventListener(end, stopDriving);
+window.addEventListener("blur", stopDriving);
 
 connect();
