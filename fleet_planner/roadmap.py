@@ -329,40 +329,25 @@ def _runs(free: np.ndarray) -> tuple[list[list[int]], np.ndarray, np.ndarray, np
     h, w = free.shape
     runs: list[list[int]] = []
     tails, heads, run_of = [], [], []
-    for r in range(h):                       # rows: forward = +col
-        c = 0
-        while c < w:
-            if not free[r, c]:
-                c += 1
+    lines = [(free[r, :], [r * w + k for k in range(w)]) for r in range(h)]   # rows: forward = +col
+    lines += [(free[:, c], [k * w + c for k in range(h)]) for c in range(w)]  # columns: forward = +row
+    for mask, flat in lines:
+        i, n = 0, len(flat)
+        while i < n:
+            if not mask[i]:
+                i += 1
                 continue
-            c1 = c
-            while c1 + 1 < w and free[r, c1 + 1]:
-                c1 += 1
-            if c1 > c:
-                cells = [r * w + k for k in range(c, c1 + 1)]
+            j = i
+            while j + 1 < n and mask[j + 1]:
+                j += 1
+            if j > i:
+                cells = flat[i:j + 1]
                 for x, y in zip(cells, cells[1:]):
                     tails.append(x)
                     heads.append(y)
                     run_of.append(len(runs))
                 runs.append(cells)
-            c = c1 + 1
-    for c in range(w):                       # columns: forward = +row
-        r = 0
-        while r < h:
-            if not free[r, c]:
-                r += 1
-                continue
-            r1 = r
-            while r1 + 1 < h and free[r1 + 1, c]:
-                r1 += 1
-            if r1 > r:
-                cells = [k * w + c for k in range(r, r1 + 1)]
-                for x, y in zip(cells, cells[1:]):
-                    tails.append(x)
-                    heads.append(y)
-                    run_of.append(len(runs))
-                runs.append(cells)
-            r = r1 + 1
+            i = j + 1
     return runs, np.array(tails, dtype=np.int64), np.array(heads, dtype=np.int64), np.array(run_of, dtype=np.int64)
 
 

@@ -397,16 +397,21 @@ def remove_loops_inplace(out, ncells):
 _WARM = False
 
 
+def toy_instance() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The warm-ups' toy instance: the neighbour table and degrees of a 3x2 grid (cells 0-2 on top,
+    3-5 below) and the goals of two robots passing each other (2 and 0)."""
+    nb = np.array([[1, 3, NIL, NIL], [0, 2, 4, NIL], [1, 5, NIL, NIL],
+                   [0, 4, NIL, NIL], [1, 3, 5, NIL], [2, 4, NIL, NIL]], dtype=np.int32)
+    return nb, np.array([2, 3, 2, 2, 3, 2], dtype=np.int32), np.array([2, 0], dtype=np.int32)
+
+
 def warm_up() -> None:
     """Compile (or load from numba's cache) every kernel on a toy instance, so that no planning
     budget is spent compiling: two robots passing on a 3x2 grid."""
     global _WARM
     if _WARM:
         return
-    nb = np.array([[1, 3, NIL, NIL], [0, 2, 4, NIL], [1, 5, NIL, NIL],
-                   [0, 4, NIL, NIL], [1, 3, 5, NIL], [2, 4, NIL, NIL]], dtype=np.int32)
-    deg = np.array([2, 3, 2, 2, 3, 2], dtype=np.int32)
-    goals = np.array([2, 0], dtype=np.int32)
+    nb, deg, goals = toy_instance()
     dist = bfs_fields(nb, deg, goals)
     grow = np.array([0, 1], dtype=np.int32)
     occ_now = np.full(6, NIL, dtype=np.int32)

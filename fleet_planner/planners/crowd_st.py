@@ -318,12 +318,9 @@ def warm_up() -> None:
     global _WARM
     if _WARM:
         return
-    from .crowd_kernels import bfs_fields
+    from .crowd_kernels import bfs_fields, toy_instance
 
-    nb = np.array([[1, 3, NIL, NIL], [0, 2, 4, NIL], [1, 5, NIL, NIL],
-                   [0, 4, NIL, NIL], [1, 3, 5, NIL], [2, 4, NIL, NIL]], dtype=np.int32)
-    deg = np.array([2, 3, 2, 2, 3, 2], dtype=np.int32)
-    goals = np.array([2, 0], dtype=np.int32)
+    nb, deg, goals = toy_instance()
     fields = bfs_fields(nb, deg, goals)
     grow = np.array([0, 1], dtype=np.int32)
     paths = np.array([[0, 2], [1, 5], [2, 4], [2, 3], [2, 0], [2, 0]], dtype=np.int32)
