@@ -489,44 +489,19 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
 
 def _merge_boxes_batch(chunks: Sequence[np.ndarray]) -> list[list[tuple[float, float, float, float]]]:
     """What :func:`_merge_boxes` computes (boxes that overlap or touch, and the bounding boxes of
-    what they form, merged until none touch another) for many pairs' boxes at once: the touching
-    pairs within each chunk, vectorised, then SciPy's compiled connected components of that graph,
-    repeated on the merged boxes until none touch (one or two rounds)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    what they form, merged until none touch another) for many pairs' boxes at once, in compiled
+    code (:func:`fleet_planner._hold_kernels.merge_boxes`: union-find over each chunk's touching
+    pairs, repeated on the merged boxes until none touch); each chunk's boxes sorted by
+    (a_lo, b_lo), ties in the order of their first box."""
+    from . import _hold_kernels as K
 
     if not chunks:
         return []
-    boxes = np.vstack(chunks)
-    chunk = np.repeat(np.arange(len(chunks)), [len(c) for c in chunks])
-    while True:
-        n = len(boxes)
-        sizes = np.bincount(chunk, minlength=len(chunks))
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        per = sizes[chunk]                        # partners of each box: its chunk's boxes
-        first = np.repeat(np.arange(n), per)
-        block = np.concatenate([[0], np.cumsum(per)[:-1]])
-        second = starts[chunk[first]] + (np.arange(len(first)) - np.repeat(block, per))
-        sel = first < second
-        first, second = first[sel], second[sel]
-        a, b = boxes[first], boxes[second]
-        touch = ((a[:, 0] <= b[:, 1] + EPS) & (b[:, 0] <= a[:, 1] + EPS)
-                 & (a[:, 2] <= b[:, 3] + EPS) & (b[:, 2] <= a[:, 3] + EPS))
-        graph = coo_matrix((np.ones(int(touch.sum())), (first[touch], second[touch])), shape=(n, n))
-        count, comp = connected_components(graph, directed=False)
-        if count == n:
-            break
-        merged = np.empty((count, 4))
-        merged[:, [0, 2]], merged[:, [1, 3]] = np.inf, -np.inf
-        for col, fn in ((0, np.minimum), (1, np.maximum), (2, np.minimum), (3, np.maximum)):
-            fn.at(merged[:, col], comp, boxes[:, col])
-        owner = np.empty(count, dtype=np.int64)
-        owner[comp] = chunk
-        boxes, chunk = merged, owner
-    order = np.lexsort((boxes[:, 2], boxes[:, 0], chunk))
-    boxes, chunk = boxes[order], chunk[order]
-    bounds = np.searchsorted(chunk, np.arange(len(chunks) + 1))
+    sizes = [len(c) for c in chunks]
+    ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    boxes, out_ptr = K.merge_boxes(np.ascontiguousarray(np.vstack(chunks), dtype=float), ptr, EPS)
     rows = boxes.tolist()
+    bounds = out_ptr.tolist()
     return [[(r[0], r[1], r[2], r[3]) for r in rows[lo:hi]] for lo, hi in zip(bounds[:-1], bounds[1:])]
 
 

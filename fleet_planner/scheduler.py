@@ -40,13 +40,13 @@ from the final times (T1, T2 when a robot first reaches a region, T3, T4 when it
 """
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from . import _hold_kernels as K
 from . import collision as C
 from .collision import CollisionModel
 from .model import COLLISION_TESTS, EPS, Link, Network
@@ -84,6 +84,8 @@ class DelayScheduler:
             raise ValueError(f"holds: must be one of {', '.join(HOLDS)} (got {holds!r})")
         if holds == "anywhere" and mode != "exact":
             raise ValueError(f"holds: 'anywhere' needs the exact collision regions (mode='exact', got {mode!r})")
+        if holds == "anywhere":
+            K.warm_up()   # the compiled hold search (numba's cache): not part of any planning budget
         self.model = model
         self.delays = np.zeros(len(model.paths))
         self.mode = mode
@@ -388,24 +390,32 @@ class DelayScheduler:
             return self._blocked(j, int(f_own[n]), goal=bool(np.isinf(f_hi[n])))
         T0 = np.asarray(m.times[j], dtype=float)
         hold_at = np.array([0, nv - 1]) if j in self.start_only else np.arange(nv)
-        edge = np.searchsorted(hold_at, g_key, side="right") - 1   # macro edge of each segment
-        g_lo = g_lo - (T0[g_key] - T0[hold_at[edge]])              # as times of leaving its hold vertex
-        g_hi = g_hi - (T0[g_key] - T0[hold_at[edge]])
-        is_hold = np.zeros(nv, dtype=bool)
-        is_hold[hold_at] = True
-        f_keep = is_hold[f_key]
-        vert_of = np.full(nv, -1)
-        vert_of[hold_at] = np.arange(len(hold_at))
-        F_groups = _groups(vert_of[f_key[f_keep]], f_lo[f_keep], f_hi[f_keep], len(hold_at))
-        G_groups = _groups(edge, g_lo, g_hi, len(hold_at) - 1)
-        safes = [_safe(*grp) for grp in F_groups]
+        nh = len(hold_at)
+        h_key, h_lo, h_hi = f_key, f_lo, f_hi   # the hold vertices' rows (macro vertex numbers)
+        if nh == nv:
+            g_edge = g_key
+        else:
+            g_edge = np.searchsorted(hold_at, g_key, side="right") - 1   # macro edge of each segment
+            g_lo = g_lo - (T0[g_key] - T0[hold_at[g_edge]])              # as times of leaving its hold vertex
+            g_hi = g_hi - (T0[g_key] - T0[hold_at[g_edge]])
+            is_hold = np.zeros(nv, dtype=bool)
+            is_hold[hold_at] = True
+            keep = is_hold[f_key]
+            vert_of = np.full(nv, -1)
+            vert_of[hold_at] = np.arange(nh)
+            h_key, h_lo, h_hi = vert_of[f_key[keep]], f_lo[keep], f_hi[keep]
+        # the compiled search (fleet_planner._hold_kernels) on each vertex's and edge's intervals by lo
+        f_ptr, f_slo, f_shi = _grouped(h_key, h_lo, h_hi, nh)
+        g_ptr, g_slo, g_shi = _grouped(g_edge, g_lo, g_hi, nh - 1)
         durations = np.diff(T0[hold_at])
-        found = _earliest(safes, G_groups, durations, early_holds=self.early_holds)
-        if found is None:
-            relaxed = _earliest([[(0.0, INF)]] + safes[1:], G_groups, durations)
+        s_ptr, s_lo, s_hi = K.safe_intervals(f_ptr, f_slo, f_shi, False)
+        ok, arrive, leave = K.earliest(s_ptr, s_lo, s_hi, g_ptr, g_slo, g_shi, durations, self.early_holds)
+        if not ok:
+            r_ptr, r_lo, r_hi = K.safe_intervals(f_ptr, f_slo, f_shi, True)
+            relaxed = K.earliest(r_ptr, r_lo, r_hi, g_ptr, g_slo, g_shi, durations, False)[0]
             self.set_timing(j, 0.0)
-            if relaxed is not None:   # waiting at its start would do, but a higher robot comes by first
-                first = safes[0][0][1] if safes[0] and safes[0][0][0] <= 0 else 0.0
+            if relaxed:   # waiting at its start would do, but a higher robot comes by first
+                first = s_hi[0] if s_ptr[1] > 0 and s_lo[0] <= 0 else 0.0
                 at0 = f_key == 0
                 cand = np.nonzero(at0 & (f_hi > first))[0]
                 n = int(cand[np.argmin(f_lo[cand])]) if len(cand) else int(np.argmin(np.where(at0, f_lo, INF)))
@@ -416,13 +426,13 @@ class DelayScheduler:
             unbounded = np.nonzero(np.isinf(hi_all))[0]
             n = int(unbounded[np.argmin(lo_all[unbounded])]) if len(unbounded) else int(np.argmax(hi_all))
             return self._blocked(j, int(own_all[n]), goal=True)
-        arrive, leave = found
-        arr, dep = np.empty(nv), np.empty(nv)
-        for k in range(len(hold_at) - 1):
-            h, h2 = hold_at[k], hold_at[k + 1]
-            arr[h], dep[h] = arrive[k], leave[k]
-            inner = np.arange(h + 1, h2)
-            arr[inner] = dep[inner] = leave[k] + T0[inner] - T0[h]
+        if nh == nv:
+            arr, dep = arrive, leave
+        else:   # between hold vertices it drives on at the profile's times
+            macro = np.searchsorted(hold_at, np.arange(nv), side="right") - 1
+            arr = leave[macro] + T0 - T0[hold_at[macro]]
+            dep = arr.copy()
+            arr[hold_at], dep[hold_at] = arrive, leave
         arr[0], arr[-1], dep[-1] = 0.0, arrive[-1], INF
         self.set_timing(j, 0.0, arr, dep)
         return None
@@ -475,111 +485,9 @@ class DelayScheduler:
         return net
 
 
-def _groups(key: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int) -> list[tuple[list[float], list[float]]]:
-    """Open intervals (lo, hi) grouped by ``key`` in 0..n-1, each group sorted by ``lo``."""
+def _grouped(key: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Open intervals (lo, hi) grouped by ``key`` in 0..n-1, each group sorted by ``lo``: (ptr, lo,
+    hi) with group k at ``ptr[k]:ptr[k + 1]``."""
     order = np.lexsort((lo, key))
-    bounds = np.searchsorted(key[order], np.arange(n + 1)).tolist()
-    los, his = lo[order].tolist(), hi[order].tolist()
-    return [(los[a:b], his[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
-
-
-def _safe(lo: list[float], hi: list[float]) -> list[tuple[float, float]]:
-    """The closed safe intervals in [0, inf) outside open forbidden intervals sorted by lo (two
-    that only touch leave the instant between them free)."""
-    out: list[tuple[float, float]] = []
-    cur = 0.0
-    for a, b in zip(lo, hi):
-        if b <= cur:
-            continue
-        if a >= cur:
-            out.append((cur, a))
-        cur = b
-    if cur < INF:
-        out.append((cur, INF))
-    return out
-
-
-def _allowed(lo: list[float], hi: list[float], a: float, e: float):
-    """The closed pieces of [a, e] outside the open intervals (lo, hi) (sorted by lo), in order."""
-    cur = a
-    for x, y in zip(lo, hi):
-        if y <= cur:
-            continue
-        if x >= e:
-            break
-        if x >= cur:
-            yield cur, x
-        cur = y
-        if cur > e:
-            return
-    if cur <= e and cur < INF:
-        yield cur, e
-
-
-def _earliest(safes: list[list[tuple[float, float]]], edges: list[tuple[list[float], list[float]]],
-              durations: np.ndarray, early_holds: bool = False) -> tuple[list[float], list[float]] | None:
-    """Earliest arrival along a chain of hold vertices: ``safes[k]`` the safe intervals of vertex k,
-    ``edges[k]`` the forbidden departure times from vertex k to k + 1 (sorted by lo), which takes
-    ``durations[k]``. The robot is on vertex 0 at t = 0 and must stay on the last one for ever.
-    Per (vertex, safe interval) only the earliest arrival is kept (waiting there is free, so it
-    dominates). Returns (arrival, departure) per vertex, or None."""
-    if not safes[0] or safes[0][0][0] > 0:
-        return None
-    best: list[dict[int, tuple[float, int, float]]] = [{0: (0.0, -1, 0.0)}]
-    for k, dur in enumerate(durations.tolist()):
-        lo, hi = edges[k]
-        nxt = safes[k + 1]
-        ends = [e for _, e in nxt]
-        last_start = nxt[-1][0] if nxt else INF
-        out: dict[int, tuple[float, int, float]] = {}
-        for si, (t, _, _) in sorted(best[k].items(), key=lambda kv: kv[1][0]):
-            e = safes[k][si][1]
-            for al, be in _allowed(lo, hi, t, e):
-                t_lo, t_hi = al + dur, be + dur
-                n = bisect.bisect_left(ends, t_lo)
-                while n < len(nxt) and nxt[n][0] <= t_hi:
-                    t_arr = max(t_lo, nxt[n][0])
-                    if n not in out or t_arr < out[n][0]:
-                        out[n] = (t_arr, si, t_arr - dur)
-                    n += 1
-                if math.isinf(nxt[-1][1]) and (len(nxt) - 1) in out and t_lo >= last_start:
-                    break
-        if not out:
-            return None
-        best.append(out)
-    final = len(safes[-1]) - 1
-    if not safes[-1] or not math.isinf(safes[-1][final][1]) or final not in best[-1]:
-        return None
-    arrive, leave = [0.0] * len(safes), [INF] * len(safes)
-    interval = [0] * len(safes)
-    si = final
-    for k in range(len(safes) - 1, 0, -1):
-        t, parent, depart = best[k][si]
-        arrive[k], leave[k - 1] = t, depart
-        interval[k] = si
-        si = parent
-    if early_holds:
-        _holds_early(safes, edges, durations.tolist(), arrive, leave, interval)
-    return arrive, leave
-
-
-def _holds_early(safes: list[list[tuple[float, float]]], edges: list[tuple[list[float], list[float]]],
-                 durations: list[float], arrive: list[float], leave: list[float], interval: list[int]) -> None:
-    """Move waits back along the path, keeping the arrival at the goal: from the last vertex back,
-    leave each vertex as late as it can and still reach the next one by the time it leaves that one
-    (staying in the safe interval it arrived in, outside the forbidden departure times). An earliest
-    arrival rushes ahead and waits in front of the conflict, in an aisle others use (docs/ARCHITECTURE.md,
-    measured fact 5); this waits where it was already standing, at its start if it can."""
-    last = len(safes) - 1
-    for k in range(last - 1, -1, -1):
-        latest = arrive[last] if k + 1 == last else leave[k + 1]
-        until = min(latest - durations[k], safes[k][interval[k]][1])
-        if until <= leave[k]:
-            continue
-        lo, hi = edges[k]
-        best = None
-        for _, end in _allowed(lo, hi, leave[k], until):
-            best = end
-        if best is not None and best > leave[k]:
-            leave[k] = best
-            arrive[k + 1] = best + durations[k]
+    ptr = np.searchsorted(key[order], np.arange(n + 1)).astype(np.int64)
+    return ptr, np.ascontiguousarray(lo[order], dtype=float), np.ascontiguousarray(hi[order], dtype=float)

@@ -18,6 +18,7 @@ smallest distance over t of two such discs is |e| / sqrt(2), e = (j's time at th
          (it is 5 m from robot 1's line and 3 m from robot 2's) and leave at E with
          |(E + 5) - 10| >= sqrt 2: E = 5 + sqrt 2, arrival E + 10 = 15 + sqrt 2 = 16.414.
 """
+import bisect
 import math
 
 import numpy as np
@@ -165,3 +166,208 @@ def test_route_choice_takes_the_detour_when_waiting_costs_more():
     assert routed.arrival_time == pytest.approx(16.0)   # 16 m at 1 m/s, no wait
     assert plans["md-routes"].info["detours"] >= 1
     assert np.any(routed.waypoints[:, 1] < 1.0)         # it took the northern corridor
+
+
+# ---------------------------------------------------------------------------------------------
+# the compiled hold search (fleet_planner._hold_kernels) against the pure-Python loops it replaced
+# ---------------------------------------------------------------------------------------------
+# A plain transcription of the scheduler's search before it was compiled (issue 8, speed): the
+# compiled kernels must give the very same numbers on any input.
+INF = math.inf
+
+
+def ref_safe(lo: list[float], hi: list[float]) -> list[tuple[float, float]]:
+    """The closed safe intervals in [0, inf) outside open forbidden intervals sorted by lo (two
+    that only touch leave the instant between them free)."""
+    out: list[tuple[float, float]] = []
+    cur = 0.0
+    for a, b in zip(lo, hi):
+        if b <= cur:
+            continue
+        if a >= cur:
+            out.append((cur, a))
+        cur = b
+    if cur < INF:
+        out.append((cur, INF))
+    return out
+
+
+def ref_allowed(lo: list[float], hi: list[float], a: float, e: float):
+    """The closed pieces of [a, e] outside the open intervals (lo, hi) (sorted by lo), in order."""
+    cur = a
+    for x, y in zip(lo, hi):
+        if y <= cur:
+            continue
+        if x >= e:
+            break
+        if x >= cur:
+            yield cur, x
+        cur = y
+        if cur > e:
+            return
+    if cur <= e and cur < INF:
+        yield cur, e
+
+
+def ref_earliest(safes: list[list[tuple[float, float]]], edges: list[tuple[list[float], list[float]]],
+              durations: np.ndarray, early_holds: bool = False) -> tuple[list[float], list[float]] | None:
+    """Earliest arrival along a chain of hold vertices: ``safes[k]`` the safe intervals of vertex k,
+    ``edges[k]`` the forbidden departure times from vertex k to k + 1 (sorted by lo), which takes
+    ``durations[k]``. The robot is on vertex 0 at t = 0 and must stay on the last one for ever.
+    Per (vertex, safe interval) only the earliest arrival is kept (waiting there is free, so it
+    dominates). Returns (arrival, departure) per vertex, or None."""
+    if not safes[0] or safes[0][0][0] > 0:
+        return None
+    best: list[dict[int, tuple[float, int, float]]] = [{0: (0.0, -1, 0.0)}]
+    for k, dur in enumerate(durations.tolist()):
+        lo, hi = edges[k]
+        nxt = safes[k + 1]
+        ends = [e for _, e in nxt]
+        last_start = nxt[-1][0] if nxt else INF
+        out: dict[int, tuple[float, int, float]] = {}
+        for si, (t, _, _) in sorted(best[k].items(), key=lambda kv: kv[1][0]):
+            e = safes[k][si][1]
+            for al, be in ref_allowed(lo, hi, t, e):
+                t_lo, t_hi = al + dur, be + dur
+                n = bisect.bisect_left(ends, t_lo)
+                while n < len(nxt) and nxt[n][0] <= t_hi:
+                    t_arr = max(t_lo, nxt[n][0])
+                    if n not in out or t_arr < out[n][0]:
+                        out[n] = (t_arr, si, t_arr - dur)
+                    n += 1
+                if math.isinf(nxt[-1][1]) and (len(nxt) - 1) in out and t_lo >= last_start:
+                    break
+        if not out:
+            return None
+        best.append(out)
+    final = len(safes[-1]) - 1
+    if not safes[-1] or not math.isinf(safes[-1][final][1]) or final not in best[-1]:
+        return None
+    arrive, leave = [0.0] * len(safes), [INF] * len(safes)
+    interval = [0] * len(safes)
+    si = final
+    for k in range(len(safes) - 1, 0, -1):
+        t, parent, depart = best[k][si]
+        arrive[k], leave[k - 1] = t, depart
+        interval[k] = si
+        si = parent
+    if early_holds:
+        ref_holds_early(safes, edges, durations.tolist(), arrive, leave, interval)
+    return arrive, leave
+
+
+def ref_holds_early(safes: list[list[tuple[float, float]]], edges: list[tuple[list[float], list[float]]],
+                 durations: list[float], arrive: list[float], leave: list[float], interval: list[int]) -> None:
+    """Move waits back along the path, keeping the arrival at the goal: from the last vertex back,
+    leave each vertex as late as it can and still reach the next one by the time it leaves that one
+    (staying in the safe interval it arrived in, outside the forbidden departure times). An earliest
+    arrival rushes ahead and waits in front of the conflict, in an aisle others use (docs/ARCHITECTURE.md,
+    measured fact 5); this waits where it was already standing, at its start if it can."""
+    last = len(safes) - 1
+    for k in range(last - 1, -1, -1):
+        latest = arrive[last] if k + 1 == last else leave[k + 1]
+        until = min(latest - durations[k], safes[k][interval[k]][1])
+        if until <= leave[k]:
+            continue
+        lo, hi = edges[k]
+        best = None
+        for _, end in ref_allowed(lo, hi, leave[k], until):
+            best = end
+        if best is not None and best > leave[k]:
+            leave[k] = best
+            arrive[k + 1] = best + durations[k]
+
+
+def _random_chain(rng, nh):
+    """Forbidden intervals of a chain of ``nh`` hold vertices: per vertex (open, times >= 0) and
+    per edge (departure times, may start before 0), some touching, some unbounded."""
+    f_key, f_lo, f_hi, g_key, g_lo, g_hi = [], [], [], [], [], []
+    grid = rng.integers(0, 3) == 0   # times on a coarse grid: many ties and touching intervals
+    for k in range(nh):
+        for _ in range(int(rng.integers(0, 4))):
+            lo = float(rng.integers(0, 20)) if grid else float(rng.uniform(0, 20))
+            size = float(rng.integers(1, 4)) if grid else float(rng.uniform(0.01, 5))
+            hi = INF if rng.random() < 0.08 else lo + size
+            f_key.append(k), f_lo.append(lo), f_hi.append(hi)
+        if k < nh - 1:
+            for _ in range(int(rng.integers(0, 4))):
+                lo = float(rng.integers(-3, 20)) if grid else float(rng.uniform(-3, 20))
+                hi = lo + (float(rng.integers(1, 4)) if grid else float(rng.uniform(0.01, 5)))
+                g_key.append(k), g_lo.append(lo), g_hi.append(hi)
+    durations = rng.integers(1, 4, nh - 1).astype(float) if grid else rng.uniform(0.2, 3, nh - 1)
+    return (np.array(f_key, dtype=np.int64), np.array(f_lo), np.array(f_hi), np.array(g_key, dtype=np.int64),
+            np.array(g_lo), np.array(g_hi), durations)
+
+
+@pytest.mark.parametrize("early", [False, True])
+def test_the_compiled_hold_search_gives_the_numbers_of_the_python_one(early):
+    from fleet_planner import _hold_kernels as K
+    from fleet_planner.scheduler import _grouped
+
+    rng = np.random.default_rng(8)
+    found = 0
+    for _ in range(400):
+        nh = int(rng.integers(2, 9))
+        f_key, f_lo, f_hi, g_key, g_lo, g_hi, durations = _random_chain(rng, nh)
+        f_ptr, f_slo, f_shi = _grouped(f_key, f_lo, f_hi, nh)
+        g_ptr, g_slo, g_shi = _grouped(g_key, g_lo, g_hi, nh - 1)
+        safes = [ref_safe(f_slo[a:b].tolist(), f_shi[a:b].tolist()) for a, b in zip(f_ptr[:-1], f_ptr[1:])]
+        edges = [(g_slo[a:b].tolist(), g_shi[a:b].tolist()) for a, b in zip(g_ptr[:-1], g_ptr[1:])]
+        s_ptr, s_lo, s_hi = K.safe_intervals(f_ptr, f_slo, f_shi, False)
+        assert [list(zip(s_lo[a:b].tolist(), s_hi[a:b].tolist())) for a, b in zip(s_ptr[:-1], s_ptr[1:])] == safes
+        expect = ref_earliest(safes, edges, durations, early_holds=early)
+        ok, arrive, leave = K.earliest(s_ptr, s_lo, s_hi, g_ptr, g_slo, g_shi, durations, early)
+        assert ok == (expect is not None)
+        if ok:
+            found += 1
+            assert arrive.tolist() == expect[0] and leave.tolist() == expect[1]   # exactly the same floats
+    assert found > 100   # the cases are not all refusals
+
+
+def test_the_compiled_merge_gives_the_regions_of_the_scipy_batch_in_the_same_order():
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from fleet_planner.collision import _merge_boxes_batch
+    from fleet_planner.model import EPS
+
+    rng = np.random.default_rng(4)
+    chunks = []
+    for _ in range(60):
+        n = int(rng.integers(1, 30))
+        lo = rng.integers(0, 12, (n, 2)).astype(float) if rng.random() < 0.5 else rng.uniform(0, 20, (n, 2))
+        size = rng.integers(0, 3, (n, 2)).astype(float) if rng.random() < 0.5 else rng.uniform(0.1, 3, (n, 2))
+        boxes = np.stack([lo[:, 0], lo[:, 0] + size[:, 0], lo[:, 1], lo[:, 1] + size[:, 1]], 1)
+        chunks.append(boxes[np.argsort(boxes[:, 0], kind="stable")])
+    # the SciPy batch the compiled merge replaced (issue 8, speed), as it was
+    boxes = np.vstack(chunks)
+    chunk = np.repeat(np.arange(len(chunks)), [len(c) for c in chunks])
+    while True:
+        n = len(boxes)
+        sizes = np.bincount(chunk, minlength=len(chunks))
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        per = sizes[chunk]
+        first = np.repeat(np.arange(n), per)
+        block = np.concatenate([[0], np.cumsum(per)[:-1]])
+        second = starts[chunk[first]] + (np.arange(len(first)) - np.repeat(block, per))
+        sel = first < second
+        first, second = first[sel], second[sel]
+        a, b = boxes[first], boxes[second]
+        touch = ((a[:, 0] <= b[:, 1] + EPS) & (b[:, 0] <= a[:, 1] + EPS)
+                 & (a[:, 2] <= b[:, 3] + EPS) & (b[:, 2] <= a[:, 3] + EPS))
+        graph = coo_matrix((np.ones(int(touch.sum())), (first[touch], second[touch])), shape=(n, n))
+        count, comp = connected_components(graph, directed=False)
+        if count == n:
+            break
+        merged = np.empty((count, 4))
+        merged[:, [0, 2]], merged[:, [1, 3]] = np.inf, -np.inf
+        for col, fn in ((0, np.minimum), (1, np.maximum), (2, np.minimum), (3, np.maximum)):
+            fn.at(merged[:, col], comp, boxes[:, col])
+        owner = np.empty(count, dtype=np.int64)
+        owner[comp] = chunk
+        boxes, chunk = merged, owner
+    order = np.lexsort((boxes[:, 2], boxes[:, 0], chunk))
+    boxes, chunk = boxes[order], chunk[order]
+    bounds = np.searchsorted(chunk, np.arange(len(chunks) + 1))
+    expect = [[tuple(r) for r in boxes[lo:hi].tolist()] for lo, hi in zip(bounds[:-1], bounds[1:])]
+    assert _merge_boxes_batch(chunks) == expect
