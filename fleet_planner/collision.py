@@ -6,7 +6,7 @@ their discs overlap, ``|p_x(a) - p_y(b)| < r_x + r_y``, is what the paper calls 
 (drawn there in time x travelled-length coordinates; with a known velocity profile the two views are
 the same set). For one segment of each path that set is convex, so its extent along each path is
 one interval: the part of the segment inside the *capsule* of radius ``R`` around the other
-segment. Those per-segment-pair boxes are computed for all nearby segment pairs at once with numpy
+segment. Those per-segment-pair boxes are computed for all nearby segment pairs in one compiled pass
 (pairs found with a shapely STRtree, never by looping over all pairs of path samples) and merged
 into connected components: one component is one collision region ``k`` of the pair, its bounding
 box ``[a_lo, a_hi] x [b_lo, b_hi]`` its collision box.
@@ -22,6 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import _md_kernels as K
 from .model import EPS
 
 
@@ -81,64 +82,10 @@ def _cat(parts: Sequence[_Segs]) -> _Segs:
     return _Segs(*(np.concatenate(col) for col in zip(*parts)))
 
 
-def _take(segs: _Segs, rows: np.ndarray) -> _Segs:
-    return _Segs(*(col[rows] for col in segs))
-
-
-def _swap(a: _Segs, b: _Segs, swap: np.ndarray) -> tuple[_Segs, _Segs]:
-    """The two sides of segment pairs exchanged where ``swap``."""
-    def pick(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return np.where(swap[:, None] if x.ndim == 2 else swap, y, x)
-
-    return _Segs(*(pick(x, y) for x, y in zip(a, b))), _Segs(*(pick(y, x) for x, y in zip(a, b)))
-
-
-def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Parameters s with |w + s*u| < R for unit u: roots of s^2 + 2 s (u.w) + |w|^2 - R^2."""
-    b = np.einsum("ij,ij->i", u, w)
-    c = np.einsum("ij,ij->i", w, w) - R * R
-    disc = b * b - c
-    root = np.sqrt(np.maximum(disc, 0.0))
-    lo, hi = -b - root, -b + root
-    empty = disc <= 0
-    return np.where(empty, np.inf, lo), np.where(empty, -np.inf, hi)
-
-
-def capsule_interval(p0: np.ndarray, u: np.ndarray, length: np.ndarray,
-                     q0: np.ndarray, v: np.ndarray, qlen: np.ndarray, R: np.ndarray):
-    """For each row: the interval [lo, hi] of s in [0, length] such that the point p0 + s*u lies within
-    R of the segment q0 + t*v, t in [0, qlen] (u, v unit vectors). Empty rows have lo > hi.
-
-    The capsule is convex, so its intersection with a line is one interval: the union of the two
-    end discs' intervals and the slab's."""
-    w0 = p0 - q0
-    lo_a, hi_a = _circle_interval(w0, u, R)
-    lo_b, hi_b = _circle_interval(w0 - v * qlen[:, None], u, R)
-    # slab: perpendicular distance to q's line < R and projection within [0, qlen]
-    cross0 = v[:, 0] * w0[:, 1] - v[:, 1] * w0[:, 0]
-    cross1 = v[:, 0] * u[:, 1] - v[:, 1] * u[:, 0]
-    proj0 = np.einsum("ij,ij->i", v, w0)
-    proj1 = np.einsum("ij,ij->i", v, u)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # |cross0 + s*cross1| < R
-        s1 = (-R - cross0) / cross1
-        s2 = (R - cross0) / cross1
-        perp_lo = np.where(cross1 != 0, np.minimum(s1, s2), np.where(np.abs(cross0) < R, -np.inf, np.inf))
-        perp_hi = np.where(cross1 != 0, np.maximum(s1, s2), np.where(np.abs(cross0) < R, np.inf, -np.inf))
-        # 0 <= proj0 + s*proj1 <= qlen
-        t1 = -proj0 / proj1
-        t2 = (qlen - proj0) / proj1
-        inside = (proj0 >= 0) & (proj0 <= qlen)
-        proj_lo = np.where(proj1 != 0, np.minimum(t1, t2), np.where(inside, -np.inf, np.inf))
-        proj_hi = np.where(proj1 != 0, np.maximum(t1, t2), np.where(inside, np.inf, -np.inf))
-    slab_lo = np.maximum(perp_lo, proj_lo)
-    slab_hi = np.minimum(perp_hi, proj_hi)
-    slab_empty = slab_lo >= slab_hi
-    slab_lo = np.where(slab_empty, np.inf, slab_lo)
-    slab_hi = np.where(slab_empty, -np.inf, slab_hi)
-    lo = np.minimum(np.minimum(lo_a, lo_b), slab_lo)
-    hi = np.maximum(np.maximum(hi_a, hi_b), slab_hi)
-    return np.maximum(lo, 0.0), np.minimum(hi, length)
+def _kernel_cols(segs: _Segs) -> tuple:
+    """A segment table's columns in the order :func:`fleet_planner._md_kernels.segment_pieces` takes them."""
+    return (segs.p0, segs.u, segs.length, segs.owner, segs.offset, segs.t0, segs.speed, segs.seg,
+            segs.first, segs.last)
 
 
 class CollisionModel:
@@ -358,26 +305,12 @@ class CollisionModel:
                     self._stale_rows += len(self._segs[x].p0)
         if len(qi) == 0:
             return
-        # orient each pair so that the smaller robot index is x
-        A, B = _take(a, qi), _take(b, ti)
-        swap = A.owner > B.owner
-        if swap.any():
-            A, B = _swap(A, B, swap)
-        R = self.radii[A.owner] + self.radii[B.owner] + self.margin
-        a_lo, a_hi = capsule_interval(A.p0, A.u, A.length, B.p0, B.u, B.length, R)
-        b_lo, b_hi = capsule_interval(B.p0, B.u, B.length, A.p0, A.u, A.length, R)
-        hit = (a_lo <= a_hi) & (b_lo <= b_hi)
-        if not hit.any():
+        # the exact test and the pieces, each pair oriented so that the smaller robot index is x
+        # (compiled: fleet_planner._md_kernels.segment_pieces)
+        pieces = K.segment_pieces(qi, ti, *_kernel_cols(a), *_kernel_cols(b), self.radii, self.margin,
+                                  _NO_PIECES.shape[1])
+        if not len(pieces):
             return
-        A, B, R = _take(A, hit), _take(B, hit), R[hit]
-        pieces = _piece_table(A.p0, A.u, A.length, A.offset, A.t0, A.speed,
-                              B.p0, B.u, B.length, B.offset, B.t0, B.speed, R)
-        pieces[:, P_X], pieces[:, P_Y] = A.owner, B.owner
-        pieces[:, P_A_LO], pieces[:, P_A_HI] = A.offset + a_lo[hit], A.offset + a_hi[hit]
-        pieces[:, P_B_LO], pieces[:, P_B_HI] = B.offset + b_lo[hit], B.offset + b_hi[hit]
-        pieces[:, P_X_FIRST], pieces[:, P_X_LAST] = A.first, A.last
-        pieces[:, P_Y_FIRST], pieces[:, P_Y_LAST] = B.first, B.last
-        pieces[:, P_X_SEG], pieces[:, P_Y_SEG] = A.seg, B.seg
         pieces = pieces[np.lexsort((pieces[:, P_B_LO], pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
         cuts = np.nonzero(np.diff(pair_key))[0] + 1
@@ -402,59 +335,6 @@ class CollisionModel:
  P_X_FIRST, P_X_LAST, P_Y_FIRST, P_Y_LAST,
  P_X_OFF, P_X_T0, P_X_V, P_Y_OFF, P_Y_T0, P_Y_V, P_X_SEG, P_Y_SEG) = range(28)
 _NO_PIECES = np.zeros((0, 28))
-
-
-def _piece_table(p0, u, lp, offp, tp, vx, q0, v, lq, offq, tq, vy, R) -> np.ndarray:
-    """Exact extents of the convex set S = {(a, b) in [0, lp] x [0, lq] : |p0 + a u - q0 - b v| < R}
-    per row: the range of phi(a, b) = (tp + a/vx) - (tq + b/vy) over S, and S's edge intervals.
-
-    A linear function's extremes over a convex set lie on its boundary: on the square's edges (the
-    ends of the four edge intervals) or where the ellipse boundary is tangent to phi's level lines."""
-    n = len(p0)
-    out = np.zeros((n, _NO_PIECES.shape[1]))
-
-    def clip(lo, hi, length):
-        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, length)
-        return np.where(lo <= hi, lo, np.inf), np.where(lo <= hi, hi, -np.inf)
-
-    p1, q1 = p0 + u * lp[:, None], q0 + v * lq[:, None]
-    xs = clip(*_circle_interval(q0 - p0, v, R), lq)   # b-range with x at its segment start
-    xe = clip(*_circle_interval(q0 - p1, v, R), lq)   # ... at its segment end
-    ys = clip(*_circle_interval(p0 - q0, u, R), lp)   # a-range with y at its segment start
-    ye = clip(*_circle_interval(p0 - q1, u, R), lp)
-    phi = lambda a, b: (tp + a / vx) - (tq + b / vy)  # noqa: E731
-    zero = np.zeros(n)
-    cands = [phi(zero, xs[0]), phi(zero, xs[1]), phi(lp, xe[0]), phi(lp, xe[1]),
-             phi(ys[0], zero), phi(ys[1], zero), phi(ye[0], lq), phi(ye[1], lq)]
-    valid = [np.isfinite(xs[0])] * 2 + [np.isfinite(xe[0])] * 2 + [np.isfinite(ys[0])] * 2 + [np.isfinite(ye[0])] * 2
-    # tangent points: y = w + A z with A = [u, -v]; phi = c + g.z, g = (1/vx, -1/vy)
-    det = u[:, 0] * (-v[:, 1]) - (-v[:, 0]) * u[:, 1]
-    ok = np.abs(det) > 1e-12
-    sdet = np.where(ok, det, 1.0)
-    # A^-1 = [[-v1, v0], [-u1, u0]] / det ; h = A^-T g
-    inv = np.stack([np.stack([-v[:, 1], v[:, 0]], 1), np.stack([-u[:, 1], u[:, 0]], 1)], 1) / sdet[:, None, None]
-    g = np.stack([1.0 / vx, -1.0 / vy], 1)
-    h = np.einsum("nji,nj->ni", inv, g)
-    hn = np.hypot(h[:, 0], h[:, 1])
-    hn = np.where(hn > 0, hn, 1.0)
-    w = p0 - q0
-    for sign in (1.0, -1.0):
-        y = sign * R[:, None] * h / hn[:, None]
-        z = np.einsum("nij,nj->ni", inv, y - w)
-        inside = ok & (z[:, 0] >= 0) & (z[:, 0] <= lp) & (z[:, 1] >= 0) & (z[:, 1] <= lq)
-        cands.append(phi(z[:, 0], z[:, 1]))
-        valid.append(inside)
-    c = np.stack(cands, 1)
-    m = np.stack(valid, 1)
-    out[:, P_PHI_LO] = np.where(m, c, np.inf).min(1)
-    out[:, P_PHI_HI] = np.where(m, c, -np.inf).max(1)
-    out[:, P_XS_LO], out[:, P_XS_HI] = offq + xs[0], offq + xs[1]
-    out[:, P_XE_LO], out[:, P_XE_HI] = offq + xe[0], offq + xe[1]
-    out[:, P_YS_LO], out[:, P_YS_HI] = offp + ys[0], offp + ys[1]
-    out[:, P_YE_LO], out[:, P_YE_HI] = offp + ye[0], offp + ye[1]
-    out[:, P_X_OFF], out[:, P_X_T0], out[:, P_X_V] = offp, tp, vx
-    out[:, P_Y_OFF], out[:, P_Y_T0], out[:, P_Y_V] = offq, tq, vy
-    return out
 
 
 def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
@@ -490,11 +370,9 @@ def _merge_boxes(boxes: np.ndarray) -> list[tuple[float, float, float, float]]:
 def _merge_boxes_batch(chunks: Sequence[np.ndarray]) -> list[list[tuple[float, float, float, float]]]:
     """What :func:`_merge_boxes` computes (boxes that overlap or touch, and the bounding boxes of
     what they form, merged until none touch another) for many pairs' boxes at once, in compiled
-    code (:func:`fleet_planner._hold_kernels.merge_boxes`: union-find over each chunk's touching
+    code (:func:`fleet_planner._md_kernels.merge_boxes`: union-find over each chunk's touching
     pairs, repeated on the merged boxes until none touch); each chunk's boxes sorted by
     (a_lo, b_lo), ties in the order of their first box."""
-    from . import _hold_kernels as K
-
     if not chunks:
         return []
     sizes = [len(c) for c in chunks]

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _hold_kernels as K
+from . import _md_kernels as K
 from . import collision as C
 from .collision import CollisionModel
 from .model import COLLISION_TESTS, EPS, Link, Network
@@ -404,7 +404,7 @@ class DelayScheduler:
             vert_of = np.full(nv, -1)
             vert_of[hold_at] = np.arange(nh)
             h_key, h_lo, h_hi = vert_of[f_key[keep]], f_lo[keep], f_hi[keep]
-        # the compiled search (fleet_planner._hold_kernels) on each vertex's and edge's intervals by lo
+        # the compiled search (fleet_planner._md_kernels) on each vertex's and edge's intervals by lo
         f_ptr, f_slo, f_shi = _grouped(h_key, h_lo, h_hi, nh)
         g_ptr, g_slo, g_shi = _grouped(g_edge, g_lo, g_hi, nh - 1)
         durations = np.diff(T0[hold_at])
@@ -442,18 +442,19 @@ class DelayScheduler:
             return Blocked(j, blocker, "parks on its goal in the way", "goal")
         return Blocked(j, blocker, "drives through its start disc before it can leave", "start")
 
-    def _time_at(self, x: int, s: float, last: bool) -> float:
-        """When robot x (as timed) first reaches / last leaves travelled length ``s``."""
+    def _times_at(self, x: int, s: np.ndarray, last: bool) -> np.ndarray:
+        """When robot x (as timed) first reaches / last leaves each travelled length in ``s``."""
         cum = self.model.cumlen[x]
-        if not last and s <= EPS:
-            return 0.0
-        if last and s >= cum[-1] - EPS:
-            return INF
-        k = int(np.searchsorted(cum, s, side="left"))
-        if k < len(cum) and abs(cum[k] - s) <= EPS:
-            return float(self.dep[x][k] if last else self.arr[x][k])
-        seg = max(k - 1, 0)
-        return float(self.dep[x][seg] + self.model.tau(x, s) - self.model.times[x][seg])
+        k = np.searchsorted(cum, s, side="left")
+        kc = np.minimum(k, len(cum) - 1)
+        at_vertex = (k < len(cum)) & (np.abs(cum[kc] - s) <= EPS)
+        seg = np.maximum(k - 1, 0)
+        with np.errstate(invalid="ignore"):
+            t = self.dep[x][seg] + self.model.tau(x, s) - self.model.times[x][seg]
+        t = np.where(at_vertex, (self.dep[x] if last else self.arr[x])[kc], t)
+        if last:
+            return np.where(s >= cum[-1] - EPS, INF, t)
+        return np.where(s <= EPS, 0.0, t)
 
     def _network_holds(self, order: Sequence[int], ids: Sequence[str]) -> Network:
         """The network under the final timing with holds: a robot's node has its departure and its
@@ -466,22 +467,43 @@ class DelayScheduler:
 
         net = Network([ids[x] for x in order], {ids[x]: float(self.delays[x]) for x in order},
                       {ids[x]: arrival(x) - float(self.delays[x]) for x in order}, mode=self.mode)
+        # every inlet region of every robot as rows (j's rank, i, k along the pair, the region),
+        # its times computed per robot in one batch
+        rows: list[tuple[int, int, int, float, float, float, float]] = []
         for j in order:
-            rows = []
+            rj = rank[j]
             for i in self.model.neighbours(j):
-                if rank.get(i, INF) >= rank[j]:
+                if rank.get(i, INF) >= rj:
                     continue
-                for reg in self.model.regions(i, j):
-                    a_lo, a_hi, b_lo, b_hi = reg.oriented(i)
-                    rows.append((i, self._time_at(i, a_lo, False), self._time_at(i, a_hi, True), b_lo, b_hi))
-            rows.sort(key=lambda r: (r[3], r[0]))
-            per_pair: dict[int, int] = {}
-            for i, t1, t4, b_lo, b_hi in rows:
-                t2, t3 = self._time_at(j, b_lo, False), self._time_at(j, b_hi, True)
-                per_pair[i] = per_pair.get(i, 0) + 1
-                with np.errstate(invalid="ignore"):
-                    M, D = t3 - t1, t4 - t2
-                net.links.append(Link(ids[i], ids[j], per_pair[i], M, D, t1, t4, b_lo, b_hi))
+                rows.extend((rj, i, j, *reg.oriented(i)) for reg in self.model.regions(i, j))
+        if not rows:
+            return net
+        R = np.array(rows, dtype=float)
+        seq = np.arange(len(R))
+        # per j (in order): by (b_lo, i), ties in the pair's region order
+        R = R[np.lexsort((seq, R[:, 1], R[:, 5], R[:, 0]))]
+        who_i, who_j = R[:, 1].astype(np.int64), R[:, 2].astype(np.int64)
+        t1, t4, t2, t3 = (np.empty(len(R)) for _ in range(4))
+        for who, cols in ((who_i, ((3, False, t1), (4, True, t4))), (who_j, ((5, False, t2), (6, True, t3)))):
+            by = np.argsort(who, kind="stable")
+            cuts = np.searchsorted(who[by], np.arange(len(self.model.paths) + 1))
+            for x in np.nonzero(np.diff(cuts))[0].tolist():
+                rows_x = by[cuts[x]:cuts[x + 1]]
+                for col, last, out in cols:
+                    out[rows_x] = self._times_at(x, R[rows_x, col], last)
+        with np.errstate(invalid="ignore"):
+            M, D = t3 - t1, t4 - t2
+        # k: the link's number among the pair's links, in that order
+        pair = who_j * len(self.model.paths) + who_i
+        first = np.ones(len(R), dtype=bool)
+        by_pair = np.argsort(pair, kind="stable")
+        first[1:] = pair[by_pair][1:] != pair[by_pair][:-1]
+        start = np.maximum.accumulate(np.where(first, np.arange(len(R)), 0))
+        k = np.empty(len(R), dtype=np.int64)
+        k[by_pair] = np.arange(len(R)) - start + 1
+        for i, j, kk, m, d, a, b, lo, hi in zip(who_i.tolist(), who_j.tolist(), k.tolist(), M.tolist(), D.tolist(),
+                                                t1.tolist(), t4.tolist(), R[:, 5].tolist(), R[:, 6].tolist()):
+            net.links.append(Link(ids[i], ids[j], kk, m, d, a, b, lo, hi))
         return net
 
 

@@ -163,3 +163,162 @@ def test_a_snapshot_restores_a_robots_pairs():
     paths[5] = paths[5] + 0.3
     fresh = CollisionModel(paths, radii, 0.05)
     assert set(model.pairs()) == set(fresh.pairs())
+
+
+# ---------------------------------------------------------------------------------------------
+# the compiled pieces (fleet_planner._md_kernels.segment_pieces) against the numpy code they
+# replaced (issue 8, speed), transcribed here as it was: the very same numbers
+# ---------------------------------------------------------------------------------------------
+def _circle_interval(w: np.ndarray, u: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters s with |w + s*u| < R for unit u: roots of s^2 + 2 s (u.w) + |w|^2 - R^2."""
+    b = np.einsum("ij,ij->i", u, w)
+    c = np.einsum("ij,ij->i", w, w) - R * R
+    disc = b * b - c
+    root = np.sqrt(np.maximum(disc, 0.0))
+    lo, hi = -b - root, -b + root
+    empty = disc <= 0
+    return np.where(empty, np.inf, lo), np.where(empty, -np.inf, hi)
+
+
+def capsule_interval(p0: np.ndarray, u: np.ndarray, length: np.ndarray,
+                     q0: np.ndarray, v: np.ndarray, qlen: np.ndarray, R: np.ndarray):
+    """For each row: the interval [lo, hi] of s in [0, length] such that the point p0 + s*u lies within
+    R of the segment q0 + t*v, t in [0, qlen] (u, v unit vectors). Empty rows have lo > hi.
+
+    The capsule is convex, so its intersection with a line is one interval: the union of the two
+    end discs' intervals and the slab's."""
+    w0 = p0 - q0
+    lo_a, hi_a = _circle_interval(w0, u, R)
+    lo_b, hi_b = _circle_interval(w0 - v * qlen[:, None], u, R)
+    # slab: perpendicular distance to q's line < R and projection within [0, qlen]
+    cross0 = v[:, 0] * w0[:, 1] - v[:, 1] * w0[:, 0]
+    cross1 = v[:, 0] * u[:, 1] - v[:, 1] * u[:, 0]
+    proj0 = np.einsum("ij,ij->i", v, w0)
+    proj1 = np.einsum("ij,ij->i", v, u)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # |cross0 + s*cross1| < R
+        s1 = (-R - cross0) / cross1
+        s2 = (R - cross0) / cross1
+        perp_lo = np.where(cross1 != 0, np.minimum(s1, s2), np.where(np.abs(cross0) < R, -np.inf, np.inf))
+        perp_hi = np.where(cross1 != 0, np.maximum(s1, s2), np.where(np.abs(cross0) < R, np.inf, -np.inf))
+        # 0 <= proj0 + s*proj1 <= qlen
+        t1 = -proj0 / proj1
+        t2 = (qlen - proj0) / proj1
+        inside = (proj0 >= 0) & (proj0 <= qlen)
+        proj_lo = np.where(proj1 != 0, np.minimum(t1, t2), np.where(inside, -np.inf, np.inf))
+        proj_hi = np.where(proj1 != 0, np.maximum(t1, t2), np.where(inside, np.inf, -np.inf))
+    slab_lo = np.maximum(perp_lo, proj_lo)
+    slab_hi = np.minimum(perp_hi, proj_hi)
+    slab_empty = slab_lo >= slab_hi
+    slab_lo = np.where(slab_empty, np.inf, slab_lo)
+    slab_hi = np.where(slab_empty, -np.inf, slab_hi)
+    lo = np.minimum(np.minimum(lo_a, lo_b), slab_lo)
+    hi = np.maximum(np.maximum(hi_a, hi_b), slab_hi)
+    return np.maximum(lo, 0.0), np.minimum(hi, length)
+
+
+def _piece_table(p0, u, lp, offp, tp, vx, q0, v, lq, offq, tq, vy, R) -> np.ndarray:
+    """Exact extents of the convex set S = {(a, b) in [0, lp] x [0, lq] : |p0 + a u - q0 - b v| < R}
+    per row: the range of phi(a, b) = (tp + a/vx) - (tq + b/vy) over S, and S's edge intervals.
+
+    A linear function's extremes over a convex set lie on its boundary: on the square's edges (the
+    ends of the four edge intervals) or where the ellipse boundary is tangent to phi's level lines."""
+    n = len(p0)
+    out = np.zeros((n, 28))
+
+    def clip(lo, hi, length):
+        lo, hi = np.maximum(lo, 0.0), np.minimum(hi, length)
+        return np.where(lo <= hi, lo, np.inf), np.where(lo <= hi, hi, -np.inf)
+
+    p1, q1 = p0 + u * lp[:, None], q0 + v * lq[:, None]
+    xs = clip(*_circle_interval(q0 - p0, v, R), lq)   # b-range with x at its segment start
+    xe = clip(*_circle_interval(q0 - p1, v, R), lq)   # ... at its segment end
+    ys = clip(*_circle_interval(p0 - q0, u, R), lp)   # a-range with y at its segment start
+    ye = clip(*_circle_interval(p0 - q1, u, R), lp)
+    phi = lambda a, b: (tp + a / vx) - (tq + b / vy)  # noqa: E731
+    zero = np.zeros(n)
+    cands = [phi(zero, xs[0]), phi(zero, xs[1]), phi(lp, xe[0]), phi(lp, xe[1]),
+             phi(ys[0], zero), phi(ys[1], zero), phi(ye[0], lq), phi(ye[1], lq)]
+    valid = [np.isfinite(xs[0])] * 2 + [np.isfinite(xe[0])] * 2 + [np.isfinite(ys[0])] * 2 + [np.isfinite(ye[0])] * 2
+    # tangent points: y = w + A z with A = [u, -v]; phi = c + g.z, g = (1/vx, -1/vy)
+    det = u[:, 0] * (-v[:, 1]) - (-v[:, 0]) * u[:, 1]
+    ok = np.abs(det) > 1e-12
+    sdet = np.where(ok, det, 1.0)
+    # A^-1 = [[-v1, v0], [-u1, u0]] / det ; h = A^-T g
+    inv = np.stack([np.stack([-v[:, 1], v[:, 0]], 1), np.stack([-u[:, 1], u[:, 0]], 1)], 1) / sdet[:, None, None]
+    g = np.stack([1.0 / vx, -1.0 / vy], 1)
+    h = np.einsum("nji,nj->ni", inv, g)
+    hn = np.hypot(h[:, 0], h[:, 1])
+    hn = np.where(hn > 0, hn, 1.0)
+    w = p0 - q0
+    for sign in (1.0, -1.0):
+        y = sign * R[:, None] * h / hn[:, None]
+        z = np.einsum("nij,nj->ni", inv, y - w)
+        inside = ok & (z[:, 0] >= 0) & (z[:, 0] <= lp) & (z[:, 1] >= 0) & (z[:, 1] <= lq)
+        cands.append(phi(z[:, 0], z[:, 1]))
+        valid.append(inside)
+    c = np.stack(cands, 1)
+    m = np.stack(valid, 1)
+    out[:, C.P_PHI_LO] = np.where(m, c, np.inf).min(1)
+    out[:, C.P_PHI_HI] = np.where(m, c, -np.inf).max(1)
+    out[:, C.P_XS_LO], out[:, C.P_XS_HI] = offq + xs[0], offq + xs[1]
+    out[:, C.P_XE_LO], out[:, C.P_XE_HI] = offq + xe[0], offq + xe[1]
+    out[:, C.P_YS_LO], out[:, C.P_YS_HI] = offp + ys[0], offp + ys[1]
+    out[:, C.P_YE_LO], out[:, C.P_YE_HI] = offp + ye[0], offp + ye[1]
+    out[:, C.P_X_OFF], out[:, C.P_X_T0], out[:, C.P_X_V] = offp, tp, vx
+    out[:, C.P_Y_OFF], out[:, C.P_Y_T0], out[:, C.P_Y_V] = offq, tq, vy
+    return out
+
+
+
+def _take(segs: C._Segs, rows: np.ndarray) -> C._Segs:
+    return C._Segs(*(col[rows] for col in segs))
+
+
+def _swap(a: C._Segs, b: C._Segs, swap: np.ndarray) -> tuple[C._Segs, C._Segs]:
+    """The two sides of segment pairs exchanged where ``swap``."""
+    def pick(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.where(swap[:, None] if x.ndim == 2 else swap, y, x)
+
+    return C._Segs(*(pick(x, y) for x, y in zip(a, b))), C._Segs(*(pick(y, x) for x, y in zip(a, b)))
+
+
+def _numpy_pieces(A, B, radii, margin):
+    """What CollisionModel._compute did with candidate pairs A[r], B[r] before it was compiled."""
+    swap = A.owner > B.owner
+    if swap.any():
+        A, B = _swap(A, B, swap)
+    R = radii[A.owner] + radii[B.owner] + margin
+    a_lo, a_hi = capsule_interval(A.p0, A.u, A.length, B.p0, B.u, B.length, R)
+    b_lo, b_hi = capsule_interval(B.p0, B.u, B.length, A.p0, A.u, A.length, R)
+    hit = (a_lo <= a_hi) & (b_lo <= b_hi)
+    A, B, R = _take(A, hit), _take(B, hit), R[hit]
+    pieces = _piece_table(A.p0, A.u, A.length, A.offset, A.t0, A.speed,
+                          B.p0, B.u, B.length, B.offset, B.t0, B.speed, R)
+    pieces[:, C.P_X], pieces[:, C.P_Y] = A.owner, B.owner
+    pieces[:, C.P_A_LO], pieces[:, C.P_A_HI] = A.offset + a_lo[hit], A.offset + a_hi[hit]
+    pieces[:, C.P_B_LO], pieces[:, C.P_B_HI] = B.offset + b_lo[hit], B.offset + b_hi[hit]
+    pieces[:, C.P_X_FIRST], pieces[:, C.P_X_LAST] = A.first, A.last
+    pieces[:, C.P_Y_FIRST], pieces[:, C.P_Y_LAST] = B.first, B.last
+    pieces[:, C.P_X_SEG], pieces[:, C.P_Y_SEG] = A.seg, B.seg
+    return pieces
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_the_compiled_pieces_are_the_numbers_of_the_numpy_ones(grid):
+    from fleet_planner import _md_kernels as K
+
+    rng = np.random.default_rng(11 + grid)
+    paths, times = [], []
+    for _ in range(12):   # random polylines; on a grid: axis-parallel, parallel and collinear pairs, stops
+        k = int(rng.integers(1, 7))
+        pts = rng.integers(0, 6, (k, 2)).astype(float) if grid else rng.uniform(0, 6, (k, 2))
+        paths.append(pts)
+        times.append(np.concatenate([[0.0], np.cumsum(rng.uniform(0.5, 2.0, len(pts) - 1))]))
+    radii = rng.uniform(0.3, 0.6, len(paths))
+    segs = C._cat([C._robot_segments(x, p, t) for x, (p, t) in enumerate(zip(paths, times))])
+    qi, ti = np.nonzero(segs.owner[:, None] != segs.owner[None, :])   # every pair, both orientations
+    expect = _numpy_pieces(_take(segs, qi), _take(segs, ti), radii, 0.05)
+    got = K.segment_pieces(qi, ti, *C._kernel_cols(segs), *C._kernel_cols(segs), radii, 0.05, 28)
+    assert len(expect) > 50
+    np.testing.assert_array_equal(got, expect)

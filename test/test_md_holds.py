@@ -169,7 +169,7 @@ def test_route_choice_takes_the_detour_when_waiting_costs_more():
 
 
 # ---------------------------------------------------------------------------------------------
-# the compiled hold search (fleet_planner._hold_kernels) against the pure-Python loops it replaced
+# the compiled hold search (fleet_planner._md_kernels) against the pure-Python loops it replaced
 # ---------------------------------------------------------------------------------------------
 # A plain transcription of the scheduler's search before it was compiled (issue 8, speed): the
 # compiled kernels must give the very same numbers on any input.
@@ -301,7 +301,7 @@ def _random_chain(rng, nh):
 
 @pytest.mark.parametrize("early", [False, True])
 def test_the_compiled_hold_search_gives_the_numbers_of_the_python_one(early):
-    from fleet_planner import _hold_kernels as K
+    from fleet_planner import _md_kernels as K
     from fleet_planner.scheduler import _grouped
 
     rng = np.random.default_rng(8)

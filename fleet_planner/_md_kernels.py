@@ -1,15 +1,18 @@
-"""The compiled inner loops of the md planner's hold search and region merging (numba).
+"""The compiled inner loops of the md planner (numba): the hold search, the collision pieces of
+segment pairs and their merging into regions.
 
 Why numba: the safe-interval earliest-arrival search along a fixed path (:mod:`fleet_planner.scheduler`,
 holds anywhere) is a dynamic programme over (vertex, safe interval) with branchy interval sweeps,
 and the merging of a pair's collision pieces into regions is a union of touching boxes: both are
 short loops over small, data-dependent lists that numpy cannot vectorise, run thousands of times
-per plan (issue 8's profile: they were most of md's planning time). The functions are written in
+per plan (issue 8's profile: they were most of md's planning time). The pieces of segment pairs
+(:mod:`fleet_planner.collision`) vectorise, but as some 300 numpy operations on temporaries per
+batch; one pass per row is several times faster. The functions are written in
 plain Python over numpy arrays, so without numba they run as they are (correct, slower).
 
-Results are the same numbers as the pure-Python loops they replace (same floating-point
-operations in the same order, same tie-breaking); ``test/test_md_holds.py`` compares them on
-random inputs against a plain transcription of the original code.
+Results are the same numbers as the Python and numpy code they replace (same floating-point
+operations in the same order, same tie-breaking, numpy's min / max on ties); ``test/test_md_holds.py``
+and ``test/test_collision.py`` compare them on random inputs against transcriptions of that code.
 """
 from __future__ import annotations
 
@@ -277,6 +280,181 @@ def merge_boxes(boxes, ptr, eps):
     return out[:pos], out_ptr
 
 
+# ---------------------------------------------------------------------------------------------
+# collision pieces of segment pairs (the geometry of fleet_planner.collision)
+# ---------------------------------------------------------------------------------------------
+@_jit
+def _mn(a, b):
+    return a if a <= b else b   # numpy's minimum (no NaN here): the first on ties
+
+
+@_jit
+def _mx(a, b):
+    return a if a >= b else b
+
+
+@_jit
+def _circle(wx, wy, ux, uy, R):
+    """Parameters s with |w + s*u| < R for unit u: roots of s^2 + 2 s (u.w) + |w|^2 - R^2
+    (inf, -inf when there are none)."""
+    b = ux * wx + uy * wy
+    c = (wx * wx + wy * wy) - R * R
+    disc = b * b - c
+    if disc <= 0:
+        return INF, -INF
+    root = np.sqrt(_mx(disc, 0.0))
+    return -b - root, -b + root
+
+
+@_jit
+def _capsule(px, py, ux, uy, length, qx, qy, vx, vy, qlen, R):
+    """The interval [lo, hi] of s in [0, length] such that p + s*u lies within R of the segment
+    q + t*v, t in [0, qlen] (u, v unit vectors); lo > hi when empty. The capsule is convex, so
+    its intersection with a line is one interval: the union of the two end discs' intervals and
+    the slab's."""
+    wx, wy = px - qx, py - qy
+    lo_a, hi_a = _circle(wx, wy, ux, uy, R)
+    lo_b, hi_b = _circle(wx - vx * qlen, wy - vy * qlen, ux, uy, R)
+    # slab: perpendicular distance to q's line < R and projection within [0, qlen]
+    cross0 = vx * wy - vy * wx
+    cross1 = vx * uy - vy * ux
+    proj0 = vx * wx + vy * wy
+    proj1 = vx * ux + vy * uy
+    if cross1 != 0:   # |cross0 + s*cross1| < R
+        s1 = (-R - cross0) / cross1
+        s2 = (R - cross0) / cross1
+        perp_lo, perp_hi = _mn(s1, s2), _mx(s1, s2)
+    elif abs(cross0) < R:
+        perp_lo, perp_hi = -INF, INF
+    else:
+        perp_lo, perp_hi = INF, -INF
+    if proj1 != 0:    # 0 <= proj0 + s*proj1 <= qlen
+        t1 = -proj0 / proj1
+        t2 = (qlen - proj0) / proj1
+        proj_lo, proj_hi = _mn(t1, t2), _mx(t1, t2)
+    elif proj0 >= 0 and proj0 <= qlen:
+        proj_lo, proj_hi = -INF, INF
+    else:
+        proj_lo, proj_hi = INF, -INF
+    slab_lo = _mx(perp_lo, proj_lo)
+    slab_hi = _mn(perp_hi, proj_hi)
+    if slab_lo >= slab_hi:
+        slab_lo, slab_hi = INF, -INF
+    lo = _mn(_mn(lo_a, lo_b), slab_lo)
+    hi = _mx(_mx(hi_a, hi_b), slab_hi)
+    return _mx(lo, 0.0), _mn(hi, length)
+
+
+@_jit
+def _clip(lo, hi, length):
+    lo, hi = _mx(lo, 0.0), _mn(hi, length)
+    if lo <= hi:
+        return lo, hi
+    return INF, -INF
+
+
+@_jit
+def _phi(tp, a, vx, tq, b, vy):
+    return (tp + a / vx) - (tq + b / vy)
+
+
+@_jit
+def segment_pieces(qi, ti, a_p0, a_u, a_len, a_own, a_off, a_t0, a_v, a_seg, a_first, a_last,
+                   b_p0, b_u, b_len, b_own, b_off, b_t0, b_v, b_seg, b_first, b_last, radii, margin, ncols):
+    """The piece table (columns ``P_*`` of :mod:`fleet_planner.collision`) of the candidate
+    segment pairs (``a`` row ``qi[r]``, ``b`` row ``ti[r]``) whose discs come closer than
+    R = r_x + r_y + margin, each oriented so that the smaller robot index is x.
+
+    Per pair: the extents of the convex set S = {(a, b) in [0, lp] x [0, lq] : |p0 + a u - q0 - b v| < R}
+    on both segments (capsule intervals), the range of phi(a, b) = (tp + a/vx) - (tq + b/vy) over
+    S, and S's edge intervals. A linear function's extremes over a convex set lie on its
+    boundary: on the square's edges (the ends of the four edge intervals) or where the ellipse
+    boundary is tangent to phi's level lines."""
+    n = len(qi)
+    out = np.zeros((n, ncols))
+    k = 0
+    for r in range(n):
+        ia, ib = qi[r], ti[r]
+        if a_own[ia] <= b_own[ib]:
+            sa, sb, swap = ia, ib, False
+        else:
+            sa, sb, swap = ib, ia, True
+        if not swap:
+            px, py, ux, uy, lp, x_own = a_p0[sa, 0], a_p0[sa, 1], a_u[sa, 0], a_u[sa, 1], a_len[sa], a_own[sa]
+            offp, tp, vx, x_seg, x_first, x_last = a_off[sa], a_t0[sa], a_v[sa], a_seg[sa], a_first[sa], a_last[sa]
+            qx, qy, wx_, wy_, lq, y_own = b_p0[sb, 0], b_p0[sb, 1], b_u[sb, 0], b_u[sb, 1], b_len[sb], b_own[sb]
+            offq, tq, vy, y_seg, y_first, y_last = b_off[sb], b_t0[sb], b_v[sb], b_seg[sb], b_first[sb], b_last[sb]
+        else:
+            px, py, ux, uy, lp, x_own = b_p0[sa, 0], b_p0[sa, 1], b_u[sa, 0], b_u[sa, 1], b_len[sa], b_own[sa]
+            offp, tp, vx, x_seg, x_first, x_last = b_off[sa], b_t0[sa], b_v[sa], b_seg[sa], b_first[sa], b_last[sa]
+            qx, qy, wx_, wy_, lq, y_own = a_p0[sb, 0], a_p0[sb, 1], a_u[sb, 0], a_u[sb, 1], a_len[sb], a_own[sb]
+            offq, tq, vy, y_seg, y_first, y_last = a_off[sb], a_t0[sb], a_v[sb], a_seg[sb], a_first[sb], a_last[sb]
+        R = radii[x_own] + radii[y_own] + margin
+        a_lo, a_hi = _capsule(px, py, ux, uy, lp, qx, qy, wx_, wy_, lq, R)
+        b_lo, b_hi = _capsule(qx, qy, wx_, wy_, lq, px, py, ux, uy, lp, R)
+        if not (a_lo <= a_hi and b_lo <= b_hi):
+            continue
+        row = out[k]
+        k += 1
+        p1x, p1y = px + ux * lp, py + uy * lp
+        q1x, q1y = qx + wx_ * lq, qy + wy_ * lq
+        c0, c1 = _circle(qx - px, qy - py, wx_, wy_, R)
+        xs0, xs1 = _clip(c0, c1, lq)    # b-range with x at its segment start
+        c0, c1 = _circle(qx - p1x, qy - p1y, wx_, wy_, R)
+        xe0, xe1 = _clip(c0, c1, lq)    # ... at its segment end
+        c0, c1 = _circle(px - qx, py - qy, ux, uy, R)
+        ys0, ys1 = _clip(c0, c1, lp)    # a-range with y at its segment start
+        c0, c1 = _circle(px - q1x, py - q1y, ux, uy, R)
+        ye0, ye1 = _clip(c0, c1, lp)
+        lo, hi = INF, -INF
+        if np.isfinite(xs0):
+            for c in (_phi(tp, 0.0, vx, tq, xs0, vy), _phi(tp, 0.0, vx, tq, xs1, vy)):
+                lo, hi = _mn(lo, c), _mx(hi, c)
+        if np.isfinite(xe0):
+            for c in (_phi(tp, lp, vx, tq, xe0, vy), _phi(tp, lp, vx, tq, xe1, vy)):
+                lo, hi = _mn(lo, c), _mx(hi, c)
+        if np.isfinite(ys0):
+            for c in (_phi(tp, ys0, vx, tq, 0.0, vy), _phi(tp, ys1, vx, tq, 0.0, vy)):
+                lo, hi = _mn(lo, c), _mx(hi, c)
+        if np.isfinite(ye0):
+            for c in (_phi(tp, ye0, vx, tq, lq, vy), _phi(tp, ye1, vx, tq, lq, vy)):
+                lo, hi = _mn(lo, c), _mx(hi, c)
+        # tangent points: y = w + A z with A = [u, -v]; phi = c + g.z, g = (1/vx, -1/vy)
+        det = ux * (-wy_) - (-wx_) * uy
+        ok = abs(det) > 1e-12
+        sdet = det if ok else 1.0
+        # A^-1 = [[-v1, v0], [-u1, u0]] / det ; h = A^-T g
+        i00, i01, i10, i11 = -wy_ / sdet, wx_ / sdet, -uy / sdet, ux / sdet
+        g0, g1 = 1.0 / vx, -1.0 / vy
+        h0 = i00 * g0 + i10 * g1
+        h1 = i01 * g0 + i11 * g1
+        hn = np.hypot(h0, h1)
+        if not hn > 0:
+            hn = 1.0
+        w0, w1 = px - qx, py - qy
+        for sign in (1.0, -1.0):
+            y0 = sign * R * h0 / hn
+            y1 = sign * R * h1 / hn
+            z0 = i00 * (y0 - w0) + i01 * (y1 - w1)
+            z1 = i10 * (y0 - w0) + i11 * (y1 - w1)
+            if ok and z0 >= 0 and z0 <= lp and z1 >= 0 and z1 <= lq:
+                c = _phi(tp, z0, vx, tq, z1, vy)
+                lo, hi = _mn(lo, c), _mx(hi, c)
+        row[0], row[1] = x_own, y_own
+        row[2], row[3] = offp + a_lo, offp + a_hi
+        row[4], row[5] = offq + b_lo, offq + b_hi
+        row[6], row[7] = lo, hi
+        row[8], row[9] = offq + xs0, offq + xs1
+        row[10], row[11] = offq + xe0, offq + xe1
+        row[12], row[13] = offp + ys0, offp + ys1
+        row[14], row[15] = offp + ye0, offp + ye1
+        row[16], row[17], row[18], row[19] = x_first, x_last, y_first, y_last
+        row[20], row[21], row[22] = offp, tp, vx
+        row[23], row[24], row[25] = offq, tq, vy
+        row[26], row[27] = x_seg, y_seg
+    return out[:k]
+
+
 _WARM = False
 
 
@@ -292,4 +470,8 @@ def warm_up() -> None:
              np.array([1.0, 1.0]), True)
     merge_boxes(np.array([[0.0, 1.0, 0.0, 1.0], [1.0, 2.0, 1.0, 2.0], [5.0, 6.0, 5.0, 6.0]]),
                 np.array([0, 3], dtype=np.int64), 1e-9)
+    p0, u = np.array([[0.0, 0.0], [0.5, -1.0]]), np.array([[1.0, 0.0], [0.0, 1.0]])
+    one, two, idx = np.ones(2), np.full(2, 2.0), np.arange(2)
+    segment_pieces(np.array([0]), np.array([1]), p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1,
+                   p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1, np.full(2, 0.4), 0.0, 28)
     _WARM = True
