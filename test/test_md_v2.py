@@ -57,10 +57,51 @@ def test_where_the_search_fails_the_dense_solver_plans_and_the_plan_says_so():
     robots = _robots(12, 0)   # 12 robots on the comb: no priority order of md's paths works
     with pytest.raises(PlanningError):
         get_planner("md", fallback=None, time_limit=1.0).plan(COMB, robots)
-    plan = get_planner("md", time_limit=1.0).plan(COMB, robots)
+    plan = get_planner("md", time_limit=1.0, crowded=False).plan(COMB, robots)
     assert plan.info["fallback"] in ("crowd", "dense") and plan.planner == "md"
     assert plan.info["search"]["attempts"] >= 1 and plan.info["why"]
     assert check_plan(COMB, robots, plan) == []
+
+
+def test_a_crowded_instance_goes_to_the_dense_solver_before_md_plans_a_path():
+    """19 of the 12 robots' 24 starts and goals lie in the comb's 17 one-lane aisles (1.12 per
+    aisle): md hands the instance over at once instead of spending its budget first."""
+    from fleet_planner.planners import md_crowd
+
+    robots = _robots(12, 0)
+    measured = md_crowd.crowding(COMB, robots, 0.02)
+    assert (measured.aisles, measured.in_lanes) == (17, 19)
+    assert md_crowd.crowding(COMB, DENSE, 0.02).crowded() is None   # 6 robots: md's own case
+    plan = get_planner("md", time_limit=30.0).plan(COMB, robots)
+    assert plan.info["fallback"] in ("crowd", "dense") and plan.info["search"]["attempts"] == 0
+    assert plan.info["why"].startswith("crowded: 19 starts and goals in 17 one-lane aisles")
+    assert check_plan(COMB, robots, plan) == []
+
+
+def test_two_wide_aisles_are_not_lanes_and_many_robots_are_crowded():
+    from fleet_planner.planners import md_crowd
+
+    rows = ["..........", "..@@..@@..", "..@@..@@..", ".........."]
+    wide = GridMap.from_rows([rows[0]] + rows + [rows[0]])   # 2-cell aisles between the racks and around them
+    robots = [RobotSpec("a", 0.45, 1.0, wide.centre(4, 2), wide.centre(5, 3))]
+    assert md_crowd.crowding(wide, robots).aisles == 0
+    narrow = GridMap.from_rows(rows)   # 1-cell cross aisles above and below the racks
+    assert md_crowd.crowding(narrow, robots).aisles == 4   # above and below each of the two racks
+    many = md_crowd.Crowding(robots=800, aisles=0, in_lanes=0)
+    assert "800 robots" in many.crowded() and many.crowded(robots=801) is None
+
+
+def test_md_keeps_the_dense_plan_only_when_it_is_better():
+    """compare_above=1: the dense solver plans too on the 6-robot comb; whichever plan comes back
+    has the lower sum of arrival times of the two, and it is valid."""
+    from fleet_planner.planners.md_crowd import sum_of_arrivals
+
+    alone = get_planner("md", compare_above=None, time_limit=30.0).plan(COMB, DENSE)
+    dense = get_planner("dense").plan(COMB, DENSE)
+    both = get_planner("md", compare_above=1.0, time_limit=30.0).plan(COMB, DENSE)
+    assert check_plan(COMB, DENSE, both) == []
+    assert sum_of_arrivals(both) == pytest.approx(min(sum_of_arrivals(alone), sum_of_arrivals(dense)), abs=1e-6)
+    assert ("fallback" in both.info) == (sum_of_arrivals(dense) < sum_of_arrivals(alone) - 1e-6)
 
 
 def test_the_papers_methods_do_not_search():

@@ -41,6 +41,7 @@ from ..model import (
 )
 from ..scheduler import HOLDS, Blocked, DelayScheduler
 from .base import Planner, Progress
+from .md_crowd import crowding, sum_of_arrivals
 from .md_search import PrioritySearch
 
 if TYPE_CHECKING:
@@ -48,6 +49,14 @@ if TYPE_CHECKING:
 
 _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
 ORDERS = ("shortest", "longest", "given", "parking")
+
+
+class _SearchFailed(Exception):
+    """md found no plan within its budget: the last refusal and how many attempts were made."""
+
+    def __init__(self, error: PlanningError, attempts: int):
+        super().__init__(str(error))
+        self.error, self.attempts = error, attempts
 
 
 @dataclass
@@ -111,8 +120,16 @@ class MDPlanner(Planner):
     until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts);
     ``fallback`` (default "crowd"; a registered ``dense`` planner is preferred when there is one):
     the dense solver that plans when the search fails, named in the plan's ``info["fallback"]``;
-    None refuses instead. The live fleet's legs (:meth:`plan_incremental`) stop trying detours and
-    re-orderings once
+    None refuses instead (and switches off the two uses of the dense solver that follow).
+    ``crowded`` (default on): an instance crowded for prioritized planning (many starts and goals in
+    aisles too narrow for two robots to pass, or very many robots: :mod:`.md_crowd`) goes to the
+    dense solver first, with the whole budget, before any path is planned; md plans only if the dense
+    solver refuses. ``compare_above`` (default 1.05; None: never): when md's sum of arrival times
+    exceeds this multiple of its routes driven alone (its robots wait a lot), the dense solver plans
+    too, within what is left of the budget, and the plan with the lower sum of arrival times is
+    returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
+    solver when its plan won, ``info["compared"]`` its sum when md's did. The live fleet's legs
+    (:meth:`plan_incremental`) stop trying detours and re-orderings once
     ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
     fleet manager re-plans later)."""
 
@@ -122,7 +139,7 @@ class MDPlanner(Planner):
                  mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
                  detours: int | None = None, detour_min: float = 2.0, early_holds: bool | None = None,
                  time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd",
-                 leg_time_limit: float = 0.5):
+                 leg_time_limit: float = 0.5, crowded: bool = True, compare_above: float | None = 1.05):
         if holds is None:
             holds = "anywhere" if mode == "exact" else "none"
         if detours is None:
@@ -158,6 +175,11 @@ class MDPlanner(Planner):
         if fallback is not None and fallback not in ("crowd", "dense"):
             raise ValueError(f"fallback: must be 'crowd', 'dense' or None (got {fallback!r})")
         self.fallback = fallback
+        self.crowded = bool(crowded)
+        if compare_above is not None and (isinstance(compare_above, bool) or not isinstance(compare_above, (int, float))
+                                          or not (math.isfinite(compare_above) and compare_above >= 1)):
+            raise ValueError(f"compare_above: must be a finite number >= 1 or None (got {compare_above!r})")
+        self.compare_above = None if compare_above is None else float(compare_above)
         if order not in ORDERS:
             raise ValueError(f"order: must be one of {', '.join(ORDERS)} (got {order!r})")
         if not margin >= 0:
@@ -173,6 +195,42 @@ class MDPlanner(Planner):
         deadline = t_start + self.time_limit
         robots = list(robots)
         _check_endpoints(robots, self.margin)
+        if self.fallback is not None and self.crowded:
+            why = crowding(grid, robots, self.margin).crowded()
+            if why is not None:   # md would fail or run out of time here: the dense solver plans first
+                try:
+                    return self._dense(grid, robots, t_start, deadline, 0, f"crowded: {why}")
+                except PlanningError:
+                    pass   # e.g. robots off cell centres: md tries with what is left
+        try:
+            plan, drive = self._prioritized(grid, robots, progress, t_start, deadline)
+        except _SearchFailed as failed:
+            return self._fallback(grid, robots, failed.error, failed.attempts, t_start, deadline)
+        if self.fallback is None or self.compare_above is None or not robots:
+            return plan
+        ours = sum_of_arrivals(plan)
+        if ours <= self.compare_above * drive:
+            return plan
+        # md's robots wait a lot: the dense solver's plan may be better; the lower sum of arrivals wins
+        try:
+            other = self._dense(grid, robots, t_start, deadline, plan.info.get("search", {}).get("attempts", 1),
+                                f"md's sum of arrivals {ours:.1f} s is {ours / drive:.3f} x its routes driven alone")
+        except PlanningError:
+            return plan
+        theirs = sum_of_arrivals(other)
+        if theirs < ours - 1e-6:
+            other.info["md"] = {"sum_of_arrivals": round(ours, 3), **plan.info}
+            other.info["why"] += f"; the dense plan's {theirs:.1f} s is lower"
+            return other
+        plan.info["compared"] = {other.info["fallback"]: round(theirs, 3)}
+        plan.planning_time_s = time.perf_counter() - t_start
+        return plan
+
+    def _prioritized(self, grid: GridMap, robots: list[RobotSpec], progress: Progress | None, t_start: float,
+                     deadline: float) -> tuple[Plan, float]:
+        """md itself: safe paths, holds, route choice, greedy re-ordering, and the priority search when
+        that gives up, until ``deadline``; the plan and the sum of its routes driven alone (s); or
+        _SearchFailed."""
         shortest: dict[int, np.ndarray] = {}
         order = self._initial_order(grid, robots, shortest)
         search = PrioritySearch(seed=0)
@@ -182,7 +240,7 @@ class MDPlanner(Planner):
         while True:
             attempts += 1
             session = _Session(self, grid, robots, list(order), fixed=0, hints=dict(shortest),
-                               deadline=deadline if attempts > 1 else None, must=must)
+                               deadline=deadline if attempts > 1 or self.fallback is not None else None, must=must)
             try:
                 session.route(progress)
                 session.resolve(progress)
@@ -191,7 +249,7 @@ class MDPlanner(Planner):
                 blocked = next(iter(exc.blockers.items()), None)
                 if (not self.search or blocked is None or time.perf_counter() >= deadline
                         or attempts >= 10 + 2 * len(robots) or blocked[0] not in ids or blocked[1] not in ids):
-                    return self._fallback(grid, robots, exc, attempts, t_start, deadline)
+                    raise _SearchFailed(exc, attempts) from None
                 order = search.next_order(session.order, ids[blocked[0]], ids[blocked[1]])
                 if progress:
                     progress(attempts, attempts + 1, "priority search")
@@ -202,7 +260,8 @@ class MDPlanner(Planner):
             info["detours"] = session.detoured
         if attempts > 1:
             info["search"] = {"attempts": attempts, "priorities": len(search.constraints)}
-        return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network)
+        drive = float(sum(session.route_of(x)[1][-1] for x in range(len(robots))))
+        return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network), drive
 
     def _fallback(self, grid: GridMap, robots: list[RobotSpec], failure: PlanningError, attempts: int,
                   t_start: float, deadline: float) -> Plan:
@@ -212,23 +271,36 @@ class MDPlanner(Planner):
         the search and the fallback tried."""
         if self.fallback is None:
             raise failure
-        from . import get_planner, planner_names
-
-        name = "dense" if "dense" in planner_names() else self.fallback
-        budget = max(deadline - time.perf_counter(), 0.5 * self.time_limit)
+        why = "; ".join(f"{rid}: {w}" for rid, w in list(failure.failures.items())[:3])
         try:
-            try:
-                dense = get_planner(name, time_limit_s=budget)
-            except TypeError:
-                dense = get_planner(name)
-            plan = dense.plan(grid, robots)
+            return self._dense(grid, robots, t_start, deadline, attempts, why)
         except PlanningError as exc:
+            name = self._dense_name()
             why = "; ".join(f"{rid}: {w}" for rid, w in list(exc.failures.items())[:3])
             raise PlanningError({rid: f"{w} (priority search: {attempts} attempt(s); fallback {name}: {why})"
                                  for rid, w in failure.failures.items()}, failure.blockers) from exc
+
+    def _dense_name(self) -> str:
+        from . import planner_names
+
+        return "dense" if "dense" in planner_names() else str(self.fallback)
+
+    def _dense(self, grid: GridMap, robots: list[RobotSpec], t_start: float, deadline: float, attempts: int,
+               why: str) -> Plan:
+        """The dense solver's plan under md's name, with ``info["fallback"]`` naming the solver and
+        ``info["why"]`` saying why it planned; with what is left of the time budget (at least half
+        of it). PlanningError when it cannot plan."""
+        from . import get_planner
+
+        name = self._dense_name()
+        budget = max(deadline - time.perf_counter(), 0.5 * self.time_limit)
+        try:
+            dense = get_planner(name, time_limit_s=budget, margin=self.margin)
+        except TypeError:
+            dense = get_planner(name)
+        plan = dense.plan(grid, robots)
         info = dict(plan.info)
-        info.update({"fallback": name, "search": {"attempts": attempts},
-                     "why": "; ".join(f"{rid}: {w}" for rid, w in list(failure.failures.items())[:3])})
+        info.update({"fallback": name, "search": {"attempts": attempts}, "why": why})
         return Plan("md", plan.paths, time.perf_counter() - t_start, info, plan.network)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],

@@ -1,0 +1,82 @@
+"""When the md planner hands an instance to the dense solver (issue 8): crowding measured before
+any path is planned, and the comparison of two plans.
+
+Prioritized planning fails by construction where robots park in aisles too narrow for two of them
+to pass (one robot's start or goal disc then blocks every path through the aisle: docs/ARCHITECTURE.md,
+measured fact 1), and md's safe paths alone cost seconds at several hundred robots (8.7 s CPU at 400
+robots on warehouse-10-20-10-2-1, before the first conflict is even seen). So the planner looks at
+the instance first: the *lanes* are the free cells where the free run across (in the row or the
+column) is too short for two of the widest discs side by side; they group into aisles
+(4-connected). The instance is crowded when robots' starts and goals in lanes are many per aisle
+(``lane_load``, measured on the MovingAI warehouse with 1-cell aisles: 0.24 at 100 robots, 0.49 at
+200 - md plans both - 0.90 at 400 and 1.12 at 500, which md refuses and the dense solver plans in
+about 1.3 s CPU), or when there are simply more robots than md's pairwise collision model plans
+within the default budget (``crowd_robots``; md took more than 90 s at 1000).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ..grid import GridMap
+from ..model import Plan, RobotSpec
+
+#: starts and goals in lanes per aisle from which an instance is crowded (see the module docstring)
+LANE_LOAD = 0.7
+#: robots from which md hands the instance to the dense solver at once
+CROWD_ROBOTS = 750
+
+
+@dataclass(frozen=True)
+class Crowding:
+    """How crowded an instance is for prioritized planning."""
+
+    robots: int
+    #: aisles (connected groups of lane cells) and the starts and goals in them
+    aisles: int
+    in_lanes: int
+
+    @property
+    def lane_load(self) -> float:
+        return self.in_lanes / self.aisles if self.aisles else 0.0
+
+    def crowded(self, lane_load: float = LANE_LOAD, robots: int = CROWD_ROBOTS) -> str | None:
+        """Why the dense solver should plan this instance first, or None."""
+        if self.robots >= robots:
+            return f"{self.robots} robots (md hands {robots} or more to the dense solver)"
+        if self.aisles and self.lane_load >= lane_load:
+            return (f"{self.in_lanes} starts and goals in {self.aisles} one-lane aisles "
+                    f"({self.lane_load:.2f} per aisle, >= {lane_load:g})")
+        return None
+
+
+def crowding(grid: GridMap, robots: Sequence[RobotSpec], margin: float = 0.0) -> Crowding:
+    """Measure the instance (compiled code only: run labelling and counting by SciPy and NumPy)."""
+    if not robots:
+        return Crowding(0, 0, 0)
+    free = ~np.asarray(grid.blocked, dtype=bool)
+    two = 4 * max(r.radius for r in robots) + 2 * margin   # two widest discs side by side
+    lanes = np.zeros_like(free)
+    for axis in (0, 1):   # runs of free cells along each row (axis 1) and each column (axis 0)
+        structure = np.zeros((3, 3), dtype=bool)
+        structure[1, :] = axis == 1
+        structure[:, 1] = structure[:, 1] | (axis == 0)
+        structure[1, 1] = True
+        runs, count = ndimage.label(free, structure=structure)
+        if count:
+            length = np.bincount(runs.ravel())[runs] * grid.resolution
+            lanes |= free & (length < two)
+    aisles, count = ndimage.label(lanes)
+    if not count:
+        return Crowding(len(robots), 0, 0)
+    pts = np.array([p for r in robots for p in (r.start, r.goal)], dtype=float)
+    cols = np.clip(np.floor(pts[:, 0] / grid.resolution).astype(int), 0, grid.width - 1)
+    rows = np.clip(np.floor(pts[:, 1] / grid.resolution).astype(int), 0, grid.height - 1)
+    return Crowding(len(robots), int(count), int(np.count_nonzero(aisles[rows, cols])))
+
+
+def sum_of_arrivals(plan: Plan) -> float:
+    return float(sum(p.arrival_time for p in plan.paths))
