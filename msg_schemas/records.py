@@ -30,6 +30,7 @@ Bin Packing System in an Automatic Warehouse".
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields, replace
@@ -337,6 +338,94 @@ class RobotStatus(Record):
     rejected_path_id: int | None = spec(optional(integer(lo=0)), default=None)
     # whether it carries the goods of task_id (the robot's word that a pick or place is done)
     loaded: bool | None = spec(optional(boolean), default=None)
+
+    #: the compact form of the same record (:meth:`to_compact_json`), read by the same parser
+    COMPACT_SCHEMA: ClassVar[str] = "fleet/robot_status@2"
+
+    def __post_init__(self) -> None:
+        # check_fields' checks in its order, but a float already in range skips its check (it
+        # would return it unchanged): a status is built 10 times a second per robot
+        for name, check, path, lo, hi in _status_checks():
+            value = getattr(self, name)
+            if type(value) is float and lo <= value <= hi and _isfinite(value):
+                continue
+            object.__setattr__(self, name, check(value, path))
+        self._check_together()
+
+    def to_compact_json(self) -> str:
+        """This status as ``fleet/robot_status@2``: ``{"schema", "id", "v": [...]}``, the other fields
+        by position in the order of :data:`COMPACT_FIELDS` (trailing nulls left out), numbers
+        rounded (:data:`COMPACT_ROUNDING`). About half the bytes of :meth:`to_json` and several
+        times faster to write and read; :meth:`from_json` reads both forms."""
+        v = [f'"{self.kind}",{self.x:.4f},{self.y:.4f},{self.yaw:.4f},{self.vx:.4f},{self.vy:.4f},'
+             f'{self.battery:.6f},"{self.mode}",{_floor(self.progress, 6)},{self.stamp!r},{self.radius!r}',
+             "null" if self.task_id is None else json.dumps(self.task_id),
+             "null" if self.path_id is None else str(self.path_id), f"{self.lateness_s:.3f}",
+             "null" if self.behavior is None else json.dumps(_plain(self.behavior), allow_nan=False,
+                                                             separators=(",", ":")),
+             _json_flag(self.manual), _json_flag(self.estop),
+             "null" if self.travelled_m is None else _floor(self.travelled_m, 4),
+             "null" if self.rejected_path_id is None else str(self.rejected_path_id), _json_flag(self.loaded)]
+        while v[-1] == "null":
+            v.pop()
+        return f'{{"schema":"{self.COMPACT_SCHEMA}","id":"{self.id}","v":[{",".join(v)}]}}'
+
+    @classmethod
+    def _from_dict(cls, data: Any) -> Record:
+        data = _V.as_mapping(data, cls.NAME)
+        if data.get("schema") != cls.COMPACT_SCHEMA:
+            return super()._from_dict(data)
+        _V.keys(data, cls.NAME, ("schema", "id", "v"), ("schema", "id", "v"))
+        values = data["v"]
+        if not isinstance(values, (list, tuple)) or not _COMPACT_REQUIRED <= len(values) <= len(COMPACT_FIELDS):
+            raise RecordError.at(f"{cls.NAME}.v", f"must be a list of {_COMPACT_REQUIRED} to {len(COMPACT_FIELDS)} "
+                                                  f"values (got {show_json(values)})")
+        # each value checked as the field it stands for (errors name the field: robot_status.x)
+        return cls(id=data["id"], **dict(zip(COMPACT_FIELDS, values)))
+
+
+#: the fields of ``fleet/robot_status@2`` after ``id``, by position; the first
+#: :data:`_COMPACT_REQUIRED` are required, the others may be null or left out at the end
+COMPACT_FIELDS = ("kind", "x", "y", "yaw", "vx", "vy", "battery", "mode", "progress", "stamp", "radius",
+                  "task_id", "path_id", "lateness_s", "behavior", "manual", "estop", "travelled_m",
+                  "rejected_path_id", "loaded")
+_COMPACT_REQUIRED = 11
+#: how ``fleet/robot_status@2`` rounds (decimals): positions, heading and velocity to 0.1 mm (rad,
+#: mm/s), battery to 1e-6, lateness to 1 ms; progress and travelled_m are rounded down (a robot
+#: never reports itself further along, or arrived, before it is); stamp and radius are exact
+COMPACT_ROUNDING = {"x": 4, "y": 4, "yaw": 4, "vx": 4, "vy": 4, "battery": 6, "progress": 6, "lateness_s": 3,
+                    "travelled_m": 4}
+# the float fields of a status with the bounds of their checks (the fast path of __post_init__;
+# test_msg_schemas checks that these are the checks' bounds)
+_STATUS_FLOATS = {"x": (-math.inf, math.inf), "y": (-math.inf, math.inf), "yaw": (-math.inf, math.inf),
+                  "vx": (-math.inf, math.inf), "vy": (-math.inf, math.inf), "battery": (0.0, 1.0),
+                  "progress": (0.0, 1.0), "stamp": (-math.inf, math.inf), "radius": (0.0, math.inf),
+                  "lateness_s": (0.0, math.inf), "travelled_m": (0.0, math.inf)}
+_STATUS_CHECKS: list[tuple[str, Check, str, float, float]] = []
+_isfinite = math.isfinite
+
+
+def _status_checks() -> list[tuple[str, Check, str, float, float]]:
+    """(field, check, path, fast-path bounds) of every field of RobotStatus, in declaration order;
+    fields without a fast path get empty bounds (inf, -inf)."""
+    if not _STATUS_CHECKS:
+        _STATUS_CHECKS.extend((f.name, f.metadata["check"], f"{RobotStatus.NAME}.{f.name}",
+                               *_STATUS_FLOATS.get(f.name, (math.inf, -math.inf)))
+                              for f in fields(RobotStatus) if "check" in f.metadata)
+    return _STATUS_CHECKS
+
+
+def _floor(value: float, decimals: int) -> str:
+    """``value`` rounded down to ``decimals``, as JSON."""
+    scale = 10 ** decimals
+    k = math.floor(value * scale)
+    if k / scale > value:  # value * scale rounded up
+        k -= 1
+    return f"{k / scale:.{decimals}f}"
+
+
+def _json_flag(value: bool | None) -> str:
+    return "null" if value is None else ("true" if value else "false")
 
 
 @dataclass(frozen=True)

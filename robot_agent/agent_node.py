@@ -291,7 +291,7 @@ class AgentNode(Node):
     def _on_timer(self) -> None:
         try:
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
-            self._status.publish(String(data=status.to_json()))
+            self._status.publish(String(data=status.to_compact_json()))  # fleet/robot_status@2
             for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any
                 if self._waits is not None:
                     self._waits.publish(String(data=wait.to_json()))

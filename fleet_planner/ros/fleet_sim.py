@@ -114,7 +114,7 @@ class FleetSimNode(Node):
     def _on_timer(self) -> None:
         try:
             for status in self.sim.step(self.get_clock().now().nanoseconds / 1e9):
-                self._status.publish(String(data=status.to_json()))
+                self._status.publish(String(data=status.to_compact_json()))
             if self._waits is not None:
                 for wait in self.sim.take_wait_messages():
                     self._waits.publish(String(data=wait.to_json()))
