@@ -123,6 +123,7 @@ class FleetManager:
         self._occ: Occupancy | None = None
         self._free_spots: dict[tuple[int, float], list[tuple[str, Point]]] = {}
         self._reserved_at: list[Point] | None = None
+        self._reserved_arr: np.ndarray | None = None
         self._spot_trees: dict[int, Any] = {}
         if store is not None:
             self._reload(store)
@@ -339,11 +340,11 @@ class FleetManager:
         (re)plan, jobs to assign, robots to send charging or parking."""
         d = Decisions(notes=self._notes)
         self._notes = []
-        self._occ, self._free_spots, self._reserved_at = None, {}, None
+        self._occ, self._free_spots, self._reserved_at, self._reserved_arr = None, {}, None, None
         try:
             self._decide(now, d)
         finally:
-            self._occ, self._free_spots, self._reserved_at = None, {}, None
+            self._occ, self._free_spots, self._reserved_at, self._reserved_arr = None, {}, None, None
         if d.legs:
             self._plan_id += 1
         return d
@@ -628,7 +629,9 @@ class FleetManager:
             self._reserved_at += [o.pos for o in self.robots.values() if o.status.mode in ("picking", "placing")]
         if not self._reserved_at:
             return False
-        at = np.asarray(self._reserved_at, dtype=float)
+        at = self._reserved_arr
+        if at is None or len(at) != len(self._reserved_at):  # (places are only ever added during a step)
+            at = self._reserved_arr = np.asarray(self._reserved_at, dtype=float)
         return bool(np.any(np.hypot(at[:, 0] - pose[0], at[:, 1] - pose[1]) < AT_STATION_M))
 
     def _free_spot(self, r: FleetRobot, spots: Mapping[str, Point]) -> tuple[str, Point] | None:

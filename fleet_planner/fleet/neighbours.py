@@ -23,7 +23,7 @@ Selection is pure and vectorised: all pairs within the largest possible range fr
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Container, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -163,15 +163,18 @@ class NeighbourRelay:
         return select_neighbours([s.id for s in statuses], xy, radius, speed, self.horizon, self.sense_m,
                                  self.watch)
 
-    def records(self, statuses: Iterable[RobotStatus], now: float) -> dict[str, str]:
-        """The JSON of each robot's neighbours record (``fleet/neighbours@1``) stamped ``now``."""
+    def records(self, statuses: Iterable[RobotStatus], now: float,
+                only: Container[str] | None = None) -> dict[str, str]:
+        """The JSON of each robot's neighbours record (``fleet/neighbours@1``) stamped ``now``
+        (``only``: of these robots only; every status still counts as a neighbour)."""
         statuses = list(statuses)
         by_id = {s.id: s for s in statuses}
         self.horizon = self.horizon_for(statuses, now)
         chosen = self.select(statuses)
         for gone in set(self._json) - set(by_id):
             del self._json[gone]
-        return {rid: self.encode(rid, now, [by_id[o] for o in others]) for rid, others in chosen.items()}
+        return {rid: self.encode(rid, now, [by_id[o] for o in others]) for rid, others in chosen.items()
+                if only is None or rid in only}
 
     def offer_json(self, status: RobotStatus, text: str) -> None:
         """``text`` is the JSON ``status`` came in as (it parsed to exactly that record): records carry

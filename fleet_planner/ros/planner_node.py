@@ -12,6 +12,7 @@ logged warning.
 """
 from __future__ import annotations
 
+import time
 import traceback
 from collections.abc import Mapping
 from dataclasses import fields, replace
@@ -19,9 +20,11 @@ from typing import Any
 
 from nav_msgs.msg import OccupancyGrid, Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
+from rclpy.time_source import CLOCK_TOPIC
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
@@ -36,7 +39,7 @@ from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
 from fleet_planner.fleet.obstacles import ObstacleParams
 from fleet_planner.robots import RobotKind, load_kinds
-from fleet_planner.ros.drain import create_draining_subscription
+from fleet_planner.ros.drain import create_draining_subscription, drain_limit, take_waiting
 from fleet_planner.ros.entry import run_node
 from fleet_planner.ros.operator_services import PlannerOperator
 from fleet_planner.ros.relay import NeighbourPublisher
@@ -53,6 +56,12 @@ from msg_schemas.convert import (
     timed_path_to_msg,
 )
 from msg_schemas.records import ObstacleRecord, RecordError, RobotStatus, Task, TaskEvent
+
+#: at most this many notes of one step are logged (one log line; the rest are counted)
+MAX_NOTES_LOGGED = 40
+#: wall seconds between two log lines of the same kind from the status path (rclpy's own throttle
+#: still finds the caller's frame on every call: a cost per status, not per line)
+STATUS_LOG_EVERY_S = 5.0
 
 #: parameters that shape planned legs and cannot change while the node runs
 _FIXED = ("speed_factor", "safety_margin")
@@ -72,6 +81,15 @@ _OBSTACLE_HELP = {
     "growth": "m its predicted disc grows per second of prediction",
     "stale_s": "s after its last record an obstacle that is not persistent is forgotten",
 }
+
+
+def quiet_events() -> PublisherEventCallbacks:
+    """No QoS event handlers for a publisher: rclpy's default one (incompatible QoS) puts one more
+    entity into every wait of the executor, for each of the per-robot publishers (3 per robot)."""
+    return PublisherEventCallbacks(use_default_callbacks=False)
+
+
+QUIET = quiet_events()
 
 
 def _range(description: str, lo: float, hi: float, read_only: bool = True) -> ParameterDescriptor:
@@ -107,7 +125,8 @@ class PlannerNode(Node):
             "s of ROS time between the neighbours records sent to each robot (/robots/<id>/neighbours)",
             0.02, 2.0)).value
         self._markers_period = self.declare_parameter("markers_period_s", 1.0, _range(
-            "s of ROS time between two RViz marker arrays at most (they cost time in proportion to the fleet)",
+            "s of wall time between two RViz marker arrays at most (they cost time in proportion to the fleet, "
+            "and a viewer looks at them in wall time, however fast the simulated clock runs)",
             0.0, 60.0)).value
         gated = self.declare_parameter("gated", True, ParameterDescriptor(
             description="central: send each robot its legs' precedence links on /robots/<id>/gate (for agents "
@@ -157,10 +176,14 @@ class PlannerNode(Node):
         self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
         self._gates: dict[str, Publisher] = {}
         self._inbox = StatusInbox()  # only the latest status of each robot is parsed (fleet/inbox.py)
-        self._markers_at = -float("inf")
+        self._markers_at = -float("inf")   # (wall time, time.monotonic)
+        self._arrival_wall, self._arrival_now = -float("inf"), 0.0   # (see _arrival)
+        self._said: dict[str, float] = {}   # when a line of each kind of the status path was last logged
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
         self._tasks = create_draining_subscription(self, String, topics.TASKS, self._on_task, topics.TASKS_QOS)
-        create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status, topics.ROBOT_STATUS_QOS)
+        self._status_sub = create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status,
+                                                        topics.ROBOT_STATUS_QOS)
+        self._status_limit = drain_limit(topics.ROBOT_STATUS_QOS)
         # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
         self.operator = PlannerOperator(self, self.fleet, self._publish)
         create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
@@ -208,28 +231,76 @@ class PlannerNode(Node):
                               reason=f"task.auth: {problem} ({self.keys.refused} refused so far)")]
         return self.fleet.submit(replace(task, auth=None), now)
 
+    def _arrival(self) -> float:
+        """The planner's clock for a status just taken, read from rclpy at most once per wall
+        millisecond (statuses come in thousands a second; reading the ROS clock costs more than filing one)."""
+        wall = time.monotonic()
+        if wall - self._arrival_wall >= 1e-3:
+            self._arrival_wall, self._arrival_now = wall, self._now()
+        return self._arrival_now
+
     def _on_status(self, msg: String) -> None:
-        at_once = self._inbox.offer(msg.data, self._now())
+        at_once = self._inbox.offer(msg.data, self._arrival())
         if at_once is not None:
             self._status(*at_once)
 
     def _take_statuses(self) -> None:
+        """Every status waiting now, the latest of each robot parsed. First the simulated clock's
+        latest tick and what waits in the status queue, so a step that follows a long one sees the
+        time and the fleet as they are now, not as they were before it (a robot is never found
+        silent only because the planner was not listening)."""
+        self._catch_up_clock()
+        self._arrival_wall = -float("inf")   # the clock may have moved on
+        for _ in range(self._status_limit):
+            msg = take_waiting(self._status_sub)
+            if msg is None:
+                break
+            self._on_status(msg)
         for raw, arrived in self._inbox.take():
             self._status(raw, arrived)
+
+    def _catch_up_clock(self) -> None:
+        """Hand the latest waiting ``/clock`` tick to the node's time source (with use_sim_time):
+        rclpy reads it only when the executor comes to it, after the callbacks already due."""
+        sub = next((s for s in self.subscriptions if s.topic_name == CLOCK_TOPIC), None)
+        if sub is None:
+            return
+        last = None
+        for _ in range(1000):
+            msg = take_waiting(sub)
+            if msg is None:
+                break
+            last = msg
+        if last is not None:
+            sub.callback(last)
+
+    def _say(self, kind: str, text: str, error: bool = False) -> None:
+        """One log line of ``kind`` per STATUS_LOG_EVERY_S wall seconds (a cheap throttle, checked
+        before rclpy's logger is called at all)."""
+        wall = time.monotonic()
+        if wall - self._said.get(kind, -float("inf")) < STATUS_LOG_EVERY_S:
+            return
+        self._said[kind] = wall
+        log = self.get_logger()
+        (log.error if error else log.warning)(text)
 
     def _status(self, raw: str, arrived: float) -> None:
         msg = String(data=raw)
         try:
             status = string_to_record(msg, RobotStatus)
+            # it cannot have arrived before it was stamped (one clock): a planner whose clock lagged
+            # when the status came in (busy, its /clock not yet read) must not find it ahead, or the
+            # robot silent; never later than the planner's clock now
+            arrived = max(arrived, min(self._arrival(), status.stamp))
             problem = stamp_problem(f"robot {status.id!r}", status.stamp, arrived, float("inf"), self._max_age)
             if problem:  # (ahead: the fleet manager's max_clock_skew_s)
                 raise ValueError(problem)
             self.fleet.on_status(status, arrived)
             self.neighbour_relay.relay.offer_json(status, raw)
         except (RecordError, ValueError) as exc:
-            self.get_logger().warning(f"robot status ignored: {exc}", throttle_duration_sec=5.0)
+            self._say("status ignored", f"robot status ignored: {exc}")
         except Exception as exc:
-            self.get_logger().error(f"robot status {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
+            self._say("status failed", f"robot status {msg.data[:200]!r}: {exc!r}", error=True)
 
     def _on_obstacle(self, msg: String) -> None:
         try:
@@ -264,8 +335,9 @@ class PlannerNode(Node):
     # -- output ---------------------------------------------------------------------------------------
     def _publish(self, d: Decisions, now: float) -> None:
         log = self.get_logger()
-        for note in d.notes:
-            log.info(note)
+        if d.notes:  # one line per step (a log call costs far more than a note)
+            more = len(d.notes) - MAX_NOTES_LOGGED
+            log.info("\n".join(d.notes[:MAX_NOTES_LOGGED] + ([f"... and {more} more notes"] if more > 0 else [])))
         for gate in d.gates:  # before the legs: a robot waits for the record of its leg
             self._publisher(self._gates, topics.gate_topic, String, gate.robot_id).publish(record_to_string(gate))
         for leg in d.legs:
@@ -281,8 +353,9 @@ class PlannerNode(Node):
         self._publish_events(d.events)
         if d.legs:
             self._schedule.publish(record_to_string(self.fleet.schedule(now)))
-        if not 0.0 <= now - self._markers_at < self._markers_period:
-            self._markers_at = now
+        wall = time.monotonic()
+        if not 0.0 <= wall - self._markers_at < self._markers_period:
+            self._markers_at = wall
             self._markers.publish(plan_markers(self.fleet.trajectories() + self.fleet.obstacles.trajectories(now),
                                                self.fleet.statuses(), self.frame_id, now))
 
@@ -292,16 +365,17 @@ class PlannerNode(Node):
 
     def _publisher(self, table: dict[str, Publisher], topic: Any, kind: Any, robot_id: str) -> Publisher:
         if robot_id not in table:
-            table[robot_id] = self.create_publisher(kind, topic(robot_id), topics.LATCHED_QOS)
+            table[robot_id] = self.create_publisher(kind, topic(robot_id), topics.LATCHED_QOS,
+                                                    event_callbacks=QUIET)
         return table[robot_id]
 
     def _path_publisher(self, robot_id: str) -> tuple[Publisher, Publisher | None]:
         """The publishers of a robot's timed paths and (with a signing key) of their signatures."""
         if robot_id not in self._paths:
             auth = None if self.keys.signer is None else self.create_publisher(
-                String, topics.timed_path_auth_topic(robot_id), topics.TIMED_PATH_AUTH_QOS)
+                String, topics.timed_path_auth_topic(robot_id), topics.TIMED_PATH_AUTH_QOS, event_callbacks=QUIET)
             self._paths[robot_id] = (self.create_publisher(Path, topics.timed_path_topic(robot_id),
-                                                           topics.TIMED_PATH_QOS), auth)
+                                                           topics.TIMED_PATH_QOS, event_callbacks=QUIET), auth)
         return self._paths[robot_id]
 
 

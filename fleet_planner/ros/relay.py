@@ -6,8 +6,10 @@ record only when that changes and then once a second (so a quiet fleet costs lit
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from std_msgs.msg import String
@@ -19,6 +21,8 @@ from msg_schemas import topics
 #: a robot with no neighbours gets an (empty) record at least this often (s of ROS time)
 EMPTY_EVERY_S = 1.0
 _EMPTY_TAIL = '"robots":[]}'
+#: wall seconds between two looks at who subscribes to the robots' neighbours topics
+LISTENERS_EVERY_S = 1.0
 
 
 class NeighbourPublisher:
@@ -33,6 +37,8 @@ class NeighbourPublisher:
         self._empty_at: dict[str, float] = {}   # when the last empty record went to a robot
         self.sent = 0
         self._refresh = refresh   # called first at each tick (the planner takes in its waiting statuses)
+        self._listeners_at = -float("inf")   # (wall time) when the listeners were last asked for
+        self._heard_by: set[str] = set()
         self._timer = node.create_timer(period_s, self._tick)
 
     @property
@@ -44,12 +50,25 @@ class NeighbourPublisher:
         """``fn(robot_id) -> set of robot ids`` its gate watches (relayed to it however far)."""
         self.relay.watch = fn
 
+    def _listeners(self) -> set[str]:
+        """The robots whose neighbours topic someone subscribes to (asked of DDS at most once per
+        LISTENERS_EVERY_S wall seconds; a robot new to the fleet is asked at once)."""
+        wall = time.monotonic()
+        robots = self.fleet.robots
+        if wall - self._listeners_at >= LISTENERS_EVERY_S or any(rid not in self._pubs for rid in robots):
+            self._listeners_at = wall
+            self._heard_by = {rid for rid in robots if self._publisher(rid).get_subscription_count() > 0}
+        return self._heard_by
+
     def _tick(self) -> None:
         try:
+            listeners = self._listeners()
+            if not listeners:  # nobody hears a record (fleet-sim robots, synthetic ones): no work
+                return
             if self._refresh is not None:
                 self._refresh()
             now = self.node.get_clock().now().nanoseconds / 1e9
-            records = self.relay.records([r.status for r in self.fleet.robots.values()], now)
+            records = self.relay.records([r.status for r in self.fleet.robots.values()], now, only=listeners)
             for rid, text in records.items():
                 if text.endswith(_EMPTY_TAIL):
                     last = self._empty_at.get(rid)
@@ -70,5 +89,6 @@ class NeighbourPublisher:
         pub = self._pubs.get(robot_id)
         if pub is None:
             pub = self._pubs[robot_id] = self.node.create_publisher(
-                String, topics.neighbours_topic(robot_id), topics.NEIGHBOURS_QOS)
+                String, topics.neighbours_topic(robot_id), topics.NEIGHBOURS_QOS,
+                event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))  # no entity in each wait
         return pub

@@ -110,10 +110,10 @@ def start_processes(members: Sequence[FleetMember], rate: float, params_file: Pa
         common += ["-p", f"kinds_file:={kinds_file}"]
     sim = ["-p", "use_sim_time:=true"]
     commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)],
-                "planner": node_command("planner", "fleet_planner.ros.planner_node")
+                "planner": _profiled("planner", node_command("planner", "fleet_planner.ros.planner_node"))
                 + ["--ros-args", "--params-file", str(params_file)] + sim + common}
     if fleet_file is not None:
-        commands["fleet_sim"] = node_command("fleet-sim", "fleet_planner.ros.fleet_sim") + [
+        commands["fleet_sim"] = _profiled("fleet_sim", node_command("fleet-sim", "fleet_planner.ros.fleet_sim")) + [
             "--ros-args", "-p", f"fleet_file:={fleet_file}"] + sim + common
     for m in members if fleet_file is None else ():
         commands[f"agent_{m.id}"] = node_command("robot_agent", "robot_agent.agent_node") + [
@@ -133,6 +133,19 @@ def start_processes(members: Sequence[FleetMember], rate: float, params_file: Pa
         stop_processes(procs)
         raise
     return procs
+
+
+#: a directory: the planner and fleet-sim processes run under cProfile, their profiles written there
+PROFILE_ENV = "FLEET_DEMO_PROFILE"
+
+
+def _profiled(name: str, cmd: list[str]) -> list[str]:
+    """``cmd`` under cProfile (profile in $FLEET_DEMO_PROFILE/<name>.prof) when that variable is set."""
+    where = os.environ.get(PROFILE_ENV)
+    if not where:
+        return cmd
+    module = {"planner": "fleet_planner.ros.planner_node", "fleet_sim": "fleet_planner.ros.fleet_sim"}[name]
+    return [sys.executable, "-m", "cProfile", "-o", str(Path(where) / f"{name}.prof"), "-m", module]
 
 
 def stop_processes(procs: Sequence[subprocess.Popen], grace: float = 5.0) -> None:
