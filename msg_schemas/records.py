@@ -642,7 +642,8 @@ class GateRecord(Record):
     network's collision regions, as in an Action Dependency Graph; fleet_planner/fleet/gate.py).
     Latched per robot and re-sent whole, with a higher ``seq``, when it grows. ``watch`` maps each
     robot the links name to the latest path of that robot they were checked against: a robot
-    reporting a later path than its ``watch`` entry is unknown progress (wait)."""
+    reporting a later path than its ``watch`` entry is unknown progress (wait). Signed by the
+    planner where keys are configured (``auth``), like task events."""
 
     SCHEMA: ClassVar[str] = "fleet/gate@1"
     NAME: ClassVar[str] = "gate"
@@ -653,6 +654,7 @@ class GateRecord(Record):
     stamp: float = spec(number())
     links: tuple[dict[str, Any], ...] = spec(list_of(obj(GATE_LINK)), default=())
     watch: dict[str, int] | None = spec(optional(dict_of(integer(lo=0))), default=None)
+    auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with keys)
 
     def _check_together(self) -> None:
         for n, link in enumerate(self.links):

@@ -76,7 +76,7 @@ class AgentNode(Node):
     The robot's id is the parameter ``id``, or else the last part of the node's namespace (topic
     names are relative, so an agent in ``/r1`` talks on ``/r1/fleet/...``: in a fleet, give the id).
 
-    Task events and timed paths count only from the planner node (``planner``; see
+    Task events, timed paths and gate records count only from the planner node (``planner``; see
     ``fleet_planner/ros/origin.py``) or, with ``auth_trust_file``, only when signed by one of its keys
     (``fleet_planner/ros/signing.py``); with ``fleet_file``, only the roster's statuses are heard."""
 
@@ -108,7 +108,8 @@ class AgentNode(Node):
             "fleet YAML whose robot ids are the roster: statuses of other ids are ignored (one warning each); "
             "empty: every robot's are heard")).value
         trust_file = self.declare_parameter("auth_trust_file", "", _fixed(
-            "key file of the planner (fleet_planner/auth.py): with it, only task events and timed paths signed "
+            "key file of the planner (fleet_planner/auth.py): with it, only task events, timed paths and gate "
+            "records signed "
             "by one of its keys are taken, from any node (empty: only from the planner node, unsigned)")).value
         gated = self.declare_parameter("gated", True, _fixed(
             "central: never enter a collision region before the robot ranked above has left it (by the "
@@ -148,7 +149,7 @@ class AgentNode(Node):
         self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
         self._gate_origin = OriginCheck(self, gates, planner)
         self.keys = Keys(trust_file=trust_file)
-        self._events_topic = events.topic_name
+        self._events_topic, self._gates_topic = events.topic_name, gates.topic_name
         self._pairing: PathPairing | None = None
         if self.keys.checks:  # signed paths: their signatures come beside them
             auth = subscribe(String, topics.timed_path_auth_topic(robot_id), self._on_path_auth,
@@ -206,17 +207,21 @@ class AgentNode(Node):
             self.get_logger().error(printable(f"timed path ignored: {exc}", 300), throttle_duration_sec=1.0)
 
     def _on_gate(self, msg: String) -> None:
-        # without keys, only while the planner node alone publishes the topic (like paths and events);
-        # gate records carry no signature yet, so with keys this check is not made (README: left)
-        problem = None if self.keys.checks else self._gate_origin.problem()
-        if problem:
-            self.get_logger().error(printable(f"gate record ignored: not from the planner: {problem}", 300),
-                                    throttle_duration_sec=1.0)
-            return
+        # a gate record releases the robot into a region: like task events, with keys only when
+        # signed by the planner (fresh, not replayed), without keys only while the planner node
+        # alone publishes the topic
         try:
-            self.agent.on_gate(string_to_record(msg, GateRecord))
+            record = string_to_record(msg, GateRecord)
+            if self.keys.checks:
+                problem = self.keys.problem(record, self._gates_topic)
+                if problem:
+                    raise RecordError(f"gate {record.path_id}/{record.seq}: gate.auth: {problem} "
+                                      f"({self.keys.refused} refused so far)")
+            elif problem := self._gate_origin.problem():
+                raise RecordError(f"gate {record.path_id}/{record.seq}: not from the planner: {problem}")
+            self.agent.on_gate(record)
         except RecordError as exc:
-            self.get_logger().warning(f"gate record ignored: {exc}", throttle_duration_sec=5.0)
+            self.get_logger().error(printable(f"gate record ignored: {exc}", 300), throttle_duration_sec=1.0)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         for p in params:

@@ -1,7 +1,8 @@
 """Agents and fleet-submit take task events and timed paths only from the planner node, with no keys
 (issue 9, deliverable 5): while another node publishes on those topics, what comes there is
 refused (a forged ``cancelled`` does not make a robot drop its job, a forged timed path is not
-driven, a forged ``done`` is not success); when it is gone, the planner's word counts again."""
+driven, a forged gate record does not release a robot, a forged ``done`` is not success); when
+it is gone, the planner's word counts again."""
 import numpy as np
 import pytest
 import rclpy
@@ -11,12 +12,13 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 from test_records_total import KINDS, WH
 
+from fleet_planner.fleet.gate import gate_limit
 from fleet_planner.model import TimedPath
 from fleet_planner.ros.demo.monitor import spin_until
 from fleet_planner.ros.submit import Submitter
 from msg_schemas import topics
 from msg_schemas.convert import ns_to_stamp, timed_path_to_msg
-from msg_schemas.records import Task, TaskEvent
+from msg_schemas.records import GateRecord, Task, TaskEvent
 from robot_agent.agent_node import AgentNode
 
 START = WH.stations_of("charger")[0].pose
@@ -92,3 +94,26 @@ def test_fleet_submit_takes_no_forged_done(world, ros_context):
     finally:
         executor.remove_node(submitter)
         submitter.destroy_node()
+
+
+def test_gate_records_count_only_while_the_planner_alone_publishes_them(world):
+    """A forged gate record of a higher ``seq`` without links would release the robot into the
+    regions its record holds it before: refused while another node publishes there."""
+    agent, planner, forger, executor = world
+    hold = ({"robot": "o2", "path_id": 3, "exit": 4.0, "entry": 1.0},)
+    gates = planner.create_publisher(String, topics.gate_topic("o1"), topics.GATE_QOS)
+    assert until(executor, lambda: agent._gate_origin.sub.get_publisher_count() == 1)
+    gates.publish(String(data=GateRecord(robot_id="o1", path_id=5, seq=0, stamp=1.0, links=hold).to_json()))
+    driver = agent.agent.driver
+    assert until(executor, lambda: driver.gate is not None)
+    assert gate_limit(driver.gate, 5, {}) == 1.0
+
+    fake = forger.create_publisher(String, topics.gate_topic("o1"), topics.GATE_QOS)
+    fake.publish(String(data=GateRecord(robot_id="o1", path_id=5, seq=9, stamp=2.0).to_json()))
+    assert until(executor, lambda: agent._gate_origin.refused > 0)
+    assert driver.gate.seq == 0 and gate_limit(driver.gate, 5, {}) == 1.0  # still held
+
+    forger.destroy_publisher(fake)
+    assert until(executor, lambda: agent._gate_origin.sub.get_publisher_count() == 1)
+    gates.publish(String(data=GateRecord(robot_id="o1", path_id=5, seq=1, stamp=3.0).to_json()))
+    assert until(executor, lambda: driver.gate.seq == 1)  # the planner's word counts again

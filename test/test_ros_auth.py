@@ -1,8 +1,10 @@
 """Authenticated commands on the live fleet (issue 9, deliverable 5): with keys configured, a task
 signed by a client key is done; unsigned and wrongly signed tasks are rejected with the reason and
 counted; forged events and timed paths (unsigned, or signed with a key the robots do not trust) are
-refused and counted by the agents, even from a node that calls itself the planner."""
+refused and counted by the agents, even from a node that calls itself the planner; so are forged
+gate records."""
 import os
+from dataclasses import replace
 
 import pytest
 import rclpy
@@ -114,3 +116,42 @@ def test_fleet_submit_signs_its_task_and_believes_only_signed_events(keyed, ros_
         fleet.monitor.destroy_publisher(fake)
         fleet.executor.remove_node(submitter)
         submitter.destroy_node()
+
+
+def test_gate_records_count_only_signed_by_the_planner_fresh_and_for_this_robot(keyed, ros_context):
+    """A gate record releases a robot into a collision region: with keys, an unsigned one, one signed
+    with a key the robots do not trust, one re-signed for another robot's topic and a replay of the
+    planner's own record are refused and counted, whoever publishes them; the robot keeps the
+    planner's record (the forged ones, of a higher ``seq`` and with no links, would release it)."""
+    fleet, files = keyed
+    mon = fleet.monitor
+    client, forger = Keys(sign_file=files["client"]), Keys(sign_file=files["forger"])
+    mon.submit(client.sign(Task(id="K3", pick="chute_1", place="B04-01"), mon._tasks.topic_name))
+    assert wait_for(fleet, lambda: any(e.event == "assigned" for e in mon.events_of("K3")))
+    robot = next(e.robot_id for e in mon.events_of("K3") if e.event == "assigned")
+    agent = fleet.agents[robot]
+    driver = agent.agent.driver
+    assert wait_for(fleet, lambda: driver.gate is not None and driver.gate.path_id == agent.agent.model.path_id)
+    genuine = driver.gate
+    assert genuine.auth is not None and genuine.auth["key"] == "planner"  # the planner signs its gate records
+    impostor = rclpy.create_node("planner", namespace="/", context=ros_context)
+    fleet.executor.add_node(impostor)
+    try:
+        fake = impostor.create_publisher(String, topics.gate_topic(robot), topics.GATE_QOS)
+        other = next(r for r in fleet.agents if r != robot)
+        release = replace(genuine, seq=genuine.seq + 50, links=(), watch=None, auth=None)
+        refused = agent.keys.refused
+        for rec in (release,                                                          # unsigned
+                    forger.sign(release, fake.topic_name),                            # untrusted key
+                    Keys(sign_file=files["planner"]).sign(release, topics.gate_topic(other)),  # another channel
+                    genuine):                                                         # replayed
+            fake.publish(String(data=rec.to_json()))
+            assert wait_for(fleet, lambda n=refused: agent.keys.refused > n), rec
+            refused = agent.keys.refused
+        assert driver.gate.seq < release.seq and driver.gate.auth is not None
+        assert driver.gate.auth["key"] == "planner"
+    finally:
+        fleet.executor.remove_node(impostor)
+        impostor.destroy_node()
+    assert wait_for(fleet, lambda: ended(fleet, "K3"))
+    no_contact(fleet)

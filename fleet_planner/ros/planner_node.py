@@ -339,7 +339,8 @@ class PlannerNode(Node):
             more = len(d.notes) - MAX_NOTES_LOGGED
             log.info("\n".join(d.notes[:MAX_NOTES_LOGGED] + ([f"... and {more} more notes"] if more > 0 else [])))
         for gate in d.gates:  # before the legs: a robot waits for the record of its leg
-            self._publisher(self._gates, topics.gate_topic, String, gate.robot_id).publish(record_to_string(gate))
+            gate_pub = self._publisher(self._gates, topics.gate_topic, String, gate.robot_id)
+            gate_pub.publish(record_to_string(self.keys.sign(gate, gate_pub.topic_name)))  # signed with keys
         for leg in d.legs:
             try:
                 msg = timed_path_to_msg(leg.relative(), ns_to_stamp(leg.path_id), self.frame_id)
