@@ -294,12 +294,14 @@ class TaskEvent(Record):
 #: rules need (``fleet_planner.behavior.RobotView``): its behaviour, where its path goes next
 #: (null: it stands), the length of the rest of its path and of the straight run ahead (m), the
 #: station it is bound for, the robot its behaviour is about, whether its Avoid / Exchange finds no
-#: room, the station it docks at and since when it asked to (s, ROS time). Every key is required
-#: (null where there is nothing).
+#: room, the station it docks at and since when it asked to (s, ROS time), and the retreat wave it
+#: backs out in (``{"since": s, "by": founder id}``). Every key but ``retreat`` (null if absent:
+#: statuses from before it) is required (null where there is nothing).
 BEHAVIOR_STATE: dict[str, Check] = {
     "name": choice(BEHAVIORS), "next": optional(point), "remaining": number(lo=0.0),
     "straight": number(lo=0.0), "station": optional(nonempty), "partner": optional(ros_id),
-    "no_space": boolean, "docked_at": optional(nonempty), "dock_since": optional(number())}
+    "no_space": boolean, "docked_at": optional(nonempty), "dock_since": optional(number()),
+    "retreat": optional(obj({"since": number(), "by": ros_id}))}
 
 
 @dataclass(frozen=True)
@@ -326,7 +328,8 @@ class RobotStatus(Record):
     path_id: int | None = spec(optional(integer(lo=0)), default=None)  # which timed path it follows
     lateness_s: float = spec(number(lo=0.0), default=0.0)  # how far behind its due position
     # robots coordinating by behaviours (BBMRCA) broadcast their behaviour state: see BEHAVIOR_STATE
-    behavior: dict[str, Any] | None = spec(optional(obj(BEHAVIOR_STATE)), default=None)
+    behavior: dict[str, Any] | None = spec(optional(_V.mapping(BEHAVIOR_STATE, defaults={"retreat": None})),
+                                           default=None)
     # the operator's hand (fleet_planner.fleet.manual): driven by cmd_vel / stopped by the e-stop
     # (left out when false)
     manual: bool | None = spec(optional(boolean), default=None)

@@ -118,6 +118,20 @@ def test_md_and_prior_plan_along_the_lanes_and_pass_the_checker(planner):
     assert np.abs(by_id["r1"].waypoints[:, 1] - 2.5).max() >= 1.9   # it took a cross aisle
 
 
+def test_one_md_planner_keeps_the_lanes_of_a_map_apart_from_the_same_map_without():
+    """md's path-finder cache is keyed by the lanes too: the same map with and without lanes,
+    planned by one planner in either order, gets each its own paths."""
+    grid = _grid()
+    lane_grid = with_lanes(grid, parse_lanes(_one_way_east_middle(), grid))
+    robots = [RobotSpec("r1", R, 1.0, (10.5, 2.5), (1.5, 2.5))]
+    md = get_planner("md")
+    plain = md.plan(grid, robots).by_id()["r1"].waypoints
+    on_lanes = md.plan(lane_grid, robots).by_id()["r1"].waypoints
+    again = md.plan(grid, robots).by_id()["r1"].waypoints
+    assert np.abs(plain[:, 1] - 2.5).max() < 1e-6 and np.abs(again[:, 1] - 2.5).max() < 1e-6
+    assert _no_westward_run(on_lanes) and np.abs(on_lanes[:, 1] - 2.5).max() >= 1.9
+
+
 def _no_westward_run(wp: np.ndarray) -> bool:
     """No piece of the path runs west along row 2 inside the aisle."""
     for (x0, y0, _), (x1, y1, _) in zip(wp, wp[1:]):

@@ -21,7 +21,8 @@ def behavior_state(view: RobotView) -> dict[str, Any]:
     return {"name": view.behavior.value, "next": list(view.next_waypoint) if view.next_waypoint else None,
             "remaining": view.remaining, "straight": view.straight, "station": view.station,
             "partner": view.partner, "no_space": view.no_space, "docked_at": view.docked_at,
-            "dock_since": view.dock_since}
+            "dock_since": view.dock_since,
+            "retreat": None if view.retreat is None else {"since": view.retreat[0], "by": view.retreat[1]}}
 
 
 def view_of_status(status: RobotStatus, standing: bool = False) -> RobotView:
@@ -34,8 +35,10 @@ def view_of_status(status: RobotStatus, standing: bool = False) -> RobotView:
         moving = not standing and math.hypot(status.vx, status.vy) > 1e-3
         ahead = (status.x + status.vx, status.y + status.vy) if moving else None
         return RobotView(status.id, pos, status.radius, next_waypoint=ahead)
+    retreat = b.get("retreat")
     return RobotView(status.id, pos, status.radius, Behavior(b["name"]), b["next"], b["remaining"], b["straight"],
-                     b["station"], b["partner"], b["no_space"], b["docked_at"], b["dock_since"])
+                     b["station"], b["partner"], b["no_space"], b["docked_at"], b["dock_since"],
+                     None if retreat is None else (retreat["since"], retreat["by"]))
 
 
 def samples_to_path(robot_id: str, radius: float, samples: Sequence[tuple[float, float, float]]) -> TimedPath:

@@ -624,7 +624,7 @@ class _Finders:
 class _FinderCache:
     """The path finders of the maps a planner has planned on, owned by the planner: every call on
     the same map (the fleet manager plans a leg many times a minute) reuses the inflated maps and
-    disc caches. Keyed by map content and resolution, as the prior planner keys its roadmaps (a
+    disc caches. Keyed by map content, resolution and lanes, as the prior planner keys its roadmaps (a
     GridMap is a mutable dataclass, so neither hashable nor a weak key, and the finders refer to
     their map, which would keep a weak key alive); the few most recent maps are kept."""
 
@@ -634,7 +634,9 @@ class _FinderCache:
         self._by_map: dict[tuple, _Finders] = {}
 
     def of(self, grid: GridMap) -> _Finders:
-        key = (grid.blocked.shape, grid.resolution, grid.blocked.tobytes())
+        lanes = getattr(grid, "lanes", None)   # a map with lanes plans only along them: its own finders
+        key = (grid.blocked.shape, grid.resolution, grid.blocked.tobytes(),
+               None if lanes is None else lanes.allowed.tobytes())
         finders = self._by_map.get(key)
         if finders is None:
             if len(self._by_map) >= self.MAX_MAPS:
