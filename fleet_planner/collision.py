@@ -300,7 +300,10 @@ class CollisionModel:
         pieces = np.vstack(tables) if len(tables) > 1 else tables[0] if tables else _NO_PIECES
         if not len(pieces):
             return
-        pieces = pieces[np.lexsort((pieces[:, P_B_LO], pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
+        # by pair, then along the pair; ties by the segments, so that the order does not depend on
+        # how the candidates were found (the fleet's index or directly)
+        pieces = pieces[np.lexsort((pieces[:, P_Y_SEG], pieces[:, P_X_SEG], pieces[:, P_B_LO], pieces[:, P_A_LO],
+                                    pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
         cuts = [0, *(np.nonzero(np.diff(pair_key))[0] + 1).tolist(), len(pieces)]
         xs, ys = pieces[:, P_X].astype(np.int64).tolist(), pieces[:, P_Y].astype(np.int64).tolist()
