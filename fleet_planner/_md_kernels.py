@@ -455,6 +455,27 @@ def segment_pieces(qi, ti, a_p0, a_u, a_len, a_own, a_off, a_t0, a_v, a_seg, a_f
     return out[:k]
 
 
+@_jit
+def box_pairs(lo, hi, rlo, rhi):
+    """Index pairs (q, t) of the boxes ``lo[q]..hi[q]`` and ``rlo[t]..rhi[t]`` (rows (x, y)) that
+    overlap or touch, q ascending, then t (the order of ``np.nonzero`` on the overlap matrix)."""
+    n, m = len(lo), len(rlo)
+    count = 0
+    for q in range(n):
+        for t in range(m):
+            if lo[q, 0] <= rhi[t, 0] and rlo[t, 0] <= hi[q, 0] and lo[q, 1] <= rhi[t, 1] and rlo[t, 1] <= hi[q, 1]:
+                count += 1
+    out_q = np.empty(count, dtype=np.int64)
+    out_t = np.empty(count, dtype=np.int64)
+    k = 0
+    for q in range(n):
+        for t in range(m):
+            if lo[q, 0] <= rhi[t, 0] and rlo[t, 0] <= hi[q, 0] and lo[q, 1] <= rhi[t, 1] and rlo[t, 1] <= hi[q, 1]:
+                out_q[k], out_t[k] = q, t
+                k += 1
+    return out_q, out_t
+
+
 _WARM = False
 
 
@@ -472,6 +493,7 @@ def warm_up() -> None:
                 np.array([0, 3], dtype=np.int64), 1e-9)
     p0, u = np.array([[0.0, 0.0], [0.5, -1.0]]), np.array([[1.0, 0.0], [0.0, 1.0]])
     one, two, idx = np.ones(2), np.full(2, 2.0), np.arange(2)
+    box_pairs(p0 - 1.0, p0 + 1.0, p0 - 1.0, p0 + 1.0)
     segment_pieces(np.array([0]), np.array([1]), p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1,
                    p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1, np.full(2, 0.4), 0.0, 28)
     _WARM = True

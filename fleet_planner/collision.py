@@ -107,7 +107,7 @@ class CollisionModel:
 
     def __init__(self, paths: Sequence[np.ndarray], radii: Sequence[float], margin: float = 0.0,
                  speeds: Sequence[float] | None = None, times: Sequence[np.ndarray] | None = None,
-                 fast_merge: bool = False):
+                 fast_merge: bool = False, focus: Iterable[int] | None = None):
         #: merge a pair's pieces into regions with compiled connected components (the same regions;
         #: ties in ``a_lo`` may be numbered differently): for paths with many short segments (holds)
         self.fast_merge = fast_merge
@@ -122,6 +122,11 @@ class CollisionModel:
         self.lengths = np.array([c[-1] for c in self.cumlen])
         self.travel = np.array([float(t[-1]) for t in self.times])
         self._segs = [_robot_segments(x, p, t) for x, (p, t) in enumerate(zip(self.paths, self.times))]
+        self._bb = np.empty((len(self.paths), 4))
+        for x in range(len(self.paths)):
+            self._set_bbox(x)
+        #: only pairs with at least one of these robots are computed (None: every pair)
+        self.focus = None if focus is None else sorted(set(int(x) for x in focus))
         self._regions: dict[tuple[int, int], list[Region]] = {}
         self._pieces: dict[tuple[int, int], np.ndarray] = {}
         self._adj: dict[int, set[int]] = {}
@@ -131,7 +136,7 @@ class CollisionModel:
         self._tree_segs: _Segs | None = None
         self._stale: set[int] = set()
         self._stale_rows = 0
-        self._compute(range(len(self.paths)), all_pairs=True)
+        self._compute(range(len(self.paths)) if self.focus is None else self.focus, all_pairs=True)
 
     # -- queries --------------------------------------------------------------------------------
     def regions(self, x: int, y: int) -> list[Region]:
@@ -180,6 +185,7 @@ class CollisionModel:
             self.lengths[x] = self.cumlen[x][-1]
             self.travel[x] = float(self.times[x][-1])
             self._segs[x] = _robot_segments(x, self.paths[x], self.times[x])
+            self._set_bbox(x)
         dirty = set(changed)
         for x in dirty:
             for y in self._adj.pop(x, ()):
@@ -209,6 +215,7 @@ class CollisionModel:
         self.paths[x], self.times[x], self.cumlen[x] = path, times, cumlen
         self.lengths[x], self.travel[x] = length, travel
         self._segs[x] = segs
+        self._set_bbox(x)
         for y, chunk in pieces.items():
             key = (min(x, y), max(x, y))
             self._pieces[key] = chunk
@@ -221,20 +228,19 @@ class CollisionModel:
             self._stale_rows += len(segs.p0)
 
     # -- the geometry ---------------------------------------------------------------------------
-    def _bbox(self, x: int) -> np.ndarray:
-        """(min x, min y, max x, max y) of robot x's path."""
+    def _set_bbox(self, x: int) -> None:
+        """(min x, min y, max x, max y) of robot x's path, kept in ``_bb``."""
         pts = self.paths[x]
-        return np.concatenate([pts.min(0), pts.max(0)])
+        self._bb[x, :2], self._bb[x, 2:] = pts.min(0), pts.max(0)
 
-    def _near(self, robots: list[int], others: list[int], reach: float) -> list[int]:
-        """Those of ``others`` (sorted) whose path's bounding box comes within ``reach`` of the
+    def _near(self, robots: list[int], others: Iterable[int], reach: float) -> list[int]:
+        """Those of ``others`` (ascending) whose path's bounding box comes within ``reach`` of the
         bounding box of one of ``robots``' paths."""
-        others = sorted(others)
-        mine = np.array([self._bbox(x) for x in robots])
-        theirs = np.array([self._bbox(y) for y in others])
+        others = np.array(sorted(others), dtype=np.int64)
+        mine, theirs = self._bb[robots], self._bb[others]
         close = np.any(np.all((theirs[:, None, :2] <= mine[None, :, 2:] + reach)
                               & (mine[None, :, :2] <= theirs[:, None, 2:] + reach), axis=2), axis=1)
-        return [y for y, c in zip(others, close.tolist()) if c]
+        return others[close].tolist()
 
     def _build_tree(self) -> None:
         import shapely
@@ -253,73 +259,79 @@ class CollisionModel:
         if not robots or len(self.paths) < 2:
             return
         reach = 2 * float(self.radii.max()) + self.margin
-        if all_pairs or self._tree is None or self._stale_rows > self.REBUILD_SHARE * len(self._tree_segs.p0):
-            self._build_tree()
-        tree, tsegs = self._tree, self._tree_segs
-        assert tree is not None and tsegs is not None
-        mine = _cat([self._segs[x] for x in robots])
+        mine = self._segs[robots[0]] if len(robots) == 1 else _cat([self._segs[x] for x in robots])
         # candidates by envelopes grown by the reach (the exact test is the capsule computation
         # below); not the "dwithin" predicate, which misses zero-length segments (parked robots)
         # in GEOS 3.14
         p1 = mine.p0 + mine.u * mine.length[:, None]
         lo, hi = np.minimum(mine.p0, p1) - reach, np.maximum(mine.p0, p1) + reach
-        boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
-        if all_pairs:
-            qi, ti = tree.query(boxes)
-            keep = mine.owner[qi] < tsegs.owner[ti]
-            a, b = mine, tsegs
-            qi, ti = qi[keep], ti[keep]
+        if self.focus is not None:
+            # pairs with the focus only: no index of the fleet, the robots whose paths come near
+            # (bounding boxes) and their segments' envelopes compared directly
+            rsegs, qi, ti = self._direct(robots, range(len(self.paths)), mine, lo, hi, reach)
+            parts = [(qi, ti, rsegs)]
         else:
-            changed = set(robots)
-            # unchanged robots from the fleet's index
-            qi, ti = tree.query(boxes)
-            owner_t = tsegs.owner[ti]
-            fresh = ~np.isin(owner_t, list(self._stale | changed))
-            parts_q, parts_t = [qi[fresh]], [ti[fresh]]
-            # robots changed since the index was built (these included): a small index of their own
-            # (envelopes compared directly, in blocks: cheaper than building an index per call)
-            # only robots whose whole path comes within reach of the changed ones' paths
-            near_robots = self._near(robots, list(self._stale | changed), reach)
-            rsegs = _cat([self._segs[x] for x in near_robots])
-            rp1 = rsegs.p0 + rsegs.u * rsegs.length[:, None]
-            rlo, rhi = np.minimum(rsegs.p0, rp1), np.maximum(rsegs.p0, rp1)
-            found_q, found_t = [], []
-            step = max(1, 200_000 // max(1, len(rlo)))
-            for k in range(0, len(lo), step):
-                qlo, qhi = lo[k:k + step, None, :], hi[k:k + step, None, :]
-                near = ((qlo <= rhi[None]) & (rlo[None] <= qhi)).all(2)
-                q, t = np.nonzero(near)
-                found_q.append(q + k)
-                found_t.append(t)
-            rq, rt = np.concatenate(found_q), np.concatenate(found_t)
-            # a pair of two changed robots once (owner order), never a robot with itself
-            both = np.isin(rsegs.owner[rt], robots)
-            keep = np.where(both, mine.owner[rq] < rsegs.owner[rt], mine.owner[rq] != rsegs.owner[rt])
-            parts_q.append(rq[keep])
-            parts_t.append(rt[keep] + len(tsegs.p0))
-            qi, ti = np.concatenate(parts_q), np.concatenate(parts_t)
-            a, b = mine, _cat([tsegs, rsegs])
-            for x in robots:
-                if x not in self._stale:
-                    self._stale.add(x)
-                    self._stale_rows += len(self._segs[x].p0)
-        if len(qi) == 0:
-            return
+            if all_pairs or self._tree is None or self._stale_rows > self.REBUILD_SHARE * len(self._tree_segs.p0):
+                self._build_tree()
+            tree, tsegs = self._tree, self._tree_segs
+            assert tree is not None and tsegs is not None
+            qi, ti = tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+            if all_pairs:
+                keep = mine.owner[qi] < tsegs.owner[ti]
+                parts = [(qi[keep], ti[keep], tsegs)]
+            else:
+                # unchanged robots from the fleet's index
+                changed = self._stale | set(robots)
+                stale = np.zeros(len(self.paths), dtype=bool)
+                stale[list(changed)] = True
+                fresh = ~stale[tsegs.owner[ti]]
+                # robots changed since the index was built (these included): envelopes compared
+                # directly (cheaper than building an index per call)
+                rsegs, rq, rt = self._direct(robots, changed, mine, lo, hi, reach)
+                parts = [(qi[fresh], ti[fresh], tsegs), (rq, rt, rsegs)]
+                for x in robots:
+                    if x not in self._stale:
+                        self._stale.add(x)
+                        self._stale_rows += len(self._segs[x].p0)
         # the exact test and the pieces, each pair oriented so that the smaller robot index is x
         # (compiled: fleet_planner._md_kernels.segment_pieces)
-        pieces = K.segment_pieces(qi, ti, *_kernel_cols(a), *_kernel_cols(b), self.radii, self.margin,
-                                  _NO_PIECES.shape[1])
+        tables = [K.segment_pieces(q, t, *_kernel_cols(mine), *_kernel_cols(b), self.radii, self.margin,
+                                   _NO_PIECES.shape[1]) for q, t, b in parts if len(q)]
+        pieces = np.vstack(tables) if len(tables) > 1 else tables[0] if tables else _NO_PIECES
         if not len(pieces):
             return
-        pieces = pieces[np.lexsort((pieces[:, P_B_LO], pieces[:, P_A_LO], pieces[:, P_Y], pieces[:, P_X]))]
+        # by pair, then along the pair; ties by the segments, so that the order does not depend on
+        # how the candidates were found (the fleet's index or directly)
+        pieces = pieces[np.lexsort((pieces[:, P_Y_SEG], pieces[:, P_X_SEG], pieces[:, P_B_LO], pieces[:, P_A_LO],
+                                    pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
-        cuts = np.nonzero(np.diff(pair_key))[0] + 1
-        for chunk in np.split(pieces, cuts):
-            x, y = int(chunk[0, P_X]), int(chunk[0, P_Y])
-            self._pieces[(x, y)] = chunk
+        cuts = [0, *(np.nonzero(np.diff(pair_key))[0] + 1).tolist(), len(pieces)]
+        xs, ys = pieces[:, P_X].astype(np.int64).tolist(), pieces[:, P_Y].astype(np.int64).tolist()
+        for c0, c1 in zip(cuts[:-1], cuts[1:]):
+            x, y = xs[c0], ys[c0]
+            self._pieces[(x, y)] = pieces[c0:c1]
             self._regions.pop((x, y), None)
             self._adj.setdefault(x, set()).add(y)
             self._adj.setdefault(y, set()).add(x)
+
+    def _direct(self, robots: list[int], others: Iterable[int], mine: _Segs, lo: np.ndarray, hi: np.ndarray,
+                reach: float) -> tuple[_Segs, np.ndarray, np.ndarray]:
+        """Candidate pairs of ``mine`` (the segments of ``robots``, envelopes ``lo``/``hi`` grown by
+        the reach) with the segments of those of ``others`` whose whole path comes within reach:
+        (their segments, rows of mine, rows of theirs), rows of mine ascending, then theirs; a pair
+        of two of ``robots`` once (owner order), never a robot with itself."""
+        near = self._near(robots, others, reach)
+        if not near:
+            return mine, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        rsegs = self._segs[near[0]] if len(near) == 1 else _cat([self._segs[x] for x in near])
+        rp1 = rsegs.p0 + rsegs.u * rsegs.length[:, None]
+        rlo, rhi = np.minimum(rsegs.p0, rp1), np.maximum(rsegs.p0, rp1)
+        rq, rt = K.box_pairs(lo, hi, rlo, rhi)
+        inside = np.zeros(len(self.paths), dtype=bool)
+        inside[robots] = True
+        both = inside[rsegs.owner[rt]]
+        keep = np.where(both, mine.owner[rq] < rsegs.owner[rt], mine.owner[rq] != rsegs.owner[rt])
+        return rsegs, rq[keep], rt[keep]
 
 
 # Columns of a piece table: one row per pair of segments (one of robot x, one of robot y, x < y)

@@ -305,7 +305,6 @@ class DelayScheduler:
         tables = [m.pieces(i, j) for i in higher]
         sizes = [len(t) for t in tables]
         P = np.vstack(tables)
-        n = len(P)
         who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
         sw = who > j
 
@@ -314,16 +313,16 @@ class DelayScheduler:
 
         i_seg = col(C.P_X_SEG, C.P_Y_SEG).astype(np.int64)
         j_seg = col(C.P_Y_SEG, C.P_X_SEG).astype(np.int64)
-        a0, d0, a1, d1 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        pos = 0
-        for i, k in zip(higher, sizes):
-            sl = slice(pos, pos + k)
-            pos += k
-            last = len(self.arr[i]) - 1
-            s0 = np.minimum(i_seg[sl], last)
-            s1 = np.minimum(s0 + 1, last)
-            a0[sl], d0[sl] = self.arr[i][s0], self.dep[i][s0]
-            a1[sl], d1[sl] = self.arr[i][s1], self.dep[i][s1]
+        # each row's segment ends as timed: i's vertex times of all higher robots in one array
+        lens = np.array([len(self.arr[i]) for i in higher], dtype=np.int64)
+        first = np.repeat(np.cumsum(lens) - lens, sizes)
+        last = np.repeat(lens - 1, sizes)
+        arr_all = np.concatenate([self.arr[i] for i in higher])
+        dep_all = np.concatenate([self.dep[i] for i in higher])
+        s0 = np.minimum(i_seg, last)
+        s1 = first + np.minimum(s0 + 1, last)
+        s0 = first + s0
+        a0, d0, a1, d1 = arr_all[s0], dep_all[s0], arr_all[s1], dep_all[s1]
         phi_lo = np.where(sw, -P[:, C.P_PHI_HI], P[:, C.P_PHI_LO])
         phi_hi = np.where(sw, -P[:, C.P_PHI_LO], P[:, C.P_PHI_HI])
         is_lo, is_hi = col(C.P_XS_LO, C.P_YS_LO), col(C.P_XS_HI, C.P_YS_HI)   # j's range, i at its segment start

@@ -132,6 +132,36 @@ def test_many_incremental_updates_equal_a_rebuild(monkeypatch, share):
             assert model.regions(*pair) == fresh.regions(*pair)
 
 
+def test_a_focused_model_has_exactly_the_focus_pairs_of_the_full_one():
+    """The live fleet's legs (focus: the robots being planned) need only the pairs with those
+    robots: exactly the full model's pieces and regions for those pairs, none of the others, also
+    after updates of focused robots."""
+    rng = np.random.default_rng(12)
+    n = 16
+    paths = [np.cumsum(rng.uniform(-3, 3, (6, 2)), axis=0) + rng.uniform(0, 8, 2) for _ in range(n)]
+    paths[3] = paths[3][:1]   # parked
+    radii = rng.uniform(0.3, 0.5, n)
+
+    def times(p):
+        return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
+
+    focus = [2, 9, 13]
+    model = CollisionModel(paths, radii, 0.05, times=[times(p) for p in paths], fast_merge=True, focus=focus)
+    for step in range(4):
+        full = CollisionModel(paths, radii, 0.05, times=[times(p) for p in paths], fast_merge=True)
+        wanted = {pair for pair in full.pairs() if set(pair) & set(focus)}
+        assert len(wanted) > 5 and len(wanted) < len(list(full.pairs()))
+        assert set(model.pairs()) == wanted
+        for x in focus:
+            assert set(model.neighbours(x)) == set(full.neighbours(x))
+        for pair in wanted:
+            np.testing.assert_array_equal(model.pieces(*pair), full.pieces(*pair))
+            assert model.regions(*pair) == full.regions(*pair)
+        x = focus[step % len(focus)]
+        paths[x] = np.cumsum(rng.uniform(-3, 3, (5, 2)), axis=0) + rng.uniform(0, 8, 2)
+        model.set_paths({x: (paths[x], times(paths[x]))})
+
+
 def test_the_batched_merge_finds_the_regions_of_the_sequential_one():
     from fleet_planner.collision import _merge_boxes, _merge_boxes_batch
 

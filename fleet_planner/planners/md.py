@@ -427,7 +427,8 @@ class _Session:
             raise PlanningError(missing)
         routes = [self.route_of(x) for x in range(len(self.robots))]
         self.model = CollisionModel([p for p, _ in routes], [r.radius for r in self.robots], self.margin,
-                                    times=[t for _, t in routes], fast_merge=self.planner.holds == "anywhere")
+                                    times=[t for _, t in routes], fast_merge=self.planner.holds == "anywhere",
+                                    focus=range(self.fixed, len(self.robots)) if self.fixed else None)
         self.sched = DelayScheduler(self.model, self.planner.mode, self.planner.holds,
                                     start_only=[x for x, r in enumerate(self.robots) if r.max_accel is not None],
                                     early_holds=self.early_holds)
