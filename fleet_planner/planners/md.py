@@ -240,7 +240,9 @@ class MDPlanner(Planner):
         while True:
             attempts += 1
             session = _Session(self, grid, robots, list(order), fixed=0, hints=dict(shortest),
-                               deadline=deadline if attempts > 1 or self.fallback is not None else None, must=must)
+                               deadline=deadline if attempts > 1 or self.fallback is not None else None, must=must,
+                               # the first attempt's route choice is not cut short (its quality is md's)
+                               free_detours=attempts == 1)
             try:
                 session.route(progress)
                 session.resolve(progress)
@@ -389,10 +391,12 @@ class _Session:
                  fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = (),
                  hints: dict[int, np.ndarray] | None = None, deadline: float | None = None,
                  must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] | None = None,
-                 incremental: bool = False):
+                 incremental: bool = False, free_detours: bool = False):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
-        #: perf_counter time after which re-ordering gives up and route choice stops trying (None: no bound)
+        #: perf_counter time after which re-ordering gives up (None: no bound)
         self.deadline = deadline
+        #: and after which route choice stops trying (``free_detours``: never)
+        self.detour_deadline = None if free_detours else deadline
         #: waits moved back along the path: the planner's choice, by default in legs only (fixed robots)
         self.early_holds = planner.early_holds if planner.early_holds is not None else incremental
         self.margin = planner.margin
@@ -539,7 +543,7 @@ class _Session:
         """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
         the stretch after its longest wait (keeping what x must avoid) and keep the one with the
         earliest arrival; True if x's path changed."""
-        if x < self.fixed or (self.deadline is not None and time.perf_counter() > self.deadline):
+        if x < self.fixed or (self.detour_deadline is not None and time.perf_counter() > self.detour_deadline):
             return False
         me, sched = self.robots[x], self.sched
         changed = False
