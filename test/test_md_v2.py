@@ -148,6 +148,9 @@ def test_bad_options_are_refused_naming_the_option(capsys, tmp_path):
         MDPlanner(leg_time_limit=-1)
     with pytest.raises(ValueError, match="fallback: must be"):
         MDPlanner(fallback="lacam")
+    for bad in (0.9, math.nan, "1.1", True):
+        with pytest.raises(ValueError, match="compare_above: must be a finite number >= 1 or None"):
+            MDPlanner(compare_above=bad)
     scen = tmp_path / "s.yaml"
     scen.write_text("map:\n  rows: ['........', '........']\n  resolution: 1.0\nrobots:\n"
                     "  - {id: a, radius: 0.4, max_speed: 1.0, start: [0.5, 0.5], goal: [7.5, 0.5]}\n")
@@ -224,3 +227,26 @@ def test_early_holds_keep_the_arrival_and_wait_further_back(early):
     else:
         assert j.waypoints[:, :2].tolist() == [[1, 11], [10, 11], [10, 11], [16, 11]]
         assert j.waypoints[:, 2] == pytest.approx([0, 9, 9 + s2, 15 + s2])
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(2, 12), holds=st.sampled_from(["none", "anywhere"]),
+       crowded=st.booleans())
+def test_every_plan_through_the_dense_solver_is_valid(seed, n, holds, crowded):
+    """Property (the checker as oracle) over md's two uses of the dense solver on the comb: every
+    instance treated as crowded, or md's plan always compared with the dense one."""
+    from fleet_planner.planners import md_crowd
+
+    robots = _robots(n, seed)
+    old = md_crowd.LANE_LOAD, md_crowd.MIN_ROBOTS
+    md_crowd.LANE_LOAD, md_crowd.MIN_ROBOTS = (0.0, 0) if crowded else old
+    try:
+        plan = get_planner("md", holds=holds, compare_above=1.0, time_limit=2.0).plan(COMB, robots)
+    except PlanningError as err:
+        assert err.failures and set(err.failures) <= {r.id for r in robots}
+        return
+    finally:
+        md_crowd.LANE_LOAD, md_crowd.MIN_ROBOTS = old
+    assert check_plan(COMB, robots, plan) == []
+    if crowded:
+        assert plan.info.get("why", "").startswith("crowded") or "fallback" not in plan.info
