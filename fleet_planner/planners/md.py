@@ -40,6 +40,7 @@ from ..model import (
     timed_path_from_profile,
 )
 from ..scheduler import HOLDS, Blocked, DelayScheduler
+from . import md_crowd
 from .base import Planner, Progress
 from .md_crowd import crowding, sum_of_arrivals
 from .md_search import PrioritySearch
@@ -120,11 +121,12 @@ class MDPlanner(Planner):
     until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts);
     ``fallback`` (default "crowd"; a registered ``dense`` planner is preferred when there is one):
     the dense solver that plans when the search fails, named in the plan's ``info["fallback"]``;
-    None refuses instead (and switches off the two uses of the dense solver that follow).
+    None refuses instead (and switches off the two uses of the dense solver that follow; so do
+    ``holds="none"`` and boxes: the paper's methods).
     ``crowded`` (default on): an instance crowded for prioritized planning (many starts and goals in
     aisles too narrow for two robots to pass, or very many robots: :mod:`.md_crowd`) goes to the
     dense solver first, with the whole budget, before any path is planned; md plans only if the dense
-    solver refuses. ``compare_above`` (default 1.05; None: never): when md's sum of arrival times
+    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when md's sum of arrival times
     exceeds this multiple of its routes driven alone (its robots wait a lot), the dense solver plans
     too, within what is left of the budget, and the plan with the lower sum of arrival times is
     returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
@@ -195,7 +197,9 @@ class MDPlanner(Planner):
         deadline = t_start + self.time_limit
         robots = list(robots)
         _check_endpoints(robots, self.margin)
-        if self.fallback is not None and self.crowded:
+        # md v2's two uses of the dense solver; the paper's methods (holds "none", boxes) plan alone
+        v2 = self.fallback is not None and self.holds == "anywhere"
+        if v2 and self.crowded:
             why = crowding(grid, robots, self.margin).crowded()
             if why is not None:   # md would fail or run out of time here: the dense solver plans first
                 try:
@@ -206,8 +210,8 @@ class MDPlanner(Planner):
             plan, drive = self._prioritized(grid, robots, progress, t_start, deadline)
         except _SearchFailed as failed:
             return self._fallback(grid, robots, failed.error, failed.attempts, t_start, deadline)
-        if self.fallback is None or self.compare_above is None or not robots:
-            return plan
+        if not v2 or self.compare_above is None or len(robots) < md_crowd.MIN_ROBOTS:
+            return plan   # a few robots: md's own plan (the hand-worked cases stay md's)
         ours = sum_of_arrivals(plan)
         if ours <= self.compare_above * drive:
             return plan

@@ -28,8 +28,8 @@ from ..model import Plan, RobotSpec
 LANE_LOAD = 0.7
 #: robots from which md hands the instance to the dense solver at once
 CROWD_ROBOTS = 750
-#: fewer robots than this are never crowded: md is cheap there, and its plan is compared with the
-#: dense solver's anyway when its robots wait a lot
+#: fewer robots than this are never crowded and md's plan is not compared with the dense solver's:
+#: md is cheap there, and small hand-worked cases stay md's
 MIN_ROBOTS = 10
 
 
