@@ -11,6 +11,9 @@ Columns: planning time (s); sum of arrival times / sum of no-interference arriva
 longest no-interference arrival time; re-orderings; collision regions (md); and the verdict:
 ``ok``, ``FAIL (k)`` (the plan breaks the contract: k violations, printed), ``no plan`` (the planner
 refused, with a PlanningError), ``timeout`` or ``error``. Exit status 1 when any plan was invalid.
+The notes say where md v2's plan came from: ``crowded: dense`` (handed to the dense solver before
+planning, :mod:`fleet_planner.planners.md_crowd`), ``better: dense`` (both planned, the dense plan
+had the lower sum of arrivals), ``md better than dense``, ``fallback: dense`` (md found no plan).
 
     .venv/bin/python bench/bench_md.py [--sizes 10,50,100,200,500] [--planners md,md-departure,md-box,prior]
         [--maps warehouse-10-20-10-2-1,...] [--maps-dir DIR] [--seed 0] [--timeout 600] [--time-limit S]
@@ -18,7 +21,7 @@ refused, with a PlanningError), ``timeout`` or ``error``. Exit status 1 when any
 
     # issue 8's table: md (v2), the paper's method (md-departure) and PRIOR on warehouse-10-20-10-2-1,
     # -10-2-2 and warehouse-20-40-10-2-2 at 100, 200, 400, 500 robots (and 1000 on the two larger maps)
-    nice .venv/bin/python bench/bench_md.py --suite issue8 --maps-dir ../shared/data/maps --timeout 120
+    nice .venv/bin/python bench/bench_md.py --suite issue8 --maps-dir ../shared/data/maps --cpu-limit 40 --timeout 600
 
 Without the maps directory a generated warehouse (1 m cells, 1-cell aisles) with random start/goal
 pairs stands in, and the output says so.
@@ -264,8 +267,12 @@ def run_one(inst: Instance, n: int, planner: str, timeout: float, alone: AloneTi
     row.regions = plan.info.get("regions")
     row.cpu_s = plan.info.get("cpu_s")
     notes = []
-    if "fallback" in plan.info:
-        notes.append(f"fallback {plan.info['fallback']}")
+    if "fallback" in plan.info:   # md v2 handed over (crowded), found the dense plan better, or failed
+        why = str(plan.info.get("why", ""))
+        how = "crowded" if why.startswith("crowded") else "better" if "is lower" in why else "fallback"
+        notes.append(f"{how}: {plan.info['fallback']}")
+    if isinstance(plan.info.get("compared"), dict):
+        notes.append("md better than " + ", ".join(plan.info["compared"]))
     if isinstance(plan.info.get("search"), dict):
         notes.append(f"search {plan.info['search'].get('attempts')}")
     if plan.info.get("detours"):

@@ -74,6 +74,9 @@ def test_a_crowded_instance_goes_to_the_dense_solver_before_md_plans_a_path():
     assert md_crowd.crowding(COMB, DENSE, 0.02).crowded() is None   # 6 robots: md's own case
     plan = get_planner("md", time_limit=30.0).plan(COMB, robots)
     assert plan.info["fallback"] in ("crowd", "dense") and plan.info["search"]["attempts"] == 0
+    # with departure delays only (the paper's method) md searches first, the dense solver only after
+    late = get_planner("md", holds="none", time_limit=1.0).plan(COMB, robots)
+    assert not late.info["why"].startswith("crowded") and late.info["search"]["attempts"] >= 1
     assert plan.info["why"].startswith("crowded: 19 starts and goals in 17 one-lane aisles")
     assert check_plan(COMB, robots, plan) == []
 
@@ -91,10 +94,13 @@ def test_two_wide_aisles_are_not_lanes_and_many_robots_are_crowded():
     assert "800 robots" in many.crowded() and many.crowded(robots=801) is None
 
 
-def test_md_keeps_the_dense_plan_only_when_it_is_better():
-    """compare_above=1: the dense solver plans too on the 6-robot comb; whichever plan comes back
-    has the lower sum of arrival times of the two, and it is valid."""
+def test_md_keeps_the_dense_plan_only_when_it_is_better(monkeypatch):
+    """compare_above=1 (and no minimum fleet): the dense solver plans too on the 6-robot comb;
+    whichever plan comes back has the lower sum of arrival times of the two, and it is valid."""
+    from fleet_planner.planners import md_crowd
     from fleet_planner.planners.md_crowd import sum_of_arrivals
+
+    monkeypatch.setattr(md_crowd, "MIN_ROBOTS", 0)
 
     alone = get_planner("md", compare_above=None, time_limit=30.0).plan(COMB, DENSE)
     dense = get_planner("dense").plan(COMB, DENSE)
@@ -148,6 +154,9 @@ def test_bad_options_are_refused_naming_the_option(capsys, tmp_path):
         MDPlanner(leg_time_limit=-1)
     with pytest.raises(ValueError, match="fallback: must be"):
         MDPlanner(fallback="lacam")
+    for bad in (0.9, math.nan, "1.1", True):
+        with pytest.raises(ValueError, match="compare_above: must be a finite number >= 1 or None"):
+            MDPlanner(compare_above=bad)
     scen = tmp_path / "s.yaml"
     scen.write_text("map:\n  rows: ['........', '........']\n  resolution: 1.0\nrobots:\n"
                     "  - {id: a, radius: 0.4, max_speed: 1.0, start: [0.5, 0.5], goal: [7.5, 0.5]}\n")
@@ -224,3 +233,23 @@ def test_early_holds_keep_the_arrival_and_wait_further_back(early):
     else:
         assert j.waypoints[:, :2].tolist() == [[1, 11], [10, 11], [10, 11], [16, 11]]
         assert j.waypoints[:, 2] == pytest.approx([0, 9, 9 + s2, 15 + s2])
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(2, 12), crowded=st.booleans())
+def test_every_plan_through_the_dense_solver_is_valid(seed, n, crowded):
+    """Property (the checker as oracle) over md's two uses of the dense solver on the comb: every
+    instance treated as crowded, or md's plan always compared with the dense one."""
+    from fleet_planner.planners import md_crowd
+
+    robots = _robots(n, seed)
+    old = md_crowd.LANE_LOAD, md_crowd.MIN_ROBOTS
+    md_crowd.LANE_LOAD, md_crowd.MIN_ROBOTS = (0.0 if crowded else old[0]), 0
+    try:
+        plan = get_planner("md", compare_above=1.0, time_limit=2.0).plan(COMB, robots)
+    except PlanningError as err:
+        assert err.failures and set(err.failures) <= {r.id for r in robots}
+        return
+    finally:
+        md_crowd.LANE_LOAD, md_crowd.MIN_ROBOTS = old
+    assert check_plan(COMB, robots, plan) == []

@@ -44,7 +44,8 @@ def register(name: str, target: str, summary: str = "", **options: Any) -> None:
 
 register("md", "fleet_planner.planners.md:MDPlanner",
          "md v2: the (M,D) network of You & Ji with exact collision regions, holds anywhere, route choice "
-         "and priority search (--holds none: the paper's departure delays)")
+         "and priority search; crowded instances and worse plans to the dense solver (--holds none: the paper's "
+         "departure delays)")
 register("md-box", "fleet_planner.planners.md:MDPlanner",
          "the (M,D) network of You & Ji with the paper's collision boxes", mode="box", holds="none",
          search=False, fallback=None)
@@ -56,10 +57,10 @@ register("md-departure", "fleet_planner.planners.md:MDPlanner",
 register("md-holds", "fleet_planner.planners.md:MDPlanner",
          "md with holds anywhere along the path but no route choice "
          "(earliest arrival against the higher robots' timed trajectories)",
-         mode="exact", holds="anywhere", detours=0)
+         mode="exact", holds="anywhere", detours=0, crowded=False, compare_above=None)
 register("md-routes", "fleet_planner.planners.md:MDPlanner",
          "md with route choice in time: robots that wait long try detours, the earliest arrival wins",
-         mode="exact", holds="anywhere", detours=2)
+         mode="exact", holds="anywhere", detours=2, crowded=False, compare_above=None)
 register("crowd", "fleet_planner.planners.crowd:CrowdPlanner", "LaCAM/PIBT for dense crowds, timed by precedence")
 register("dense", "fleet_planner.planners.crowd:DensePlanner", "the dense-crowd solver (LaCAM/PIBT + LNS; = crowd)")
 

@@ -40,6 +40,7 @@ from ..model import (
     timed_path_from_profile,
 )
 from ..scheduler import HOLDS, Blocked, DelayScheduler
+from . import md_crowd
 from .base import Planner, Progress
 from .md_crowd import crowding, sum_of_arrivals
 from .md_search import PrioritySearch
@@ -120,11 +121,12 @@ class MDPlanner(Planner):
     until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts);
     ``fallback`` (default "crowd"; a registered ``dense`` planner is preferred when there is one):
     the dense solver that plans when the search fails, named in the plan's ``info["fallback"]``;
-    None refuses instead (and switches off the two uses of the dense solver that follow).
+    None refuses instead (and switches off the two uses of the dense solver that follow; so do
+    ``holds="none"`` and boxes: the paper's methods).
     ``crowded`` (default on): an instance crowded for prioritized planning (many starts and goals in
     aisles too narrow for two robots to pass, or very many robots: :mod:`.md_crowd`) goes to the
     dense solver first, with the whole budget, before any path is planned; md plans only if the dense
-    solver refuses. ``compare_above`` (default 1.05; None: never): when md's sum of arrival times
+    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when md's sum of arrival times
     exceeds this multiple of its routes driven alone (its robots wait a lot), the dense solver plans
     too, within what is left of the budget, and the plan with the lower sum of arrival times is
     returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
@@ -195,7 +197,9 @@ class MDPlanner(Planner):
         deadline = t_start + self.time_limit
         robots = list(robots)
         _check_endpoints(robots, self.margin)
-        if self.fallback is not None and self.crowded:
+        # md v2's two uses of the dense solver; the paper's methods (holds "none", boxes) plan alone
+        v2 = self.fallback is not None and self.holds == "anywhere"
+        if v2 and self.crowded:
             why = crowding(grid, robots, self.margin).crowded()
             if why is not None:   # md would fail or run out of time here: the dense solver plans first
                 try:
@@ -206,8 +210,8 @@ class MDPlanner(Planner):
             plan, drive = self._prioritized(grid, robots, progress, t_start, deadline)
         except _SearchFailed as failed:
             return self._fallback(grid, robots, failed.error, failed.attempts, t_start, deadline)
-        if self.fallback is None or self.compare_above is None or not robots:
-            return plan
+        if not v2 or self.compare_above is None or len(robots) < md_crowd.MIN_ROBOTS:
+            return plan   # a few robots: md's own plan (the hand-worked cases stay md's)
         ours = sum_of_arrivals(plan)
         if ours <= self.compare_above * drive:
             return plan
@@ -240,7 +244,9 @@ class MDPlanner(Planner):
         while True:
             attempts += 1
             session = _Session(self, grid, robots, list(order), fixed=0, hints=dict(shortest),
-                               deadline=deadline if attempts > 1 or self.fallback is not None else None, must=must)
+                               deadline=deadline if attempts > 1 or self.fallback is not None else None, must=must,
+                               # the first attempt's route choice is not cut short (its quality is md's)
+                               free_detours=attempts == 1)
             try:
                 session.route(progress)
                 session.resolve(progress)
@@ -389,10 +395,12 @@ class _Session:
                  fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = (),
                  hints: dict[int, np.ndarray] | None = None, deadline: float | None = None,
                  must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] | None = None,
-                 incremental: bool = False):
+                 incremental: bool = False, free_detours: bool = False):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
-        #: perf_counter time after which re-ordering gives up and route choice stops trying (None: no bound)
+        #: perf_counter time after which re-ordering gives up (None: no bound)
         self.deadline = deadline
+        #: and after which route choice stops trying (``free_detours``: never)
+        self.detour_deadline = None if free_detours else deadline
         #: waits moved back along the path: the planner's choice, by default in legs only (fixed robots)
         self.early_holds = planner.early_holds if planner.early_holds is not None else incremental
         self.margin = planner.margin
@@ -540,7 +548,7 @@ class _Session:
         """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
         the stretch after its longest wait (keeping what x must avoid) and keep the one with the
         earliest arrival; True if x's path changed."""
-        if x < self.fixed or (self.deadline is not None and time.perf_counter() > self.deadline):
+        if x < self.fixed or (self.detour_deadline is not None and time.perf_counter() > self.detour_deadline):
             return False
         me, sched = self.robots[x], self.sched
         changed = False

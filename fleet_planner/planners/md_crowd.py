@@ -28,6 +28,9 @@ from ..model import Plan, RobotSpec
 LANE_LOAD = 0.7
 #: robots from which md hands the instance to the dense solver at once
 CROWD_ROBOTS = 750
+#: fewer robots than this are never crowded and md's plan is not compared with the dense solver's:
+#: md is cheap there, and small hand-worked cases stay md's
+MIN_ROBOTS = 10
 
 
 @dataclass(frozen=True)
@@ -43,8 +46,13 @@ class Crowding:
     def lane_load(self) -> float:
         return self.in_lanes / self.aisles if self.aisles else 0.0
 
-    def crowded(self, lane_load: float = LANE_LOAD, robots: int = CROWD_ROBOTS) -> str | None:
-        """Why the dense solver should plan this instance first, or None."""
+    def crowded(self, lane_load: float | None = None, robots: int | None = None) -> str | None:
+        """Why the dense solver should plan this instance first, or None (thresholds: the module's
+        LANE_LOAD and CROWD_ROBOTS unless given)."""
+        lane_load = LANE_LOAD if lane_load is None else lane_load
+        robots = CROWD_ROBOTS if robots is None else robots
+        if self.robots < MIN_ROBOTS:
+            return None
         if self.robots >= robots:
             return f"{self.robots} robots (md hands {robots} or more to the dense solver)"
         if self.aisles and self.lane_load >= lane_load:
