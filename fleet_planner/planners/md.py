@@ -315,8 +315,43 @@ class MDPlanner(Planner):
         that are already being driven and stay as they are (``fixed``, absolute times; a robot on
         its last waypoint stays there). The fixed robots rank above the new ones, so only the new
         ones are delayed, re-routed or re-ordered among themselves. Returns timed paths in absolute
-        time, or raises PlanningError (with ``blockers``) naming who is in the way."""
+        time, or raises PlanningError (with ``blockers``) naming who is in the way.
+
+        With holds, route choice in time for legs: when the legs wait more than ``detour_min`` s
+        in all (or cannot be planned), a space-time search over the grid against the fixed
+        trajectories (:class:`~fleet_planner.planners.prior.PriorPlanner`'s safe-interval search,
+        given ``leg_time_limit`` s of its own) proposes other routes; md times them with its own
+        exact scheduler (again within ``leg_time_limit``) and keeps whichever arrives first in all.
+        A leg thus takes at most about three ``leg_time_limit`` plus one scheduling pass. Measured in the delivery
+        benchmark: without it md's legs waited 4-5x longer than PRIOR's on the same situations
+        (they stay on the shortest path and queue behind the traffic in it)."""
         robots = list(robots)
+        deadline = time.perf_counter() + self.leg_time_limit
+        failure: PlanningError | None = None
+        best: list[TimedPath] | None = None
+        try:
+            best = self._legs(grid, robots, fixed, t0, deadline)
+        except PlanningError as exc:
+            failure = exc
+        late = best is None or self._lateness(grid, best, robots, t0) > self.detour_min
+        if self.holds == "anywhere" and _LEG_ROUTES and late:
+            routes = self._space_time_routes(grid, robots, fixed, t0)
+            if routes:
+                try:
+                    other = self._legs(grid, robots, fixed, t0, time.perf_counter() + self.leg_time_limit, routes)
+                except PlanningError:
+                    other = None
+                if other is not None and (best is None or _total_arrival(other) < _total_arrival(best) - 1e-6):
+                    best = other
+        if best is None:
+            assert failure is not None
+            raise failure
+        return best
+
+    def _legs(self, grid: GridMap, robots: list[RobotSpec], fixed: Sequence[TimedPath], t0: float,
+              deadline: float, routes: dict[int, np.ndarray] | None = None) -> list[TimedPath]:
+        """One try of :meth:`plan_incremental`: ``routes`` (robot index -> polyline) are taken as
+        the first paths of those robots (re-routing, if needed, plans them as usual)."""
         held = [_remaining_held(tp, t0) for tp in fixed] if self.holds == "anywhere" else []
         kept = [(poly, times, float(dep[0]) if len(dep) > 1 else 0.0) for poly, times, _, dep in held] \
             if self.holds == "anywhere" else [_remaining(tp, t0) for tp in fixed]
@@ -326,9 +361,11 @@ class MDPlanner(Planner):
         _check_endpoints(specs[nf:], self.margin)
         shortest: dict[int, np.ndarray] = {}
         order = list(range(nf)) + [nf + x for x in self._initial_order(grid, robots, shortest)]
-        session = _Session(self, grid, specs, order, fixed=nf, fixed_paths=[(poly, times) for poly, times, _ in kept],
-                           hints={nf + x: path for x, path in shortest.items()},
-                           deadline=time.perf_counter() + self.leg_time_limit, incremental=True)
+        session = _LegSession(self, grid, specs, order, fixed=nf,
+                              fixed_paths=[(poly, times) for poly, times, _ in kept],
+                              hints={nf + x: path for x, path in shortest.items()},
+                              deadline=deadline, incremental=True)
+        session.forced = {nf + x: path for x, path in (routes or {}).items()}
         session.route()
         session.sched.delays[:nf] = [delay for _, _, delay in kept]
         for x, (_, _, arr, dep) in enumerate(held):
@@ -338,6 +375,39 @@ class MDPlanner(Planner):
         for tp in out:
             tp.waypoints[:, 2] += t0
         return out
+
+    def _lateness(self, grid: GridMap, legs: list[TimedPath], robots: list[RobotSpec], t0: float) -> float:
+        """Seconds the legs arrive later in all than driving their shortest paths on the empty map
+        straight off at top speed (their waits and their detours)."""
+        late = 0.0
+        for tp, r in zip(legs, robots):
+            path = self._finders.of(grid).get(r.radius).find(r.start, r.goal)
+            length = tp.length if path is None else float(np.hypot(*np.diff(path, axis=0).T).sum())
+            late += tp.arrival_time - t0 - length / r.max_speed
+        return late
+
+    def _space_time_routes(self, grid: GridMap, robots: list[RobotSpec], fixed: Sequence[TimedPath],
+                           t0: float) -> dict[int, np.ndarray]:
+        """Routes for the legs from a safe-interval search in space-time against the fixed
+        trajectories (the search's own timing is dropped: md times the routes itself); empty when
+        the search fails or takes longer than ``leg_time_limit``."""
+        from .prior import PriorPlanner
+
+        searcher = getattr(self, "_route_search", None)
+        if searcher is None or searcher.margin != self.margin:
+            searcher = self._route_search = PriorPlanner(margin=self.margin)
+        searcher.time_limit_s = self.leg_time_limit
+        try:
+            found = searcher.plan_incremental(grid, robots, fixed, t0)
+        except (PlanningError, ValueError):
+            return {}
+        routes = {}
+        for x, tp in enumerate(found):
+            pts = tp.waypoints[:, :2]
+            keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9])
+            if keep.sum() >= 2:
+                routes[x] = pts[keep].copy()
+        return routes
 
     def _initial_order(self, grid: GridMap, robots: list[RobotSpec],
                        shortest: dict[int, np.ndarray] | None = None) -> list[int]:
@@ -609,6 +679,27 @@ class _Session:
                     for x, r in enumerate(self.robots)]
         return [timed_path_from_profile(r.id, r.radius, *self.route_of(x), float(self.sched.delays[x]))
                 for x, r in enumerate(self.robots)]
+
+
+class _LegSession(_Session):
+    """A session of :meth:`MDPlanner.plan_incremental` whose robots may be given their first
+    routes (``forced``: robot -> polyline, used once; a re-route plans as usual)."""
+
+    forced: dict[int, np.ndarray]
+
+    def safe_path(self, x: int, partner: int | None = None) -> np.ndarray | None:
+        path = self.forced.pop(x, None) if getattr(self, "forced", None) else None
+        return path if path is not None else super().safe_path(x, partner)
+
+
+#: plan_incremental: try space-time routes when the legs wait (off: md's own routes only)
+_LEG_ROUTES = True
+
+
+
+
+def _total_arrival(legs: list[TimedPath]) -> float:
+    return sum(tp.arrival_time for tp in legs)
 
 
 class _Finders:
