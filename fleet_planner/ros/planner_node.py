@@ -291,7 +291,12 @@ class PlannerNode(Node):
             # it cannot have arrived before it was stamped (one clock): a planner whose clock lagged
             # when the status came in (busy, its /clock not yet read) must not find it ahead, or the
             # robot silent; never later than the planner's clock now
-            arrived = max(arrived, min(self._arrival(), status.stamp))
+            fresh = self._arrival()
+            if status.stamp > fresh + 1.0:  # its clock ahead of ours: ours may lag (no /clock read yet)
+                self._catch_up_clock()
+                self._arrival_wall = -float("inf")
+                fresh = self._arrival()
+            arrived = max(arrived, min(fresh, status.stamp))
             problem = stamp_problem(f"robot {status.id!r}", status.stamp, arrived, float("inf"), self._max_age)
             if problem:  # (ahead: the fleet manager's max_clock_skew_s)
                 raise ValueError(problem)
