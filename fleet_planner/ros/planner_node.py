@@ -328,7 +328,7 @@ class PlannerNode(Node):
     def _pace(self, now: float) -> None:
         """Fit the step's planning budget to the clock: a leg starts ``lead_s`` of ROS time after it is
         planned, so on a clock running R times faster than the wall the legs of one step must be
-        planned within about lead_s / R wall seconds (half of it here), or they reach the robots after
+        planned within about lead_s / R wall seconds (a quarter of it here), or they reach the robots after
         they were due to start (and are refused). The rate R is measured between steps."""
         wall = time.monotonic()
         if self._paced is not None:
@@ -336,7 +336,7 @@ class PlannerNode(Node):
             if d_ros > 0 and d_wall > 0:
                 self._rate = 0.8 * self._rate + 0.2 * min(1000.0, d_ros / d_wall)
         self._paced = (now, wall)
-        budget = 0.5 * self.fleet.params.lead_s / max(1.0, self._rate)
+        budget = 0.25 * self.fleet.params.lead_s / max(1.0, self._rate)
         self.fleet.step_budget_s = min(STEP_BUDGET_S, max(MIN_STEP_BUDGET_S, budget))
         if self._leg_limit is not None:  # the planner's own limit per leg (md: detours, re-orderings)
             self.fleet.planner.leg_time_limit = min(self._leg_limit, max(MIN_LEG_LIMIT_S, budget))  # type: ignore
