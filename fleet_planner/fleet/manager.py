@@ -69,8 +69,8 @@ SPOT_RETRY_S = 2.0
 #: in a row up to LEG_RETRY_MAX_S (a refused leg costs the planner its whole time budget: tried at
 #: every step, a few of them stall the step, and the fleet's statuses wait meanwhile)
 LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
-#: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what is left waits for the next step (legs to
-#: places first, then re-plans, then new jobs, then charging and parking)
+#: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
+#: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
 STEP_BUDGET_S = 0.5
 
 
