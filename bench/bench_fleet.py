@@ -12,7 +12,7 @@ beyond the sum of their radii (from the robots' status stream, as the demo measu
 Timings on a loaded machine are noisy; CPU time is the better figure.
 
     nice .venv/bin/python bench/bench_fleet.py [--default 9 15 22 30] [--large 50 100] [--rate 10]
-        [--jobs-per-robot 1] [--timeout 600]
+        [--jobs-per-robot 1] [--jobs 60 --interval 2] [--timeout 600]
 """
 from __future__ import annotations
 
@@ -79,9 +79,11 @@ def descendants(root: int) -> list[int]:
 def run(n: int, large: bool, opts: argparse.Namespace) -> dict:
     out = REPO / "out" / "bench_fleet" / f"{'large' if large else 'default'}_{n}"
     out.mkdir(parents=True, exist_ok=True)
-    jobs = max(1, round(opts.jobs_per_robot * n))
+    jobs = opts.jobs if opts.jobs is not None and not large else max(1, round(opts.jobs_per_robot * n))
     cmd = [sys.executable, "-m", "fleet_planner.ros.demo", "--mode", "procs", "--robots", str(n), "--jobs", str(jobs),
            "--rate", str(opts.rate), "--no-progress", "--out", str(out), "--timeout", str(opts.timeout)]
+    if opts.interval is not None and not large:
+        cmd += ["--interval", str(opts.interval)]
     if large:
         cmd += ["--warehouse", "large"]
     env = {**os.environ, "PYTHONPATH": str(REPO), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
@@ -121,9 +123,15 @@ def main() -> None:
     p.add_argument("--large", type=int, nargs="*", default=[50, 100], help="fleet sizes, generated warehouse")
     p.add_argument("--rate", type=float, default=10.0, help="simulated time rate asked (default 10)")
     p.add_argument("--jobs-per-robot", type=float, default=1.0, help="jobs per robot (default 1)")
+    p.add_argument("--jobs", type=int, help="the same number of jobs for every fleet on the default warehouse "
+                                            "(instead of --jobs-per-robot; the large runs keep it)")
+    p.add_argument("--interval", type=float, help="simulated s between jobs on the default warehouse (default: "
+                                                  "the demo's, scaled with the fleet)")
     p.add_argument("--timeout", type=float, default=600.0, help="wall seconds per run at most (default 600)")
     opts = p.parse_args()
-    print(f"fleet-demo --mode procs at {opts.rate:g}x asked, {opts.jobs_per_robot:g} jobs per robot")
+    stream = (f"{opts.jobs} jobs" if opts.jobs is not None else f"{opts.jobs_per_robot:g} jobs per robot") + (
+        f" every {opts.interval:g} s" if opts.interval is not None else "")
+    print(f"fleet-demo --mode procs at {opts.rate:g}x asked, {stream} (large: {opts.jobs_per_robot:g} per robot)")
     print(f"{'N':>4} {'warehouse':>9} {'wall s':>7} {'sim rate':>8} {'done':>9} {'jobs/h':>7} {'closest':>8}  "
           "CPU % of a core / peak MB per process (count)")
     runs = [(n, False) for n in opts.default] + [(n, True) for n in opts.large]

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import re
 import sqlite3
+import time
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, cast
 
@@ -64,6 +65,13 @@ from .state import FleetRobot, Job, Occupancy, Target, can_do
 
 #: a free robot that could not get a leg to a charger or parking spot tries again this much (s) later
 SPOT_RETRY_S = 2.0
+#: a robot whose leg could not be planned tries again this much (s) later, doubled with each refusal
+#: in a row up to LEG_RETRY_MAX_S (a refused leg costs the planner its whole time budget: tried at
+#: every step, a few of them stall the step, and the fleet's statuses wait meanwhile)
+LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
+#: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
+#: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
+STEP_BUDGET_S = 0.5
 
 
 class FleetManager:
@@ -125,6 +133,8 @@ class FleetManager:
         self._reserved_at: list[Point] | None = None
         self._reserved_arr: np.ndarray | None = None
         self._spot_trees: dict[int, Any] = {}
+        self.step_budget_s = STEP_BUDGET_S
+        self._step_deadline = math.inf   # (time.monotonic) no more legs this step after it
         if store is not None:
             self._reload(store)
 
@@ -341,6 +351,7 @@ class FleetManager:
         d = Decisions(notes=self._notes)
         self._notes = []
         self._occ, self._free_spots, self._reserved_at, self._reserved_arr = None, {}, None, None
+        self._step_deadline = time.monotonic() + self.step_budget_s
         try:
             self._decide(now, d)
         finally:
@@ -463,9 +474,12 @@ class FleetManager:
         hold a chute), then those re-planning. A robot whose new leg is not yet acknowledged waits."""
         waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
                    and not r.immobile and r.online and not r.paused and not r.manual
-                   and (r.leg is None or r.status.path_id == r.leg.path_id)]
+                   and (r.leg is None or r.status.path_id == r.leg.path_id)
+                   and (now >= r.leg_retry_at or r.on_leg)]
         waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
         for r, target in waiting:
+            if self._out_of_time():
+                return   # the rest next step (a robot on its leg drives on meanwhile; it re-plans then)
             if self._plan_leg(r, target, now, d) is not None:
                 r.replan = r.conflict = False
             elif r.on_leg:  # late or in conflict and no new leg yet: stand still, so the others
@@ -501,10 +515,11 @@ class FleetManager:
                                        j.seq))
         if not queued:
             return
-        free = [r for r in self.robots.values() if r.free and r.status.battery >= self.params.min_task_battery]
+        free = [r for r in self.robots.values() if r.free and r.status.battery >= self.params.min_task_battery
+                and now >= r.leg_retry_at]
         for job in queued:
             pose = job.pick.pose
-            if not free:
+            if not free or self._out_of_time():
                 return
             if self._reserved(pose):
                 continue
@@ -527,6 +542,8 @@ class FleetManager:
     def _housekeeping(self, now: float, d: Decisions) -> None:
         for r in sorted((r for r in self.robots.values() if r.free and now >= r.retry_at),
                         key=lambda r: r.status.battery):
+            if self._out_of_time():
+                return
             if not r.free or self._at(r.pos, self.chargers):
                 continue
             low = r.status.battery < self.params.low_battery
@@ -543,6 +560,8 @@ class FleetManager:
     # -- helpers ---------------------------------------------------------------------------------------
     def _send_away(self, r: FleetRobot, now: float, d: Decisions) -> None:
         """Move a free robot that is in the way to a free charger, else to a free parking spot."""
+        if now < r.retry_at or now < r.leg_retry_at:
+            return   # its last leg off was refused: not planned again at every step
         if self._at(r.pos, self.chargers) or self._at(r.pos, self.parking):
             return
         spot = self._free_spot(r, self.chargers)
@@ -578,6 +597,8 @@ class FleetManager:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
                 r.trouble = exc.why
+                r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** r.leg_failures)
+                r.leg_failures += 1
                 blocker = self.robots.get(exc.blocker) if exc.blocker is not None else None
                 if clear_way and blocker is not None and blocker.free:
                     self._send_away(blocker, now, d)
@@ -585,9 +606,14 @@ class FleetManager:
         leg = Leg(r.id, path, path_id, target.purpose, target.name)
         self._give(r, leg, d, now)
         r.target, r.trouble = target, ""
+        r.leg_retry_at, r.leg_failures = -math.inf, 0
         if self._reserved_at is not None:
             self._reserved_at.append(target.pose)
         return leg
+
+    def _out_of_time(self) -> bool:
+        """This step has spent its leg-planning budget (``step_budget_s`` wall seconds)."""
+        return time.monotonic() >= self._step_deadline
 
     def _give(self, r: FleetRobot, leg: Leg, d: Decisions, now: float) -> None:
         if self.gates is not None:  # its links, and the links others get where it passes first

@@ -70,6 +70,8 @@ class FleetRobot:
     paused: bool = False              # the operator paused it: it holds, others plan around it (.operator)
     manual: bool = False              # driven by the operator's cmd_vel: a moving obstacle (.operator)
     retry_at: float = -math.inf       # a spot it could not get a leg to is tried again from then on
+    leg_retry_at: float = -math.inf   # a leg that could not be planned is tried again from then on
+    leg_failures: int = 0             # legs refused in a row (the wait before the next try doubles)
 
     @property
     def id(self) -> str:

@@ -36,6 +36,7 @@ from fleet_planner.fleet.inbox import StatusInbox
 from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.fleet.jobstore import JobStore
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
+from fleet_planner.fleet.manager import STEP_BUDGET_S
 from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
 from fleet_planner.fleet.obstacles import ObstacleParams
 from fleet_planner.robots import RobotKind, load_kinds
@@ -62,6 +63,11 @@ MAX_NOTES_LOGGED = 40
 #: wall seconds between two log lines of the same kind from the status path (rclpy's own throttle
 #: still finds the caller's frame on every call: a cost per status, not per line)
 STATUS_LOG_EVERY_S = 5.0
+
+#: wall seconds of leg planning per step at least, however fast the clock (one leg always goes)
+MIN_STEP_BUDGET_S = 0.05
+#: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
+MIN_LEG_LIMIT_S = 0.1
 
 #: parameters that shape planned legs and cannot change while the node runs
 _FIXED = ("speed_factor", "safety_margin")
@@ -184,6 +190,10 @@ class PlannerNode(Node):
         self._status_sub = create_draining_subscription(self, String, topics.ROBOT_STATUS, self._on_status,
                                                         topics.ROBOT_STATUS_QOS)
         self._status_limit = drain_limit(topics.ROBOT_STATUS_QOS)
+        self._paced: tuple[float, float] | None = None   # (ROS time, wall time) of the last step
+        self._rate = 1.0   # ROS seconds per wall second, measured
+        limit = getattr(self.fleet.planner, "leg_time_limit", None)
+        self._leg_limit = float(limit) if isinstance(limit, (int, float)) else None
         # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
         self.operator = PlannerOperator(self, self.fleet, self._publish)
         create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
@@ -291,7 +301,12 @@ class PlannerNode(Node):
             # it cannot have arrived before it was stamped (one clock): a planner whose clock lagged
             # when the status came in (busy, its /clock not yet read) must not find it ahead, or the
             # robot silent; never later than the planner's clock now
-            arrived = max(arrived, min(self._arrival(), status.stamp))
+            fresh = self._arrival()
+            if status.stamp > fresh + 1.0:  # its clock ahead of ours: ours may lag (no /clock read yet)
+                self._catch_up_clock()
+                self._arrival_wall = -float("inf")
+                fresh = self._arrival()
+            arrived = max(arrived, min(fresh, status.stamp))
             problem = stamp_problem(f"robot {status.id!r}", status.stamp, arrived, float("inf"), self._max_age)
             if problem:  # (ahead: the fleet manager's max_clock_skew_s)
                 raise ValueError(problem)
@@ -310,9 +325,26 @@ class PlannerNode(Node):
         except Exception as exc:
             self.get_logger().error(f"obstacle {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
 
+    def _pace(self, now: float) -> None:
+        """Fit the step's planning budget to the clock: a leg starts ``lead_s`` of ROS time after it is
+        planned, so on a clock running R times faster than the wall the legs of one step must be
+        planned within about lead_s / R wall seconds (a quarter of it here), or they reach the robots after
+        they were due to start (and are refused). The rate R is measured between steps."""
+        wall = time.monotonic()
+        if self._paced is not None:
+            d_ros, d_wall = now - self._paced[0], wall - self._paced[1]
+            if d_ros > 0 and d_wall > 0:
+                self._rate = 0.8 * self._rate + 0.2 * min(1000.0, d_ros / d_wall)
+        self._paced = (now, wall)
+        budget = 0.25 * self.fleet.params.lead_s / max(1.0, self._rate)
+        self.fleet.step_budget_s = min(STEP_BUDGET_S, max(MIN_STEP_BUDGET_S, budget))
+        if self._leg_limit is not None:  # the planner's own limit per leg (md: detours, re-orderings)
+            self.fleet.planner.leg_time_limit = min(self._leg_limit, max(MIN_LEG_LIMIT_S, budget))  # type: ignore
+
     def _on_timer(self) -> None:
         self._take_statuses()
         now = self._now()
+        self._pace(now)
         try:
             decisions = self.operator.step(now)  # the fleet's step, with the operator's part
         except Exception as exc:

@@ -90,6 +90,9 @@ def agent_params(m: FleetMember) -> list[Parameter]:
 
 # -------------------------------------------------------------------------------------------------
 # one process per node
+#: the process fleet's clock: simulated s of lost ticks made up, and how far it may run ahead of the
+#: newest robot status (a starved fleet-sim holds it; 5 status periods)
+CLOCK_CATCH_UP_S, CLOCK_MAX_LEAD_S = 1.0, 0.5
 # -------------------------------------------------------------------------------------------------
 def node_command(script: str, module: str) -> list[str]:
     """How to start a node as a process: the console script beside this Python, else ``-m module``."""
@@ -109,7 +112,9 @@ def start_processes(members: Sequence[FleetMember], rate: float, params_file: Pa
     if kinds_file:
         common += ["-p", f"kinds_file:={kinds_file}"]
     sim = ["-p", "use_sim_time:=true"]
-    commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)],
+    # the clock makes up ticks lost to a busy machine and waits for a starved robot simulator (sim_clock.py)
+    clock = ["--catch-up", str(CLOCK_CATCH_UP_S), "--max-lead", str(CLOCK_MAX_LEAD_S)]
+    commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)] + clock,
                 "planner": _profiled("planner", node_command("planner", "fleet_planner.ros.planner_node"))
                 + ["--ros-args", "--params-file", str(params_file)] + sim + common}
     if fleet_file is not None:
