@@ -293,7 +293,8 @@ class GateBook:
                 for i_mine, i_theirs in regions(mine, theirs, clear):
                     # may it be in the region before a new link reaches it? By the fine geometry, not
                     # the region's grown samples: a robot its gate holds at the region's entry is not
-                    o_in = self._may_be_in(p, done, reach, path, mine, i_mine, clear)
+                    enters = float(theirs.s[i_theirs].min()) - theirs.h / 2  # (grown: a first, coarse cut)
+                    o_in = reach >= enters and self._may_be_in(p, done, reach, path, mine, i_mine, clear)
                     if o_in and i_mine.min() == 0:
                         self.conflicts.append(o.id)
                     o_first = (pid != latest or not recorded or o_in
