@@ -9,7 +9,7 @@ from fleet_planner.fleet.sim import SimFleet
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import load_kinds
 from fleet_planner.warehouse import load_warehouse
-from msg_schemas.records import GateRecord
+from msg_schemas.records import GateRecord, RobotStatus
 
 KINDS = load_kinds()
 
@@ -36,6 +36,8 @@ def test_simulated_robots_wait_for_their_gate_and_hear_the_robots_it_names():
         sim.step(t)
     assert 0.5 < a.model.travelled <= 1.0                 # up to the entry, not beyond
     assert far.id in a.heard                              # the robot its gate names, 20 m away
+    sim.hear([RobotStatus.from_dict({**sim.last[far.id].to_dict(), "id": "elsewhere"})])  # another process's
+    sim.step(t + 0.05)
     sim.on_gate(GateRecord(robot_id=me.id, path_id=100, seq=1, stamp=t))
     for _ in range(10):
         t += 0.1

@@ -45,7 +45,7 @@ class SimFleet:
         self.relay = NeighbourRelay({k.name: k.max_speed for k in kinds.values()}, period_s, sense,
                                     latency_s=0.0)
         if gated:  # a gated robot hears every robot its links name, however far (as the planner's relay)
-            self.relay.watch = lambda rid: watched_robots(getattr(self.agents[rid].driver, "gate", None))
+            self.relay.watch = self._watched
         self.last: dict[str, RobotStatus] = {}
         self.foreign: dict[str, RobotStatus] = {}   # robots of other processes, from the relay
 
@@ -56,6 +56,10 @@ class SimFleet:
     def on_path(self, robot_id: str, path: TimedPath, t0: float, path_id: int) -> None:
         """A leg for one robot (ValueError if it cannot follow it, as RobotAgent.on_path)."""
         self.agents[robot_id].on_path(path, t0, path_id)
+
+    def _watched(self, robot_id: str) -> set[str]:
+        agent = self.agents.get(robot_id)  # (robots of other processes are heard here, not simulated)
+        return watched_robots(getattr(agent.driver, "gate", None)) if agent is not None else set()
 
     def on_gate(self, record: GateRecord) -> None:
         """A gate record, for the robot it names (fleet/gate.py)."""
