@@ -48,15 +48,18 @@ def main() -> None:
     ap.add_argument("--seeds", default="0-3", help="pure runs: seeds a-b (inclusive) or a,b,c ('' for none)")
     ap.add_argument("--limit", type=float, default=600.0, help="pure runs: simulated s before a run counts as stuck")
     ap.add_argument("--ros", action="store_true", help="also the ROS scenario (real DDS, about a minute per mode)")
+    ap.add_argument("--ros-repeat", type=int, default=1, help="ROS runs per mode (DDS timing differs run to run)")
+    ap.add_argument("--modes", default=",".join(MODES), help=f"comma-separated, of {', '.join(MODES)}")
     args = ap.parse_args()
     if "-" in args.seeds:
         a, b = args.seeds.split("-")
         seeds = list(range(int(a), int(b) + 1))
     else:
         seeds = [int(s) for s in args.seeds.split(",") if s]
+    modes = {m: MODES[m] for m in args.modes.split(",")}
     rows = []
     for seed in tqdm(seeds, desc="pure fleets", file=sys.stderr):
-        for mode, (gated, late) in MODES.items():
+        for mode, (gated, late) in modes.items():
             rows.append(("pure", seed, mode, *pure(seed, gated, late, args.limit)))
     if args.ros:
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -67,10 +70,12 @@ def main() -> None:
         ctx = Context()
         rclpy.init(context=ctx)
         try:
-            for mode, (gated, late) in tqdm(MODES.items(), desc="ros fleets", file=sys.stderr):
+            runs = [(k, m) for k in range(args.ros_repeat) for m in modes]
+            for k, mode in tqdm(runs, desc="ros fleets", file=sys.stderr):
+                gated, late = modes[mode]
                 cpu = time.process_time()
                 out = slowed_run(ctx, gated, late)
-                rows.append(("ros", "-", mode, out.done, out.seconds, out.gap, out.replans, time.process_time() - cpu))
+                rows.append(("ros", k, mode, out.done, out.seconds, out.gap, out.replans, time.process_time() - cpu))
         finally:
             rclpy.try_shutdown(context=ctx)
     print("| fleet | seed | mode | all done | completion (sim s) | closest gap (m) | late re-plans | CPU s |")

@@ -164,7 +164,7 @@ class AgentNode(Node):
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
             subscribe(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
-        self.operator = AgentOperator(self, self.agent, robot_id)  # manual drive, cmd_vel, e-stop
+        self.operator = AgentOperator(self, self.agent, robot_id, self.planner)  # manual drive, cmd_vel, e-stop
         self._timer = self.create_timer(1.0 / rate, self._on_timer)
         self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}, "
                                f"{mode} coordination")

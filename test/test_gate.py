@@ -128,6 +128,42 @@ def test_a_robot_that_may_already_be_in_the_region_passes_first_whatever_the_pla
     assert {lk.robot for lk in links_of(mine)} == {"a"}
 
 
+def _crossing_with_b_held_at_its_entry(b_travelled=None):
+    """a drives east through (5, 5) first; b, northbound, waits at its entry (or at ``b_travelled``);
+    a has reached the crossing and reports at t = 8."""
+    book = GateBook()
+    a, b = robot("a", 0.0, 5.0), robot("b", 5.0, 0.0)
+    book.on_leg(a, 1, straight("a", (0.0, 5.0), (10.0, 5.0), 0.0), [a, b], 0.0)
+    a.status = said("a", 1, 0.0)
+    entry = gate_limit(book.on_leg(b, 2, straight("b", (5.0, 0.0), (5.0, 10.0), 0.0), [a, b], 0.0)[0], 2,
+                       {"a": said("a", 1, 0.0)})
+    at = entry - 1e-3 if b_travelled is None else b_travelled
+    b.status = RobotStatus.from_dict({**said("b", 2, at).to_dict(), "x": 5.0, "y": at, "stamp": 8.0})
+    a.status = RobotStatus.from_dict({**said("a", 1, 5.0).to_dict(), "x": 5.0, "y": 5.0, "stamp": 8.0})
+    return book, a, b
+
+
+def test_a_robot_held_at_a_regions_entry_keeps_waiting_when_the_robot_inside_is_re_planned():
+    # the gated fleet with lateness re-planning came within 0.040 m: the re-planned robot inside the
+    # region was ranked behind the one waiting at its edge (whose sampled disc, grown by the spacing,
+    # looked inside), so that one was let in while the other stood in its way
+    book, a, b = _crossing_with_b_held_at_its_entry()
+    out = book.on_leg(a, 3, straight("a", (5.0, 5.0), (10.0, 5.0), 8.0), [a, b], 8.0)
+    assert out is not None and not links_of(out[0])                 # a drives out first ...
+    heard = {"a": said("a", 3, 0.0), "b": b.status}
+    assert gate_limit(book.records["b"], 2, heard) <= b.status.travelled_m  # ... b still waits ...
+    assert gate_limit(book.records["b"], 2, {**heard, "a": said("a", 3, 1.5)}) == math.inf  # ... until it is out
+    assert book.conflicts == []
+
+
+def test_a_re_planned_leg_that_starts_in_a_region_another_robot_is_in_is_refused_and_changes_nothing():
+    book, a, b = _crossing_with_b_held_at_its_entry(b_travelled=4.7)  # b's disc is in a's way
+    records, paths = dict(book.records), {k: dict(v) for k, v in book.paths.items()}
+    assert book.on_leg(a, 3, straight("a", (5.0, 5.0), (10.0, 5.0), 8.0), [a, b], 8.0, refuse_conflicts=True) is None
+    assert book.conflicts == ["b"] and book.records == records and book.paths == paths
+    assert book.on_leg(a, 3, straight("a", (5.0, 5.0), (10.0, 5.0), 8.0), [a, b], 8.0) is not None  # (taken if asked)
+
+
 def test_a_robot_following_another_down_an_aisle_gets_a_staircase_of_links():
     book = GateBook()
     a, b = robot("a", 2.0, 5.0), robot("b", 0.0, 5.0)

@@ -1,15 +1,15 @@
 """Agents and fleet-submit take task events and timed paths only from the planner node, with no keys
 (issue 9, deliverable 5): while another node publishes on those topics, what comes there is
 refused (a forged ``cancelled`` does not make a robot drop its job, a forged timed path is not
-driven, a forged gate record does not release a robot, a forged ``done`` is not success); when
-it is gone, the planner's word counts again."""
+driven, a forged gate record does not release a robot, a forged ``done`` is not success, a forged
+release does not lift an e-stop); when it is gone, the planner's word counts again."""
 import numpy as np
 import pytest
 import rclpy
 from nav_msgs.msg import Path
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from std_msgs.msg import String
+from std_msgs.msg import Bool, String
 from test_records_total import KINDS, WH
 
 from fleet_planner.fleet.gate import gate_limit
@@ -117,3 +117,20 @@ def test_gate_records_count_only_while_the_planner_alone_publishes_them(world):
     assert until(executor, lambda: agent._gate_origin.sub.get_publisher_count() == 1)
     gates.publish(String(data=GateRecord(robot_id="o1", path_id=5, seq=1, stamp=3.0).to_json()))
     assert until(executor, lambda: driver.gate.seq == 1)  # the planner's word counts again
+
+
+def test_an_e_stop_is_obeyed_from_anyone_but_released_only_by_the_planner(world):
+    agent, planner, forger, executor = world
+    hand = agent.agent.hand
+    stop = planner.create_publisher(Bool, topics.ESTOPPED, topics.ESTOPPED_QOS)
+    assert until(executor, lambda: agent.operator.estop_origin.sub.get_publisher_count() == 1)
+    stop.publish(Bool(data=True))
+    assert until(executor, lambda: hand.estopped)
+    fake = forger.create_publisher(Bool, topics.ESTOPPED, topics.ESTOPPED_QOS)
+    fake.publish(Bool(data=False))  # a forged release
+    assert until(executor, lambda: agent.operator.estop_origin.refused > 0)
+    assert hand.estopped
+    forger.destroy_publisher(fake)
+    assert until(executor, lambda: agent.operator.estop_origin.sub.get_publisher_count() == 1)
+    stop.publish(Bool(data=False))
+    assert until(executor, lambda: not hand.estopped)

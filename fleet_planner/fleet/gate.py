@@ -56,6 +56,9 @@ PIECE_TOL_M = 0.05
 #: a new link reaches a driving robot within this long (s); it is ranked first wherever its due
 #: position gets within a region before then
 REACH_S = 1.0
+#: spacing (m) of the fine samples that tell whether a robot may already be in a region: its disc
+#: comes within the pad of the other path there (less twice this, the fine samples' own error)
+FINE_M = 0.01
 
 
 @dataclass(frozen=True)
@@ -247,19 +250,22 @@ class GateBook:
         return paths
 
     def on_leg(self, r: FleetRobot, path_id: int, path: TimedPath, fleet: Iterable[FleetRobot],
-               now: float) -> list[GateRecord]:
+               now: float, refuse_conflicts: bool = False) -> list[GateRecord] | None:
         """``r`` gets leg ``path_id``: its gate record, and the records of others that grow (links
         where the new leg passes first; the watch of robots whose links name ``r``; links the
-        planner heard satisfied are dropped from those). Returned to send."""
+        planner heard satisfied are dropped from those). Returned to send.
+
+        A leg that starts inside a region another robot may already be in (both in it at once:
+        whoever passes first drives by the other standing in its way) is a conflict; its robots are
+        in :attr:`conflicts` afterwards. With ``refuse_conflicts`` such a leg is not taken (None,
+        nothing changes): the robot keeps the leg it has, whose links still hold."""
         fleet = list(fleet)
         heard = {o.id: o.status for o in fleet}
-        old = self._live(r)
-        self.paths[r.id] = {pid: p for pid, p in old.items() if pid == r.status.path_id}
-        self.paths[r.id][path_id] = path
         mine = sample(path, step=self.sample_m)
         links: list[Link] = []
         watch: dict[str, int] = {}
         grown: dict[str, list[Link]] = {}
+        self.conflicts: list[str] = []
         for o in fleet:
             if o is r or o.immobile:
                 continue
@@ -283,9 +289,15 @@ class GateBook:
                     theirs = sample(p, done, reach, step=self.sample_m)
                 else:
                     continue
-                for i_mine, i_theirs in regions(mine, theirs, r.radius + o.radius + self.pad_m):
-                    enters = float(theirs.s[i_theirs].min()) - theirs.h / 2
-                    o_first = (pid != latest or not recorded or reach >= enters
+                clear = r.radius + o.radius + self.pad_m
+                for i_mine, i_theirs in regions(mine, theirs, clear):
+                    # may it be in the region before a new link reaches it? By the fine geometry, not
+                    # the region's grown samples: a robot its gate holds at the region's entry is not
+                    enters = float(theirs.s[i_theirs].min()) - theirs.h / 2  # (grown: a first, coarse cut)
+                    o_in = reach >= enters and self._may_be_in(p, done, reach, path, mine, i_mine, clear)
+                    if o_in and i_mine.min() == 0:
+                        self.conflicts.append(o.id)
+                    o_first = (pid != latest or not recorded or o_in
                                or (i_mine.min() > 0 and not first_by_plan(mine, path, theirs, i_mine, i_theirs)))
                     if o_first:
                         links += [Link(o.id, pid, ex, en) for ex, en in pieces(theirs, mine, i_theirs, i_mine)]
@@ -293,6 +305,11 @@ class GateBook:
                     else:
                         grown.setdefault(o.id, []).extend(
                             Link(r.id, path_id, ex, en) for ex, en in pieces(mine, theirs, i_mine, i_theirs))
+        if refuse_conflicts and self.conflicts:
+            return None
+        old = self._live(r)
+        self.paths[r.id] = {pid: p for pid, p in old.items() if pid == r.status.path_id}
+        self.paths[r.id][path_id] = path
         out = [self._set(GateRecord(robot_id=r.id, path_id=path_id, seq=0, stamp=float(now),
                                     links=tuple(lk.to_dict() for lk in links), watch=watch))]
         for oid, rec in list(self.records.items()):
@@ -308,6 +325,15 @@ class GateBook:
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
                                             links=kept + added, watch=watch)))
         return out
+
+    def _may_be_in(self, p: TimedPath, done: float, reach: float, path: TimedPath, mine: _Samples,
+                   i_mine: np.ndarray, clear: float) -> bool:
+        """Whether a robot between ``done`` and ``reach`` m along ``p`` comes within ``clear`` of the
+        stretch of ``path`` in a region (``i_mine``, indices of ``mine``), by fine samples of both."""
+        there = sample(p, done, reach, step=FINE_M).xy
+        lo, hi = float(mine.s[i_mine.min()]) - mine.h, float(mine.s[i_mine.max()]) + mine.h
+        here = sample(path, lo, hi, step=FINE_M).xy
+        return bool(cdist(there, here).min() < clear - 2 * FINE_M)
 
     def _held_at(self, o: FleetRobot, pid: int, done: float, heard: Mapping[str, RobotStatus]) -> float:
         """How far along its path ``pid`` robot ``o``'s gate lets it drive until its record changes

@@ -482,8 +482,9 @@ class FleetManager:
                 return   # the rest next step (a robot on its leg drives on meanwhile; it re-plans then)
             if self._plan_leg(r, target, now, d) is not None:
                 r.replan = r.conflict = False
-            elif r.on_leg:  # late or in conflict and no new leg yet: stand still, so the others
-                self._hold(r, now, d)  # plan around where it is, not around a leg it no longer keeps
+            elif r.on_leg and (self.gates is None or r.conflict):  # late or in conflict and no new leg yet:
+                self._hold(r, now, d)  # stand still, so the others plan around where it is, not around a leg
+                # it no longer keeps (gated and only late: it keeps its leg, the gates keep the others clear)
 
     def _hold(self, r: FleetRobot, now: float, d: Decisions) -> None:
         """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
@@ -492,7 +493,8 @@ class FleetManager:
         path_id = max(round(now * 1e9), r.last_path_id + 1)
         x, y = self.strategy.start_of(r, path_id / 1e9, self._gate_limit(r))
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
-        self._give(r, leg, d, now)
+        if not self._give(r, leg, d, now):
+            return  # gated: it keeps its leg, whose links still hold
         r.conflict = False
         d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
         self._replan_around(r, (x, y), now)
@@ -604,7 +606,8 @@ class FleetManager:
                     self._send_away(blocker, now, d)
                 return None
         leg = Leg(r.id, path, path_id, target.purpose, target.name)
-        self._give(r, leg, d, now)
+        if not self._give(r, leg, d, now):
+            return None  # (why is noted)
         r.target, r.trouble = target, ""
         r.leg_retry_at, r.leg_failures = -math.inf, 0
         if self._reserved_at is not None:
@@ -615,13 +618,23 @@ class FleetManager:
         """This step has spent its leg-planning budget (``step_budget_s`` wall seconds)."""
         return time.monotonic() >= self._step_deadline
 
-    def _give(self, r: FleetRobot, leg: Leg, d: Decisions, now: float) -> None:
+    def _give(self, r: FleetRobot, leg: Leg, d: Decisions, now: float) -> bool:
         if self.gates is not None:  # its links, and the links others get where it passes first
-            d.gates += self.gates.on_leg(r, leg.path_id, leg.path, self.robots.values(), now)
+            # a leg replacing one it drives is not taken if it starts in a region another robot
+            # may be in (fleet/gate.py): the old leg's links still hold, a re-plan is only an optimisation
+            records = self.gates.on_leg(r, leg.path_id, leg.path, self.robots.values(), now, refuse_conflicts=r.on_leg)
+            if records is None:
+                why = f"a new leg would start in a region {', '.join(sorted(set(self.gates.conflicts)))} may be in"
+                if why != r.trouble:
+                    d.notes.append(f"robot {r.id}: {why}: it keeps its leg")
+                r.trouble = why
+                return False
+            d.gates += records
         r.leg, r.last_path_id = leg, leg.path_id
         r.arrived_at, r.saw_action = None, False
         d.legs.append(leg)
         self._changed(r)
+        return True
 
     def _changed(self, r: FleetRobot) -> None:
         """``r``'s leg changed during this step: the step's indexes learn it."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 
-from msg_schemas.records import RobotStatus, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import GateRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..model import TimedPath
 from ..robots import RobotKind, RobotModel
@@ -22,6 +22,7 @@ from ..warehouse import Warehouse
 from .agent import RobotAgent
 from .coordination import AGENT_BEHAVIOR, get_coordination
 from .fleet_file import FleetMember
+from .gate import watched_robots
 from .legs import CONTROL_PERIOD_S
 from .neighbours import NeighbourRelay
 
@@ -30,7 +31,7 @@ class SimFleet:
     """Simulated robots of ``members`` on ``warehouse`` under ``coordination``, stepped together."""
 
     def __init__(self, members: Sequence[FleetMember], kinds: Mapping[str, RobotKind], warehouse: Warehouse,
-                 coordination: str = "central", period_s: float = CONTROL_PERIOD_S):
+                 coordination: str = "central", period_s: float = CONTROL_PERIOD_S, gated: bool = False):
         strategy = get_coordination(coordination)
         chargers = [s.pose for s in warehouse.stations_of("charger")]
         self.agents: dict[str, RobotAgent] = {}
@@ -38,11 +39,13 @@ class SimFleet:
             if m.id in self.agents:
                 raise ValueError(f"robot {m.id!r}: listed twice")
             model = RobotModel(m.id, kinds[m.kind], m.x, m.y, m.yaw, m.battery, chargers)
-            self.agents[m.id] = RobotAgent(model, warehouse, get_coordination(strategy.name))
+            self.agents[m.id] = RobotAgent(model, warehouse, get_coordination(strategy.name), gated=gated)
         sense = AGENT_BEHAVIOR.comm_range if strategy.exchanges_wait_messages else 0.0
         # statuses of this fleet are one step old when heard, and heard at once
         self.relay = NeighbourRelay({k.name: k.max_speed for k in kinds.values()}, period_s, sense,
                                     latency_s=0.0)
+        if gated:  # a gated robot hears every robot its links name, however far (as the planner's relay)
+            self.relay.watch = self._watched
         self.last: dict[str, RobotStatus] = {}
         self.foreign: dict[str, RobotStatus] = {}   # robots of other processes, from the relay
 
@@ -53,6 +56,16 @@ class SimFleet:
     def on_path(self, robot_id: str, path: TimedPath, t0: float, path_id: int) -> None:
         """A leg for one robot (ValueError if it cannot follow it, as RobotAgent.on_path)."""
         self.agents[robot_id].on_path(path, t0, path_id)
+
+    def _watched(self, robot_id: str) -> set[str]:
+        agent = self.agents.get(robot_id)  # (robots of other processes are heard here, not simulated)
+        return watched_robots(getattr(agent.driver, "gate", None)) if agent is not None else set()
+
+    def on_gate(self, record: GateRecord) -> None:
+        """A gate record, for the robot it names (fleet/gate.py)."""
+        agent = self.agents.get(record.robot_id)
+        if agent is not None:
+            agent.on_gate(record)
 
     def on_task(self, task: Task) -> None:
         for a in self.agents.values():

@@ -28,7 +28,7 @@ from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
-from msg_schemas.records import Neighbours, RecordError, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import GateRecord, Neighbours, RecordError, Task, TaskEvent, WaitMessageRecord
 
 
 def _fixed(description: str) -> ParameterDescriptor:
@@ -54,17 +54,22 @@ class FleetSimNode(Node):
             floating_point_range=[FloatingPointRange(from_value=0.1, to_value=100.0)])).value
         hear_relay = self.declare_parameter("hear_relay", False, _fixed(
             "also hear robots of other processes from the planner's relay (/robots/<id>/neighbours)")).value
+        gated = self.declare_parameter("gated", True, _fixed(
+            "central: the robots never enter a collision region before the robot ranked above has left it "
+            "(the planner's gate records on /robots/<id>/gate), as agents with gated:=true")).value
         if mode not in COORDINATION:
             raise ValueError(f"parameter coordination: {mode!r} is not one of {', '.join(COORDINATION)}")
         kinds = kinds if kinds is not None else load_kinds(kinds_file or None)
         warehouse = warehouse if warehouse is not None else load_warehouse(wh_file or None)
         members = list(members) if members is not None else load_fleet(fleet_file or None, kinds, warehouse)
-        self.sim = SimFleet(members, kinds, warehouse, mode, 1.0 / rate)
+        self.sim = SimFleet(members, kinds, warehouse, mode, 1.0 / rate, gated=bool(gated))
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
         subscribe = partial(create_draining_subscription, self)
         for rid in self.sim.agents:
             subscribe(Path, topics.timed_path_topic(rid), partial(self._on_path, rid), topics.TIMED_PATH_QOS)
+            if gated:
+                subscribe(String, topics.gate_topic(rid), self._on_gate, topics.GATE_QOS)
             if hear_relay:
                 subscribe(String, topics.neighbours_topic(rid), self._on_neighbours, topics.NEIGHBOURS_QOS)
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
@@ -86,6 +91,12 @@ class FleetSimNode(Node):
             self.sim.on_path(robot_id, path, t0_ns / 1e9, t0_ns)
         except (RecordError, ValueError) as exc:
             self.get_logger().error(f"robot {robot_id}: timed path ignored: {exc}")
+
+    def _on_gate(self, msg: String) -> None:
+        try:
+            self.sim.on_gate(string_to_record(msg, GateRecord))
+        except RecordError as exc:
+            self.get_logger().warning(f"gate record ignored: {exc}", throttle_duration_sec=5.0)
 
     def _on_task(self, msg: String) -> None:
         try:

@@ -17,7 +17,8 @@ On the planner (:class:`PlannerOperator`, made once by the planner node):
 
 On an agent (:class:`AgentOperator`): ``/robots/<id>/manual`` (std_srvs/SetBool) switches manual
 drive, ``/robots/<id>/cmd_vel`` (geometry_msgs/Twist) drives it there, and it holds while
-``/fleet/estopped`` is true. Every handler is total: bad input is answered (or logged, for a topic)
+``/fleet/estopped`` is true (engaged by anyone, released only by the planner node: see
+``fleet_planner/ros/origin.py``). Every handler is total: bad input is answered (or logged, for a topic)
 with the reason naming the field.
 """
 from __future__ import annotations
@@ -38,6 +39,7 @@ from fleet_planner.fleet.agent import RobotAgent
 from fleet_planner.fleet.manual import DEADMAN_S
 from fleet_planner.fleet.operator import Operator, Outcome
 from fleet_planner.ros.drain import create_draining_subscription
+from fleet_planner.ros.origin import OriginCheck
 from fleet_planner.validation import printable
 from msg_schemas import topics
 from msg_schemas.convert import string_to_record
@@ -156,13 +158,15 @@ def _guess_id(raw: str) -> str:
 class AgentOperator:
     """The operator's services and topics on the agent node ``node`` of ``agent``."""
 
-    def __init__(self, node: Node, agent: RobotAgent, robot_id: str):
+    def __init__(self, node: Node, agent: RobotAgent, robot_id: str, planner: str | None = None):
         self.node = node
         self.agent = agent
         node.create_service(SetBool, topics.robot_topic(robot_id, "manual"), self._on_manual)
         node.create_subscription(Twist, topics.robot_topic(robot_id, "cmd_vel"), self._on_cmd_vel,
                                  topics.CMD_VEL_QOS)
-        node.create_subscription(Bool, topics.ESTOPPED, self._on_estop, topics.ESTOPPED_QOS)
+        estop = node.create_subscription(Bool, topics.ESTOPPED, self._on_estop, topics.ESTOPPED_QOS)
+        # an e-stop is obeyed from anyone (fail safe); its release only from the planner node
+        self.estop_origin = OriginCheck(node, estop, planner) if planner else None
         # the operator's hand keeps wall time: a command held fresh (DEADMAN_S of wall time) is given
         # again on the robot's clock, which may run faster than real time (use_sim_time)
         self._held: tuple[tuple[float, float, float], tuple[float, float, float], float] | None = None
@@ -206,6 +210,11 @@ class AgentOperator:
 
     def _on_estop(self, msg: Bool) -> None:
         try:
+            release = not msg.data and self.agent.hand.estopped
+            if release and self.estop_origin is not None and (problem := self.estop_origin.problem()):
+                self.node.get_logger().error(printable(f"e-stop release ignored: not from the planner: {problem}",
+                                                       300), throttle_duration_sec=1.0)
+                return
             if bool(msg.data) != self.agent.hand.estopped:
                 self.node.get_logger().info(self.agent.hand.set_estop(bool(msg.data)))
         except Exception as exc:

@@ -8,10 +8,18 @@ the planner node (``--planner``, default ``planner``): while another node publis
 they are refused (``fleet_planner/ros/origin.py``), so a forged ``done`` never reads as success.
 With keys (``fleet_planner/auth.py``): ``--key FILE`` signs the task with the file's first key,
 ``--trust FILE`` takes only events signed by one of that file's keys (then from any node).
+
+DDS discovery is not symmetric: the planner's event writer may match our reader a moment after our
+task writer matched its reader, and then its first answer (``accepted``) is lost. When nothing at
+all is heard for ``RESEND_S`` after sending, the task is sent once more (signed anew): the planner
+takes an id once for good and answers the second copy with a ``rejected`` naming the job's state
+(``duplicate task id ... (already queued)``), which here means "it has the job" and is followed on,
+not taken as the end (a job already done or failed ends the run with that outcome).
 """
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 import uuid
@@ -33,6 +41,9 @@ from msg_schemas.convert import string_to_record
 from msg_schemas.records import RecordError, Task, TaskEvent
 
 ENDS = {"done": 0, "rejected": 1, "failed": 1, "cancelled": 1}
+#: wall seconds without any event after sending before the task is sent once more
+RESEND_S = 3.0
+_DUPLICATE = re.compile(r"task\.id: duplicate task id .*?(?: \(already (\w+)\))?$")
 
 
 def planner_matched(node: Node, tasks_pub: Publisher, events_sub: Subscription) -> bool:
@@ -54,6 +65,9 @@ class Submitter(Node):
         self.task = task
         self.keys = keys or Keys()
         self.events: list[TaskEvent] = []
+        self.sent = 0
+        #: the job's state as the planner named it answering our second copy (None: not heard)
+        self.already: str | None = None
         self._pub = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
         self._sub = self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self.origin = OriginCheck(self, self._sub, planner)
@@ -63,6 +77,15 @@ class Submitter(Node):
 
     def send(self) -> None:
         self._pub.publish(String(data=self.keys.sign(self.task, self._pub.topic_name).to_json()))
+        self.sent += 1
+
+    @property
+    def ended(self) -> str | None:
+        """How the job ended (an event in ENDS), None while it runs."""
+        end = next((e.event for e in self.events if e.event in ENDS), None)
+        if end is None and self.already in ENDS:
+            return self.already
+        return end
 
     def _on_event(self, msg: String) -> None:
         try:
@@ -80,6 +103,10 @@ class Submitter(Node):
         elif problem := self.origin.problem():
             self.get_logger().warning(f"task event {ev.event} ignored: not from the planner: {problem}",
                                       throttle_duration_sec=2.0)
+            return
+        dup = _DUPLICATE.match(ev.reason or "") if ev.event == "rejected" and self.sent > 1 else None
+        if dup is not None:  # the answer to our second copy: the planner has the job
+            self.already = dup.group(1) or "known"
             return
         self.events.append(ev)
 
@@ -126,15 +153,21 @@ def follow(node: Submitter, timeout: float) -> int:
         print(f"{task.id}: no planner on {node._pub.topic_name} within {timeout:g} s", file=sys.stderr)
         return 1
     node.send()
+    resend_at = time.monotonic() + RESEND_S
     shown = 0
-    while time.monotonic() < deadline and not any(e.event in ENDS for e in node.events):
+    while time.monotonic() < deadline and node.ended is None:
         executor.spin_once(timeout_sec=0.1)
+        if node.sent == 1 and not node.events and time.monotonic() >= resend_at:
+            print(f"{task.id}: no answer within {RESEND_S:g} s: sent once more", file=sys.stderr)
+            node.send()
         for ev in node.events[shown:]:
             print(describe(ev), flush=True)
         shown = len(node.events)
     for ev in node.events[shown:]:
         print(describe(ev), flush=True)
-    end = next((e.event for e in node.events if e.event in ENDS), None)
+    end = node.ended
+    if node.already is not None:
+        print(f"{task.id}: the planner has it ({node.already})", flush=True)
     if end is None:
         print(f"{task.id}: not finished within {timeout:g} s", file=sys.stderr)
         return 1
