@@ -44,11 +44,12 @@ import numpy as np
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from . import crowd_kernels as kern
-from . import crowd_st
+from . import crowd_sipp, crowd_st
 from .base import Planner, Progress
 from .crowd_lns import MAX_HORIZON, Refiner
 from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
-from .crowd_timing import network, time_moves, timed_paths
+from .crowd_sipp import TimedRefiner
+from .crowd_timing import network, time_move_list, time_moves, timed_paths
 
 #: what the plan's info names as the solver that ran
 SOLVER = "dense: LaCAM/PIBT configuration search + LNS refinement, timed by precedence"
@@ -70,7 +71,8 @@ class CrowdPlanner(Planner):
     name = "dense"
 
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
-                 network: bool = True, time_limit_s: float | None = None, margin: float = 0.02):
+                 network: bool = True, time_limit_s: float | None = None, margin: float = 0.02,
+                 timed_refine_s: float | None = None):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
@@ -78,6 +80,9 @@ class CrowdPlanner(Planner):
             raise ValueError(f"time_limit: must be > 0 (got {limit!r})")
         if refine_s is not None and not refine_s >= 0:
             raise ValueError(f"refine_s: must be >= 0 (got {refine_s!r})")
+        if timed_refine_s is not None and not timed_refine_s >= 0:
+            raise ValueError(f"timed_refine_s: must be >= 0 (got {timed_refine_s!r})")
+        self.timed_refine_s = None if timed_refine_s is None else float(timed_refine_s)
         self.time_limit_s = float(limit)
         self.refine_s = None if refine_s is None else float(refine_s)
         self.seed = int(seed)
@@ -89,6 +94,7 @@ class CrowdPlanner(Planner):
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
         crowd_st.warm_up()
+        crowd_sipp.warm_up()
         t_start = time.perf_counter()
         deadline = t_start + self.time_limit_s
         robots = list(robots)
@@ -125,8 +131,19 @@ class CrowdPlanner(Planner):
             progress(2, 3, "timing by precedence")
         centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
         radii = [r.radius for r in robots]
-        timing = time_moves(remove_loops(configs), durations, centres, radii, res, [r.max_accel for r in robots],
-                            self.margin)
+        accels = [r.max_accel for r in robots]
+        timing = time_moves(remove_loops(configs), durations, centres, radii, res, accels, self.margin)
+        timed_s = self.timed_refine_s if self.timed_refine_s is not None else 0.5
+        if timed_s > 0 and len(robots) > 1 and all(a is None for a in accels):
+            # speed-aware: each robot re-planned at its own speed against the others' timed cells
+            refiner2 = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
+                                    graph.deg, graph.n, self.seed)
+            refiner2.run(deadline, cpu_s=timed_s)
+            info.update(timed_lns_iterations=refiner2.iterations, timed_lns_accepted=refiner2.accepted)
+            if refiner2.accepted:
+                robot, key, src, dst = refiner2.moves()
+                timing = time_move_list(np.asarray(starts), robot, key, src, dst, durations, centres, radii, res,
+                                        accels, self.margin)
         paths = timed_paths(timing, centres, starts, [r.id for r in robots], radii)
         net = network(timing, [r.id for r in robots], res) if self.with_network else None
         if progress:
