@@ -30,9 +30,10 @@ apart, which is >= r_i + r_j - the planner refuses (PlanningError) pairs with a 
 and goals off cell centres, and goals that cannot be reached. The plan's info names the solver
 (``solver``) and how it went (first plan's steps, configurations, LNS iterations).
 
-``plan_incremental`` plans new legs around driven trajectories with PRIOR's space-time search
-(the fixed robots as moving obstacles): a configuration search cannot move robots that are not its
-own.
+``plan_incremental`` plans new legs around driven trajectories: on the lattice (the dense solver's
+own plans) by safe-interval search against the exact cell holdings of the driven robots
+(:mod:`.crowd_incremental`), otherwise with PRIOR's space-time search (a configuration search cannot
+move robots that are not its own, and any-angle trajectories have no exact cell holdings).
 """
 from __future__ import annotations
 
@@ -69,6 +70,8 @@ class CrowdPlanner(Planner):
     """
 
     name = "dense"
+    #: which search answered the last ``plan_incremental``: "dense" (on the lattice) or "prior"
+    last_incremental = ""
 
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
                  network: bool = True, time_limit_s: float | None = None, margin: float = 0.02,
@@ -153,10 +156,50 @@ class CrowdPlanner(Planner):
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
                          t0: float) -> list[TimedPath]:
-        """New legs around driven trajectories: the fixed robots are moving obstacles, the new ones
-        are planned one after another in space-time (PRIOR, van den Berg & Overmars)."""
+        """New legs around driven trajectories (:mod:`.crowd_incremental`): where every driven
+        trajectory lies on the lattice of cell centres (the dense solver's own plans) and the new
+        robots start and end on cell centres, each new robot is planned by safe-interval search at its
+        own speed against the exact cell holdings of the others; otherwise (any-angle legs of md or
+        PRIOR, robots between centres, radius sums over the cell step) or when that search finds no
+        leg, PRIOR's space-time search (van den Berg & Overmars) plans them against the continuous
+        trajectories. ``last_incremental`` says which one answered."""
+        import math
+
+        from . import crowd_incremental as inc
         from .prior import PriorPlanner
 
+        if not math.isfinite(t0):
+            raise ValueError(f"t0: must be finite (got {t0!r})")
+        robots = list(robots)
+        clash = {r.id for r in robots} & {p.robot_id for p in fixed}
+        if clash:
+            raise ValueError(f"fixed: robots {sorted(clash)} are both fixed and to be planned")
+        if not robots:
+            self.last_incremental = "dense"
+            return []
+        native = None
+        step = grid.resolution
+        widest = max(r.radius for r in robots)
+        others = sorted([r.radius for r in robots] + [p.radius for p in fixed])
+        if widest + (others[-2] if len(others) > 1 else 0.0) <= step + 1e-9:
+            kern.warm_up()
+            crowd_sipp.warm_up()
+            graph = CellGraph(grid, widest)
+            try:
+                starts, goals = _cells(graph, robots)
+            except PlanningError:
+                starts = goals = None
+            if starts is not None and not ConfigSearch(graph, starts, goals).unreachable():
+                holdings = inc.lattice_holdings(fixed, graph, float(t0))
+                if holdings is not None:
+                    try:
+                        native = inc.plan_legs(graph, robots, starts, goals, holdings, float(t0), self.seed)
+                    except PlanningError:
+                        native = None
+        if native is not None:
+            self.last_incremental = "dense"
+            return native
+        self.last_incremental = "prior"
         return PriorPlanner().plan_incremental(grid, robots, fixed, t0)
 
 
