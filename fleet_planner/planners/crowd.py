@@ -160,9 +160,10 @@ class CrowdPlanner(Planner):
         trajectory lies on the lattice of cell centres (the dense solver's own plans) and the new
         robots start and end on cell centres, each new robot is planned by safe-interval search at its
         own speed against the exact cell holdings of the others; otherwise (any-angle legs of md or
-        PRIOR, robots between centres, radius sums over the cell step) or when that search finds no
-        leg, PRIOR's space-time search (van den Berg & Overmars) plans them against the continuous
-        trajectories. ``last_incremental`` says which one answered."""
+        PRIOR, robots between centres, radius sums over the cell step) PRIOR's space-time search (van
+        den Berg & Overmars) plans them against the continuous trajectories. ``last_incremental`` says
+        which one answered. A robot the safe-interval search cannot serve (its way shut for good by a
+        robot parked in a 1-cell aisle) is refused with PlanningError."""
         import math
 
         from . import crowd_incremental as inc
@@ -177,7 +178,6 @@ class CrowdPlanner(Planner):
         if not robots:
             self.last_incremental = "dense"
             return []
-        native = None
         step = grid.resolution
         widest = max(r.radius for r in robots)
         others = sorted([r.radius for r in robots] + [p.radius for p in fixed])
@@ -192,13 +192,10 @@ class CrowdPlanner(Planner):
             if starts is not None and not ConfigSearch(graph, starts, goals).unreachable():
                 holdings = inc.lattice_holdings(fixed, graph, float(t0))
                 if holdings is not None:
-                    try:
-                        native = inc.plan_legs(graph, robots, starts, goals, holdings, float(t0), self.seed)
-                    except PlanningError:
-                        native = None
-        if native is not None:
-            self.last_incremental = "dense"
-            return native
+                    # no leg here is no leg for PRIOR either: one robot's safe-interval search is complete on
+                    # the cell graph against fixed holdings, and PRIOR plans the new robots one by one too
+                    self.last_incremental = "dense"
+                    return inc.plan_legs(graph, robots, starts, goals, holdings, float(t0), self.seed)
         self.last_incremental = "prior"
         return PriorPlanner().plan_incremental(grid, robots, fixed, t0)
 
