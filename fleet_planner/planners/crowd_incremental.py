@@ -68,7 +68,7 @@ def lattice_holdings(fixed: Sequence[TimedPath], graph, t0: float) -> list[tuple
 def plan_legs(graph, robots: Sequence[RobotSpec], starts: Sequence[int], goals: Sequence[int],
               holdings: list[tuple[int, float, float]], t0: float, seed: int = 0) -> list[TimedPath]:
     """One timed path per robot (in absolute time from ``t0``) around ``holdings`` (see the module
-    docstring); tries up to three orders (the given one, then each failed robot first); raises
+    docstring); tries up to three orders (shortest legs first, then each failed robot first); raises
     PlanningError naming the robots it could not serve."""
     n = len(robots)
     dur = np.array([graph.grid.resolution / r.max_speed for r in robots])
@@ -78,7 +78,9 @@ def plan_legs(graph, robots: Sequence[RobotSpec], starts: Sequence[int], goals: 
     L = int(4 * max(int(hops.max(initial=0)), 1) + 64 + 2 * len(holdings) // max(graph.n, 1))
     counts = np.bincount(np.array([c for c, _, _ in holdings] + [0], dtype=np.int64), minlength=graph.n)
     K = int(counts.max(initial=0) + 4 * n + 16)
-    order = list(range(n))
+    # shortest legs first (measured on bench_dense_legs: sum of leg times 1.106 x free at 100 robots,
+    # against 1.178 in the given order and 1.244 longest first)
+    order = np.argsort(hops * dur, kind="stable").tolist()
     failed: list[int] = []
     for _attempt in range(3):
         result, failed = _sequential(graph, order, starts, goals_a, dur, fields, grow, holdings, L, K)
