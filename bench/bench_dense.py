@@ -119,10 +119,11 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, options: 
     try:
         planner = get_planner(name, **options)
         if name in ("dense", "crowd"):
-            from fleet_planner.planners import crowd_kernels, crowd_st
+            from fleet_planner.planners import crowd_kernels, crowd_sipp, crowd_st
 
             crowd_kernels.warm_up()   # numba's cache, loaded once per process: not planning
             crowd_st.warm_up()
+            crowd_sipp.warm_up()
             t0, c0 = time.perf_counter(), time.process_time()
         plan = planner.plan(grid, robots)
         timing = (time.perf_counter() - t0, time.process_time() - c0)
@@ -198,10 +199,11 @@ def main(argv=None) -> int:
     for name in args.planners:   # import every planner now, so that all runs use the same code
         get_planner(name)
     if "dense" in args.planners or "crowd" in args.planners:
-        from fleet_planner.planners import crowd_kernels, crowd_st
+        from fleet_planner.planners import crowd_kernels, crowd_sipp, crowd_st
 
         crowd_kernels.warm_up()  # compile once, before the children fork
         crowd_st.warm_up()
+        crowd_sipp.warm_up()
     jobs = []
     for name, sizes in args.runs:
         if args.maps_dir.is_dir():

@@ -394,6 +394,30 @@ def remove_loops_inplace(out, ncells):
     return out
 
 
+# ---------------------------------------------------------------------------------------------
+# the timing's longest-path pass
+# ---------------------------------------------------------------------------------------------
+@_jit
+def precedence_pass(order, after_own, after_cell, slack, dur, start, end):
+    """Earliest start and end of every move, taken in ``order`` (a topological order of the
+    precedences): after its robot's previous move ``after_own`` ended, and after the move
+    ``after_cell`` out of its cell started and ended at most ``slack`` before (NIL: none)."""
+    for q in range(len(order)):
+        k = order[q]
+        t = 0.0
+        o = after_own[k]
+        if o != NIL and end[o] > t:
+            t = end[o]
+        c = after_cell[k]
+        if c != NIL:
+            if start[c] > t:
+                t = start[c]
+            if end[c] - slack[k] > t:
+                t = end[c] - slack[k]
+        start[k] = t
+        end[k] = t + dur[k]
+
+
 _WARM = False
 
 
@@ -422,4 +446,6 @@ def warm_up() -> None:
               dist, grow, goals, nb, deg, np.linspace(0, 1, 6), occ_now, occ_next, q_to)
     plan = np.array([[0, 2], [1, 5], [2, 4], [2, 3], [2, 0]], dtype=np.int32)
     remove_loops_inplace(plan.astype(np.int64), 6)
+    z = np.zeros(2)
+    precedence_pass(np.arange(2), np.array([NIL, 0]), np.array([NIL, NIL]), z, np.ones(2), z.copy(), z.copy())
     _WARM = True

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import Link, Network, TimedPath
+from . import crowd_kernels as kern
 
 NIL = -1
 #: what a follower keeps on top of r_i + r_j (metres): rounding, not a safety margin
@@ -80,10 +81,28 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
     before the other has arrived: both are on one line, the follower behind, and the gap between
     them, ``step + (t - S_j) v_j - (t - S_i) v_i``, is smallest when the leader arrives (or at the
     follower's start), so ``S_i >= max(S_j, E_j - (2 step - r_i - r_j) / v_i)`` keeps it >= r_i + r_j."""
-    n = configs.shape[1]
     moving = configs[1:] != configs[:-1]                       # (steps, robots)
     robot, step = np.nonzero(moving.T)                         # robot-major, steps ascending
     src, dst = configs[step, robot], configs[step + 1, robot]
+    return time_move_list(configs[0], robot, step, src, dst, durations, centres, radii, step_m, accels, gap_m,
+                          consecutive=True)
+
+
+def time_move_list(starts: np.ndarray, robot: np.ndarray, step: np.ndarray, src: np.ndarray, dst: np.ndarray,
+                   durations: Sequence[float] | np.ndarray, centres: np.ndarray | None = None,
+                   radii: Sequence[float] | None = None, step_m: float = 1.0,
+                   accels: Sequence[float | None] | None = None, gap_m: float = GAP_M,
+                   consecutive: bool = False) -> Timing:
+    """:func:`time_moves` for a plan given as its moves: move k of robot ``robot[k]`` from cell
+    ``src[k]`` to ``dst[k]``, robot-major, each robot's moves in its order; ``step[k]`` orders the
+    moves in time (a discrete step, or a start time: only its order counts), so that each cell is
+    visited in the order of the steps of the moves into it. ``consecutive``: steps are discrete
+    steps (a robot's moves at consecutive steps can form one run of a trapezoid)."""
+    n = len(starts)
+    starts = np.asarray(starts)
+    robot = np.asarray(robot, dtype=np.int64)
+    if not consecutive:   # dense ranks: moves starting at one instant share a level
+        step = np.unique(np.asarray(step), return_inverse=True)[1].reshape(-1).astype(np.int64)
     m = len(robot)
     first = np.searchsorted(robot, np.arange(n + 1))
     idx = np.arange(m)
@@ -91,7 +110,7 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
     next_own = np.where((idx < m - 1) & (np.roll(robot, -1) == robot), idx + 1, NIL)
     # visits: every start (entry step -1, no entry move) and every move's destination
     has_moves = first[1:] > first[:-1]
-    v_cell = np.concatenate([configs[0], dst])
+    v_cell = np.concatenate([starts, dst])
     v_entry_step = np.concatenate([np.full(n, -1), step])
     v_entry_move = np.concatenate([np.full(n, NIL), idx])
     v_exit_move = np.concatenate([np.where(has_moves, first[:-1], NIL), next_own])
@@ -145,16 +164,8 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
         end = np.zeros(m)
         level = step * (int(depth.max(initial=0)) + 1) + depth
         by_level = np.argsort(level, kind="stable")
-        bounds = np.flatnonzero(np.diff(level[by_level])) + 1
-        for group in np.split(by_level, bounds):
-            own, cell = after_own[group], after_cell[group]
-            t = np.zeros(len(group))
-            t = np.where(own != NIL, np.maximum(t, end[np.maximum(own, 0)]), t)
-            c = np.maximum(cell, 0)
-            t = np.where(cell != NIL, np.maximum(t, np.maximum(start[c], end[c] - slack[group])), t)
-            # (a same-way follower's slack is in its own move time: see time_moves' docstring)
-            start[group] = t
-            end[group] = t + dur[group]
+        # the longest-path pass, one move at a time in level order (compiled: 10^5 moves)
+        kern.precedence_pass(by_level, after_own, after_cell, slack, dur, start, end)
         return start, end
 
     acc = np.array([np.inf if a is None else float(a) for a in accels], dtype=float) if accels is not None \
@@ -167,7 +178,9 @@ def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, cen
     breaks = np.ones(m, dtype=bool)
     if m > 1:
         turns = np.any(np.abs(direction[1:] - direction[:-1]) > 1e-9, axis=1)
-        breaks[1:] = (robot[1:] != robot[:-1]) | (step[1:] != step[:-1] + 1) | turns
+        breaks[1:] = (robot[1:] != robot[:-1]) | turns
+        if consecutive:   # (otherwise the stops are found in the times below)
+            breaks[1:] |= step[1:] != step[:-1] + 1
     for _ in range(50):
         dur = _ramp_durations(breaks, base, acc[robot], step_m)
         start, end = schedule(dur)
