@@ -50,8 +50,16 @@ def main() -> None:
         problem, info = armo_problem(problem)
         print("ARMO:", info)
     limits = RunLimits(cap_s=a.cap, stall_s=a.stall, no_progress_s=120.0, retry_s=2.0, wall_cap_s=a.wall_cap)
-    run = _BehaviorRun(problem, 0.1, limits, False, None)
-    res = run.run()
+    from tqdm import tqdm
+
+    with tqdm(total=len(problem.deliveries), unit="del", file=sys.stderr, mininterval=5.0) as bar:
+        def progress(done: int, total: int, t: float) -> None:   # deliveries done, simulated time
+            bar.n = done
+            bar.set_postfix_str(f"t={t:.0f} s", refresh=False)
+            bar.update(0)                                          # redrawn at most every 5 s
+
+        run = _BehaviorRun(problem, 0.1, limits, False, progress)
+        res = run.run()
     fleet = run.fleet
     print(f"{a.map} N={a.n}: stop={res.stop} done={res.completed}/{res.n_deliveries} t={res.ctime:.0f} "
           f"coll={res.collisions} dead={res.deadlocks}")

@@ -141,6 +141,8 @@ class PathFinder:
         # a road map of directed lanes carried by the map (fleet_planner.roadmap.with_lanes): only
         # its moves remain, and paths are not straightened (that would leave the lanes)
         self._lanes = getattr(grid, "lanes", None)
+        if self._lanes is not None and not self._lanes.restricts:   # no lane restricts a move: the map itself
+            self._lanes = None
         if self._lanes is not None:
             moves[1:-1, 1:-1] &= self._lanes.move_mask((h, w))
         self._free_p = free_p

@@ -80,6 +80,12 @@ class RoadMap:
         return cls(np.full(grid.blocked.shape, ALL_ORTHOGONAL, dtype=np.uint8), grid.resolution, name, radius)
 
     @property
+    def restricts(self) -> bool:
+        """Some move is not allowed (a road map that restricts none is the map itself: paths on
+        it are straightened as without it)."""
+        return bool(np.any(self.allowed != ALL_ORTHOGONAL))
+
+    @property
     def shape(self) -> tuple[int, int]:
         h, w = self.allowed.shape
         return int(h), int(w)

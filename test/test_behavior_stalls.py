@@ -133,3 +133,48 @@ def test_a_waiting_robot_gives_way_to_a_docking_robot():
         for k in range(30):
             w.move(0.1 * k, 0.1, [dock])
         assert in_critical_area(dock, w.view(), params) is not gives_way
+
+
+def _leaving_blocked_by_the_queue() -> BehaviorFleet:
+    """The default `large` warehouse's chute_6 (the scene of ARMO at 20 robots): r6 leaves the
+    station it still holds, three robots queue for it; on a road map paths are not straightened,
+    and r6's first step out (a diagonal staircase) runs at r19, pinned against the wall."""
+    from fleet_planner.delivery import ROBOT_RADIUS
+    from fleet_planner.roadmap import RoadMap, with_lanes
+    from fleet_planner.warehouse import generate_warehouse
+
+    grid = generate_warehouse(5, 10, 24, 2, 3, 0.5, "large").grid
+    allowed = RoadMap.open(grid).allowed.copy()
+    allowed[0, 0] = 0                       # a road map (it restricts one corner cell)
+    grid = with_lanes(grid, RoadMap(allowed, grid.resolution))
+    station = (37.25, 2.25)
+    starts = {"r6": (37.25, 2.55), "r19": (36.05, 3.63), "r1": (35.85, 1.74), "r10": (38.33, 2.84)}
+    fleet = BehaviorFleet(grid, [RobotSpec(k, ROBOT_RADIUS, 1.0, p, p) for k, p in starts.items()])
+    fleet.assign("r6", station, station="chute_6")
+    for _ in range(20):
+        fleet.step(0.1)
+    assert fleet.controller("r6").holds is not None
+    fleet.assign("r6", (5.25, 20.75))
+    for k in ("r19", "r1", "r10"):
+        fleet.assign(k, station, station="chute_6")
+    return fleet
+
+
+def _until_r6_arrives(fleet: BehaviorFleet, limit_s: float) -> None:
+    while fleet.time < limit_s and not fleet.arrived("r6"):
+        fleet.step(0.1)
+
+
+def test_a_robot_leaving_its_station_replans_round_a_waiting_robot_pinned_in_its_way(monkeypatch):
+    """IV.C.1 re-plans round a *standing* robot in the way; a robot queued for the station that is
+    pinned between the leaving robot and a wall cannot give way either (ours): the leaving robot
+    re-plans round it. Control (the paper's rule only): r6 stays blocked."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _leaving_blocked_by_the_queue()
+    _until_r6_arrives(fleet, 120.0)
+    assert fleet.arrived("r6") and fleet.controller("r6").replans >= 1
+    monkeypatch.setattr(BehaviorController, "_does_not_give_way", staticmethod(lambda o: not o.travelling))
+    control = _leaving_blocked_by_the_queue()
+    _until_r6_arrives(control, 120.0)
+    assert not control.arrived("r6") and control.controller("r6").blocked_since is not None

@@ -118,6 +118,17 @@ def test_md_and_prior_plan_along_the_lanes_and_pass_the_checker(planner):
     assert np.abs(by_id["r1"].waypoints[:, 1] - 2.5).max() >= 1.9   # it took a cross aisle
 
 
+def test_a_road_map_that_restricts_no_move_is_the_map_itself():
+    """ARMO may make no lane one-way (its program on `large`): then paths are straightened as
+    without a road map (unstraightened staircases left robots giving way into walls)."""
+    grid = _grid()
+    open_map = RoadMap.open(grid)
+    assert not open_map.restricts and parse_lanes(_one_way_east_middle(), grid).restricts
+    plain = PathFinder(grid, R).find((0.5, 0.5), (11.5, 4.5))
+    on_open = PathFinder(with_lanes(grid, open_map), R).find((0.5, 0.5), (11.5, 4.5))
+    assert np.allclose(plain, on_open)
+
+
 def test_one_md_planner_keeps_the_lanes_of_a_map_apart_from_the_same_map_without():
     """md's path-finder cache is keyed by the lanes too: the same map with and without lanes,
     planned by one planner in either order, gets each its own paths."""

@@ -369,9 +369,19 @@ class BehaviorController:
             me = self.view()
         rival = self._dock_rival(me, sensed)
         self._set(B.DOCK if rival is None else B.WAIT_KEEP_DISTANCE, None if rival is None else rival.id)
+        # a standing robot in the way does not give way (IV.C.1); Interpretation (ours, issue 13):
+        # nor does a waiting one that has no room to (pinned between the leaving robot and a
+        # wall: measured, a robot leaving its station blocked 857 s by one queued for it, ARMO on
+        # `large`, 20 robots): after ``blocked_timeout`` the leaving robot re-plans round it
         if rival is None and self._leaving() and self._stalled() and any(
-                not o.travelling and in_critical_area(me, o, self.params) for o in sensed):
-            self._replan(sensed)            # a standing robot in the way does not give way (IV.C.1)
+                self._does_not_give_way(o) and in_critical_area(me, o, self.params) for o in sensed):
+            self._replan(sensed)
+
+    @staticmethod
+    def _does_not_give_way(other: RobotView) -> bool:
+        """A robot in the way of a leaving Dock robot that will not move for it: one standing
+        (the paper's obstacle) or, ours, one waiting (see :meth:`_select_holding`)."""
+        return not other.travelling or other.behavior.is_wait
 
     def _apply_rules(self, me: RobotView, in_front: list[RobotView], sensed: list[RobotView]) -> RobotView:
         """The traffic rules (IV.B) against the robot the front area check selects; returns my view
