@@ -14,7 +14,7 @@ from fleet_planner.fleet.state import FleetRobot, Occupancy
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import load_kinds
 from fleet_planner.warehouse import load_warehouse
-from msg_schemas.records import RobotStatus
+from msg_schemas.records import RobotStatus, Task
 
 KINDS = load_kinds()
 
@@ -92,3 +92,63 @@ def test_simulated_robots_hear_their_neighbours_and_report_every_step():
     assert all(s.stamp == 0.1 for s in second)
     heard = sim.agents[members[0].id].heard   # r1 on the first charger hears r2 on the next one (2 m)
     assert members[1].id in heard and members[-1].id not in heard
+
+
+class _Refusing:
+    """A planner that refuses every leg, counting how often it is asked."""
+
+    name = "refusing"
+
+    def __init__(self):
+        self.calls = 0
+
+    def plan_incremental(self, grid, robots, fixed, t0):
+        from fleet_planner.model import PlanningError
+        self.calls += 1
+        raise PlanningError({r.id: "refused for the test" for r in robots})
+
+
+def test_a_refused_leg_is_tried_again_after_a_growing_back_off_not_at_every_step():
+    from fleet_planner.fleet import FleetManager
+    from fleet_planner.fleet.manager import LEG_RETRY_MAX_S, LEG_RETRY_S
+
+    wh = load_warehouse()
+    planner = _Refusing()
+    fleet = FleetManager(wh, KINDS, planner=planner)
+    fleet.step_budget_s = math.inf   # (no wall-time limit: the back-off alone is looked at)
+    fleet.on_status(status("r1", 2.25, 22.75), 0.0)
+    chute = next(s for s in wh.stations.values() if s.type == "chute")
+    store = next(s for s in wh.stations.values() if s.type == "storage")
+    assert fleet.submit(Task(id="j1", pick=chute.name, place=store.tags[0]), 0.0)[0].event == "accepted"
+    asked = []
+    for k in range(1, 61):   # 30 s of steps every 0.5 s
+        now = k * 0.5
+        fleet.on_status(status("r1", 2.25, 22.75, stamp=now), now)
+        before = planner.calls
+        fleet.step(now)
+        if planner.calls > before:
+            asked.append(now)
+    gaps = np.diff(asked)
+    assert len(asked) < 20   # at every step it would be 60
+    assert gaps[0] >= LEG_RETRY_S and max(gaps) <= LEG_RETRY_MAX_S + 0.5 and list(gaps) == sorted(gaps)
+
+
+def test_a_step_plans_legs_only_within_its_budget():
+    from fleet_planner.fleet import FleetManager
+
+    wh = load_warehouse()
+    planner = _Refusing()
+    fleet = FleetManager(wh, KINDS, planner=planner)
+    members = place_robots(wh, KINDS, 12)
+    for m in members:
+        fleet.on_status(status(m.id, m.x, m.y, m.kind), 0.0)
+    chutes = [s for s in wh.stations.values() if s.type == "chute"]
+    store = next(s for s in wh.stations.values() if s.type == "storage")
+    for k, c in enumerate(chutes):
+        assert fleet.submit(Task(id=f"j{k}", pick=c.name, place=store.tags[0]), 0.0)[0].event == "accepted"
+    fleet.step_budget_s = 0.0   # spent at once: no leg this step
+    fleet.step(0.5)
+    assert planner.calls == 0
+    fleet.step_budget_s = 10.0
+    fleet.step(1.0)
+    assert planner.calls > 1
