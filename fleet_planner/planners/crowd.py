@@ -194,22 +194,23 @@ class CrowdPlanner(Planner):
             return []
         step = grid.resolution
         widest = max(r.radius for r in robots)
-        others = sorted([r.radius for r in robots] + [p.radius for p in fixed])
-        if widest + (others[-2] if len(others) > 1 else 0.0) <= step + 1e-9:
+        others = [r.radius for r in robots] + [p.radius for p in fixed]
+        others.remove(widest)          # the widest new robot's widest partner, new or driven
+        if widest + max(others, default=0.0) <= step + 1e-9:
             kern.warm_up()
             crowd_sipp.warm_up()
             graph = CellGraph(grid, widest)
             try:
-                starts, goals = _cells(graph, robots)
+                cells: tuple[list[int], list[int]] | None = _cells(graph, robots)
             except PlanningError:
-                starts = goals = None
-            if starts is not None and not ConfigSearch(graph, starts, goals).unreachable():
+                cells = None
+            if cells is not None and not ConfigSearch(graph, *cells).unreachable():
                 holdings = inc.lattice_holdings(fixed, graph, float(t0))
                 if holdings is not None:
                     # no leg here is no leg for PRIOR either: one robot's safe-interval search is complete on
                     # the cell graph against fixed holdings, and PRIOR plans the new robots one by one too
                     self.last_incremental = "dense"
-                    return inc.plan_legs(graph, robots, starts, goals, holdings, float(t0), self.seed)
+                    return inc.plan_legs(graph, robots, cells[0], cells[1], holdings, float(t0), self.seed)
         self.last_incremental = "prior"
         return PriorPlanner().plan_incremental(grid, robots, fixed, t0)
 
