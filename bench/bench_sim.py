@@ -115,7 +115,7 @@ def run(n: int, opts: argparse.Namespace) -> dict:
             c0 = time.process_time()
             statuses = sim.step(now)
             c1 = time.process_time()
-            texts = [s.to_json() for s in statuses]
+            texts = [s.to_compact_json() if hasattr(s, "to_compact_json") else s.to_json() for s in statuses]
             c2 = time.process_time()
             if publish is not None:
                 for t in texts:
