@@ -211,11 +211,12 @@ def main() -> None:
     opts = p.parse_args()
     if opts.node:
         print(f"fleet-sim node, sim clock at {opts.node:g}x, {opts.seconds:g} simulated s per size")
-        print(f"{'N':>4} {'sim s':>6} {'CPU ms/sim s':>12} {'ms/robot':>8} {'rate':>6} {'steps/sim s':>11}")
+        print(f"{'N':>4} {'sim s':>6} {'CPU ms/sim s':>12} {'ms/robot':>8} {'rate':>6} {'steps/sim s':>11} "
+              f"{'CPU ms/step':>11}")
         for n in opts.robots:
             r = run_node(n, opts)
             print(f"{r['n']:>4} {r['sim_s']:>6.0f} {r['total']:>12.1f} {r['per_robot']:>8.2f} {r['rate']:>5.1f}x "
-                  f"{r['steps']:>11.1f}", flush=True)
+                  f"{r['steps']:>11.1f} {r['total'] / max(r['steps'], 1e-9):>11.1f}", flush=True)
         return
     print(f"SimFleet at {opts.rate:g} steps/s, {opts.seconds:g} simulated s per size"
           + (", statuses published with rclpy" if opts.ros else ""))
