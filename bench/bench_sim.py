@@ -180,7 +180,7 @@ def run_node(n: int, opts: argparse.Namespace) -> dict:
         while now() < start + opts.seconds:
             if now() >= end and rounds:
                 end = start_round(node.sim, rounds.pop(0), now())
-            ex.spin_once(timeout_sec=0.1)
+            ex.spin_once()   # no timeout: rclpy would make a timer for it each time (the clock ticks on)
         if prof:
             prof.disable()
         cpu, wall, sim_s = time.process_time() - c0, time.monotonic() - w0, now() - start
