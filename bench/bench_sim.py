@@ -16,7 +16,7 @@ per simulated second, the bytes of one status, and the share of robots driving. 
 the top functions of cProfile (by own time).
 
     .venv/bin/python bench/bench_sim.py [--robots 10 30 100] [--seconds 60] [--rate 10] [--ros]
-        [--profile]
+        [--profile] [--node RATE] [--codec]
 """
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ import pstats
 import random
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -196,6 +197,29 @@ def run_node(n: int, opts: argparse.Namespace) -> dict:
             "rate": sim_s / wall, "steps": steps / sim_s}
 
 
+def codec() -> None:
+    """Bytes, and CPU us to build, write and read one status, in each form."""
+    import timeit
+
+    from msg_schemas.records import RobotStatus
+    st = RobotStatus(id="r12", kind="cargo", x=12.345678901, y=3.45678912, yaw=1.5707963, vx=0.4999999,
+                     vy=0.0001234, battery=0.912345678, mode="driving", progress=0.51234567, stamp=123.456789,
+                     radius=0.35, task_id="t12", path_id=1796182134055028518, lateness_s=0.1234567,
+                     travelled_m=3.2123456, loaded=True)
+    fields = {k: v for k, v in st.to_dict().items() if k != "schema"}
+    forms = [("fleet/robot_status@1", st.to_json)]
+    if hasattr(st, "to_compact_json"):
+        forms.append((RobotStatus.COMPACT_SCHEMA, st.to_compact_json))
+
+    def us(f) -> float:
+        return min(timeit.Timer(f, timer=time.process_time).repeat(5, 3000)) / 3000 * 1e6
+    print(f"build a status (validated): {us(lambda: RobotStatus(**fields)):.1f} us CPU")
+    print(f"{'form':>22} {'bytes':>6} {'write us':>9} {'read us':>8}")
+    for name, write in forms:
+        text = write()
+        print(f"{name:>22} {len(text.encode()):>6} {us(write):>9.1f} {us(partial(RobotStatus.from_json, text)):>8.1f}")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     p.add_argument("--robots", type=int, nargs="*", default=[10, 30, 100])
@@ -208,7 +232,11 @@ def main() -> None:
     p.add_argument("--profile", type=int, nargs="?", const=25, default=0, help="print the top cProfile functions")
     p.add_argument("--node", type=float, default=0.0,
                    help="run the fleet-sim node on a sim clock at this rate x real time instead (0: off)")
+    p.add_argument("--codec", action="store_true", help="only the status codec: bytes and CPU us per status")
     opts = p.parse_args()
+    if opts.codec:
+        codec()
+        return
     if opts.node:
         print(f"fleet-sim node, sim clock at {opts.node:g}x, {opts.seconds:g} simulated s per size")
         print(f"{'N':>4} {'sim s':>6} {'CPU ms/sim s':>12} {'ms/robot':>8} {'rate':>6} {'steps/sim s':>11} "
