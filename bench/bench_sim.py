@@ -25,6 +25,7 @@ import cProfile
 import os
 import pstats
 import random
+import signal
 import sys
 import time
 from functools import partial
@@ -157,6 +158,7 @@ def run_node(n: int, opts: argparse.Namespace) -> dict:
     members = place_robots(warehouse, kinds, n)
     planners = [get_planner(name) for name in opts.planner.split(",")]
     rounds = plan_rounds(members, kinds, warehouse.grid, planners, np.random.default_rng(opts.seed), opts.seconds)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # so that the clock child is stopped too
     clock = subprocess.Popen([sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(opts.node)],
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     rclpy.init()
