@@ -65,8 +65,8 @@ class FleetSimNode(Node):
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
         subscribe = partial(create_draining_subscription, self)
         # the robots' own topics without rclpy's default QoS-event handlers (a log line on an
-        # incompatible publisher): each is a waitable the executor adds to its wait set at every
-        # wake-up, two per robot and topic (the shared topics keep theirs)
+        # incompatible publisher): each is a waitable the executor walks at every wake-up, one or
+        # two per robot and topic, whichever events the RMW has (the shared topics keep theirs)
         quiet = SubscriptionEventCallbacks(use_default_callbacks=False)
         for rid in self.sim.agents:
             subscribe(Path, topics.timed_path_topic(rid), partial(self._on_path, rid), topics.TIMED_PATH_QOS,
