@@ -16,7 +16,7 @@ per simulated second, the bytes of one status, and the share of robots driving. 
 the top functions of cProfile (by own time).
 
     .venv/bin/python bench/bench_sim.py [--robots 10 30 100] [--seconds 60] [--rate 10] [--ros]
-        [--profile]
+        [--profile] [--node RATE] [--codec]
 """
 from __future__ import annotations
 
@@ -25,8 +25,10 @@ import cProfile
 import os
 import pstats
 import random
+import signal
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -115,7 +117,7 @@ def run(n: int, opts: argparse.Namespace) -> dict:
             c0 = time.process_time()
             statuses = sim.step(now)
             c1 = time.process_time()
-            texts = [s.to_json() for s in statuses]
+            texts = [s.to_compact_json() if hasattr(s, "to_compact_json") else s.to_json() for s in statuses]
             c2 = time.process_time()
             if publish is not None:
                 for t in texts:
@@ -156,6 +158,7 @@ def run_node(n: int, opts: argparse.Namespace) -> dict:
     members = place_robots(warehouse, kinds, n)
     planners = [get_planner(name) for name in opts.planner.split(",")]
     rounds = plan_rounds(members, kinds, warehouse.grid, planners, np.random.default_rng(opts.seed), opts.seconds)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # so that the clock child is stopped too
     clock = subprocess.Popen([sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(opts.node)],
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     rclpy.init()
@@ -180,7 +183,7 @@ def run_node(n: int, opts: argparse.Namespace) -> dict:
         while now() < start + opts.seconds:
             if now() >= end and rounds:
                 end = start_round(node.sim, rounds.pop(0), now())
-            ex.spin_once(timeout_sec=0.1)
+            ex.spin_once()   # no timeout: rclpy would make a timer for it each time (the clock ticks on)
         if prof:
             prof.disable()
         cpu, wall, sim_s = time.process_time() - c0, time.monotonic() - w0, now() - start
@@ -196,6 +199,29 @@ def run_node(n: int, opts: argparse.Namespace) -> dict:
             "rate": sim_s / wall, "steps": steps / sim_s}
 
 
+def codec() -> None:
+    """Bytes, and CPU us to build, write and read one status, in each form."""
+    import timeit
+
+    from msg_schemas.records import RobotStatus
+    st = RobotStatus(id="r12", kind="cargo", x=12.345678901, y=3.45678912, yaw=1.5707963, vx=0.4999999,
+                     vy=0.0001234, battery=0.912345678, mode="driving", progress=0.51234567, stamp=123.456789,
+                     radius=0.35, task_id="t12", path_id=1796182134055028518, lateness_s=0.1234567,
+                     travelled_m=3.2123456, loaded=True)
+    fields = {k: v for k, v in st.to_dict().items() if k != "schema"}
+    forms = [("fleet/robot_status@1", st.to_json)]
+    if hasattr(st, "to_compact_json"):
+        forms.append((RobotStatus.COMPACT_SCHEMA, st.to_compact_json))
+
+    def us(f) -> float:
+        return min(timeit.Timer(f, timer=time.process_time).repeat(5, 3000)) / 3000 * 1e6
+    print(f"build a status (validated): {us(lambda: RobotStatus(**fields)):.1f} us CPU")
+    print(f"{'form':>22} {'bytes':>6} {'write us':>9} {'read us':>8}")
+    for name, write in forms:
+        text = write()
+        print(f"{name:>22} {len(text.encode()):>6} {us(write):>9.1f} {us(partial(RobotStatus.from_json, text)):>8.1f}")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     p.add_argument("--robots", type=int, nargs="*", default=[10, 30, 100])
@@ -208,14 +234,19 @@ def main() -> None:
     p.add_argument("--profile", type=int, nargs="?", const=25, default=0, help="print the top cProfile functions")
     p.add_argument("--node", type=float, default=0.0,
                    help="run the fleet-sim node on a sim clock at this rate x real time instead (0: off)")
+    p.add_argument("--codec", action="store_true", help="only the status codec: bytes and CPU us per status")
     opts = p.parse_args()
+    if opts.codec:
+        codec()
+        return
     if opts.node:
         print(f"fleet-sim node, sim clock at {opts.node:g}x, {opts.seconds:g} simulated s per size")
-        print(f"{'N':>4} {'sim s':>6} {'CPU ms/sim s':>12} {'ms/robot':>8} {'rate':>6} {'steps/sim s':>11}")
+        print(f"{'N':>4} {'sim s':>6} {'CPU ms/sim s':>12} {'ms/robot':>8} {'rate':>6} {'steps/sim s':>11} "
+              f"{'CPU ms/step':>11}")
         for n in opts.robots:
             r = run_node(n, opts)
             print(f"{r['n']:>4} {r['sim_s']:>6.0f} {r['total']:>12.1f} {r['per_robot']:>8.2f} {r['rate']:>5.1f}x "
-                  f"{r['steps']:>11.1f}", flush=True)
+                  f"{r['steps']:>11.1f} {r['total'] / max(r['steps'], 1e-9):>11.1f}", flush=True)
         return
     print(f"SimFleet at {opts.rate:g} steps/s, {opts.seconds:g} simulated s per size"
           + (", statuses published with rclpy" if opts.ros else ""))

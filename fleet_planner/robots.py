@@ -162,6 +162,7 @@ class RobotModel:
         self._action: tuple[str, float] | None = None  # (pick|place, absolute end time)
         self._charging = False
         self._steered: float | None = None  # steered by a controller: the fraction of its leg done
+        self._pre: tuple | None = None      # this step's tracking worked out ahead (TrackBatch.prepare)
 
     # -- commands ---------------------------------------------------------------------------------
     def follow(self, path: TimedPath, t0: float, path_id: int | None = None) -> None:
@@ -300,6 +301,15 @@ class RobotModel:
     def _track(self, end: float, dt: float) -> float:
         """Move along the path towards its due position at ``end``; returns the distance driven."""
         s = self._s
+        pre, self._pre = self._pre, None
+        if (pre is not None and pre[0] is self._T and pre[1] is self.kind and pre[2] == end and pre[3] == dt
+                and pre[4] == s and pre[5] == self.speed):   # worked out for the whole fleet (TrackBatch)
+            s_new, x, y = pre[6], pre[7], pre[8]
+            if s_new <= s:
+                return 0.0
+            self.vx, self.vy = (x - self.x) / dt, (y - self.y) / dt
+            self.x, self.y, self._s = x, y, s_new
+            return s_new - s
         s_due = float(np.interp(end, self._T, self._S))
         v = min(max(0.0, (s_due - s) / dt), self.kind.max_speed * (1 + _EPS))
         a = self.kind.max_accel
@@ -369,3 +379,101 @@ class RobotModel:
                 "vx": self.vx, "vy": self.vy, "battery": self.battery, "mode": self.mode,
                 "progress": self.progress, "stamp": float(stamp), "radius": self.kind.radius,
                 "task_id": self.task_id, "path_id": self.path_id, "lateness_s": self.lateness_s}
+
+
+class TrackBatch:
+    """The path tracking of many robots worked out at once (numpy over robots): :meth:`prepare`
+    computes, for every robot on a timed path, where :meth:`RobotModel.step` would take it over
+    ``[t, t + dt]`` (the due arc length, the speed and acceleration limits, braking for the next
+    halt, the point on the polyline) with the same arithmetic as :meth:`RobotModel._track`, and
+    leaves it with the robot; the robot's own step then takes that result instead of working it
+    out, if nothing it depends on changed in between (else it works it out itself). So a fleet
+    stepped after :meth:`prepare` moves exactly as robots stepped one by one (the agent process of
+    a real robot never prepares). The robots' paths are kept padded in arrays, refreshed when a
+    robot gets a new one.
+    """
+
+    def __init__(self, models: Sequence[RobotModel]):
+        self.models = list(models)
+        n = len(self.models)
+        self._paths: list[np.ndarray | None] = [None] * n   # the _T each row was filled from
+        self._T = np.full((n, 1), math.inf)
+        self._S = np.full((n, 1), math.inf)
+        self._X = np.zeros((n, 1, 2))
+        self._len = np.ones(n, dtype=np.intp)
+        self._stop_s = np.full((n, 1), math.inf)
+        self._stop_t = np.full((n, 1), -math.inf)
+
+    def _refresh(self) -> None:
+        changed = [i for i, m in enumerate(self.models) if m.path is not None and self._paths[i] is not m._T]
+        if not changed:
+            return
+        width = max([self._T.shape[1]] + [len(self.models[i]._T) for i in changed])
+        stops = max([self._stop_s.shape[1]] + [len(self.models[i]._stops) for i in changed])
+        n = len(self.models)
+        if width > self._T.shape[1]:
+            pad = width - self._T.shape[1]
+            self._T = np.hstack([self._T, np.full((n, pad), math.inf)])
+            self._S = np.hstack([self._S, np.full((n, pad), math.inf)])
+            self._X = np.concatenate([self._X, np.zeros((n, pad, 2))], axis=1)
+        if stops > self._stop_s.shape[1]:
+            pad = stops - self._stop_s.shape[1]
+            self._stop_s = np.hstack([self._stop_s, np.full((n, pad), math.inf)])
+            self._stop_t = np.hstack([self._stop_t, np.full((n, pad), -math.inf)])
+        for i in changed:
+            m = self.models[i]
+            assert m.path is not None
+            k, h = len(m._T), len(m._stops)
+            self._T[i], self._S[i], self._stop_s[i], self._stop_t[i] = math.inf, math.inf, math.inf, -math.inf
+            self._T[i, :k], self._S[i, :k], self._X[i, :k] = m._T, m._S, m.path.waypoints[:, :2]
+            self._stop_s[i, :h], self._stop_t[i, :h] = m._stops[:, 0], m._stops[:, 1]
+            self._len[i] = k
+            self._paths[i] = m._T
+
+    def prepare(self, t: Sequence[float | None], dt: Sequence[float]) -> None:
+        """Work out each robot's tracking over ``[t[i], t[i] + dt[i]]``, as its
+        ``step(t[i], dt[i])`` will be called (robots without a timed path, or with ``t[i]`` None or
+        ``dt[i]`` not > 0, are left alone)."""
+        rows = [i for i, m in enumerate(self.models) if m.path is not None and t[i] is not None and dt[i] > 0]
+        if not rows:
+            return
+        self._refresh()
+        idx = np.array(rows)
+        dt_ = np.array([dt[i] for i in rows], dtype=float)
+        end = np.array([t[i] for i in rows], dtype=float) + dt_
+        ms = [self.models[i] for i in rows]
+        s = np.array([m._s for m in ms])
+        speed = np.array([m.speed for m in ms])
+        vmax = np.array([m.kind.max_speed for m in ms])
+        acc = np.array([m.kind.max_accel for m in ms])
+        T, S, X, last = self._T[idx], self._S[idx], self._X[idx], self._len[idx] - 1
+        r = np.arange(len(rows))
+        # s_due = np.interp(end, T, S) row by row (np.interp's own arithmetic)
+        c = np.count_nonzero(T <= end[:, None], axis=1)
+        j = np.clip(c - 1, 0, np.maximum(last - 1, 0))
+        j1 = np.minimum(j + 1, last)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slope = (S[r, j1] - S[r, j]) / (T[r, j1] - T[r, j])
+            mid = slope * (end - T[r, j]) + S[r, j]
+        s_due = np.where(c == 0, S[:, 0], np.where(c > last, S[r, last], mid))
+        v = np.minimum(np.maximum(0.0, (s_due - s) / dt_), vmax * (1 + _EPS))
+        finite = np.isfinite(acc)
+        with np.errstate(invalid="ignore"):
+            v = np.where(finite, np.minimum(v, speed + acc * dt_), v)
+            sel = (self._stop_s[idx] >= (s - _EPS)[:, None]) & (self._stop_t[idx] > end[:, None])
+            nearest = np.where(sel, self._stop_s[idx], math.inf).min(axis=1)
+            gap = np.maximum(0.0, nearest - s)
+            brake = finite & sel.any(axis=1)
+            v = np.where(brake, np.minimum(np.minimum(v, np.sqrt(2 * acc * gap)), gap / dt_), v)
+        s_new = np.minimum(np.minimum(s + v * dt_, s_due), S[r, last])
+        # the point at s_new on the polyline (RobotModel._point_at)
+        k = np.clip(np.count_nonzero(S <= s_new[:, None], axis=1) - 1, 0, np.maximum(last - 1, 0))
+        k1 = np.minimum(k + 1, last)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = (s_new - S[r, k]) / (S[r, k1] - S[r, k])
+            p = X[r, k] + frac[:, None] * (X[r, k1] - X[r, k])
+        at_end = s_new >= S[r, last]
+        p = np.where(at_end[:, None], X[r, last], p)
+        for q, m in enumerate(ms):
+            m._pre = (m._T, m.kind, float(end[q]), float(dt_[q]), m._s, m.speed, float(s_new[q]), float(p[q, 0]),
+                      float(p[q, 1]))

@@ -346,11 +346,30 @@ class RobotStatus(Record):
     COMPACT_SCHEMA: ClassVar[str] = "fleet/robot_status@2"
 
     def __post_init__(self) -> None:
-        # check_fields' checks in its order, but a float already in range skips its check (it
-        # would return it unchanged): a status is built 10 times a second per robot
-        for name, check, path, lo, hi in _status_checks():
+        # check_fields' checks in its order, but values the check would return unchanged skip it:
+        # floats in range, ids and booleans of the right type, null in an optional field, and
+        # strings already checked (a status is built 10 times a second per robot)
+        for name, check, path, lo, hi, none_ok, fast in _status_checks():
             value = getattr(self, name)
-            if type(value) is float and lo <= value <= hi and _isfinite(value):
+            kind = type(value)
+            if kind is float:
+                if lo <= value <= hi and _isfinite(value):
+                    continue
+            elif value is None:
+                if none_ok:
+                    continue
+            elif kind is str:
+                known = _STATUS_STRINGS.get((name, value))
+                if known is None:
+                    known = check(value, path)
+                    if len(_STATUS_STRINGS) < _MAX_STATUS_STRINGS:
+                        _STATUS_STRINGS[(name, value)] = known
+                object.__setattr__(self, name, known)
+                continue
+            elif kind is bool:
+                if fast == "bool":
+                    continue
+            elif kind is int and fast == "path_id" and 0 <= value <= INT_MAX:
                 continue
             object.__setattr__(self, name, check(value, path))
         self._check_together()
@@ -404,17 +423,31 @@ _STATUS_FLOATS = {"x": (-math.inf, math.inf), "y": (-math.inf, math.inf), "yaw":
                   "vx": (-math.inf, math.inf), "vy": (-math.inf, math.inf), "battery": (0.0, 1.0),
                   "progress": (0.0, 1.0), "stamp": (-math.inf, math.inf), "radius": (0.0, math.inf),
                   "lateness_s": (0.0, math.inf), "travelled_m": (0.0, math.inf)}
-_STATUS_CHECKS: list[tuple[str, Check, str, float, float]] = []
+#: fields whose values of a type skip their check: ids (ints in [0, INT_MAX]) and booleans
+_STATUS_TYPED = {"path_id": "path_id", "rejected_path_id": "path_id", "manual": "bool", "estop": "bool",
+                 "loaded": "bool"}
+_STATUS_CHECKS: list[tuple[str, Check, str, float, float, bool, str]] = []
+_STATUS_STRINGS: dict[tuple[str, str], str] = {}   # (field, string) -> what its check returned
+_MAX_STATUS_STRINGS = 10_000
 _isfinite = math.isfinite
 
 
-def _status_checks() -> list[tuple[str, Check, str, float, float]]:
-    """(field, check, path, fast-path bounds) of every field of RobotStatus, in declaration order;
-    fields without a fast path get empty bounds (inf, -inf)."""
+def _none_ok(check: Check, path: str) -> bool:
+    try:
+        return check(None, path) is None
+    except RecordError:
+        return False
+
+
+def _status_checks() -> list[tuple[str, Check, str, float, float, bool, str]]:
+    """(field, check, path, float bounds, whether null passes, typed fast path) of every field of
+    RobotStatus, in declaration order; fields that are no floats get empty bounds (inf, -inf)."""
     if not _STATUS_CHECKS:
-        _STATUS_CHECKS.extend((f.name, f.metadata["check"], f"{RobotStatus.NAME}.{f.name}",
-                               *_STATUS_FLOATS.get(f.name, (math.inf, -math.inf)))
-                              for f in fields(RobotStatus) if "check" in f.metadata)
+        for f in fields(RobotStatus):
+            if "check" in f.metadata:
+                check, path = f.metadata["check"], f"{RobotStatus.NAME}.{f.name}"
+                _STATUS_CHECKS.append((f.name, check, path, *_STATUS_FLOATS.get(f.name, (math.inf, -math.inf)),
+                                       _none_ok(check, path), _STATUS_TYPED.get(f.name, "")))
     return _STATUS_CHECKS
 
 

@@ -14,6 +14,7 @@ from msg_schemas.records import (
     _STATUS_FLOATS,
     COMPACT_FIELDS,
     COMPACT_ROUNDING,
+    INT_MAX,
     Neighbours,
     RecordError,
     RobotStatus,
@@ -106,7 +107,7 @@ def test_neighbours_carry_compact_statuses_and_the_inbox_finds_their_id():
 
 
 def test_fast_path_bounds_are_the_checks_bounds():
-    checks = {name: (check, path) for name, check, path, _, _ in _status_checks()}
+    checks = {name: (check, path) for name, check, path, *_ in _status_checks()}
     for name, (lo, hi) in _STATUS_FLOATS.items():
         check, path = checks[name]
         for edge, outside in ((lo, math.nextafter(lo, -math.inf)), (hi, math.nextafter(hi, math.inf))):
@@ -116,18 +117,34 @@ def test_fast_path_bounds_are_the_checks_bounds():
                     check(outside, path)
         with pytest.raises(RecordError):
             check(math.inf, path)
+    for name, _, _, _, _, _, fast in _status_checks():   # the typed fast paths
+        check, path = checks[name]
+        if fast == "path_id":
+            assert check(0, path) == 0 and check(INT_MAX, path) == INT_MAX
+            for bad in (-1, INT_MAX + 1):
+                with pytest.raises(RecordError):
+                    check(bad, path)
+        elif fast == "bool":
+            assert check(True, path) is True and check(False, path) is False
 
 
 _VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-3, 3), st.booleans(), st.none(),
-                    st.sampled_from([0.0, 1.0, -0.0, 1.0000001, -1e-300, 5e-324]), st.text(max_size=3))
+                    st.sampled_from([0.0, 1.0, -0.0, 1.0000001, -1e-300, 5e-324, 2 ** 63 - 1, 2 ** 63, "r1", " t1 ",
+                                     "cargo", "idle", "1r", "", "a\x00", {}]), st.text(max_size=3))
+_FIELDS = sorted(f for f in RobotStatus.__dataclass_fields__ if f not in ("SCHEMA", "NAME", "COMPACT_SCHEMA"))
 
 
-@settings(max_examples=300, deadline=None)
-@given(st.dictionaries(st.sampled_from(sorted(_STATUS_FLOATS)), _VALUES, max_size=4))
+@settings(max_examples=400, deadline=None)
+@given(st.dictionaries(st.sampled_from(_FIELDS), _VALUES, max_size=4))
 def test_fast_construction_equals_the_checks(changes):
     """Whatever the values, the status accepts (normalised alike) or refuses (same message) exactly
-    as check_fields over its declared checks does."""
-    base = status().__dict__ | changes
+    as check_fields over its declared checks does (twice: the second time strings come from the
+    memo of checked strings)."""
+    for _ in range(2):
+        fast_equals_slow(status().__dict__ | changes)
+
+
+def fast_equals_slow(base):
     try:
         fast = RobotStatus(**base)
     except RecordError as exc:

@@ -6,9 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import replace
 
-from .areas import in_critical_area
 from .params import BehaviorParams
 from .views import RobotView
 
@@ -24,9 +22,18 @@ def safety_stop(me: RobotView, others: Iterable[RobotView], step: float, margin:
     own disc (``me.next_waypoint``: where my path goes next). The area is the paper's rectangle,
     so a disc at its front corners stops me a little earlier than it strictly has to.
     """
-    if step <= 0 or not me.travelling:
+    if step <= 0:
         return None
-    area = BehaviorParams(front_length=me.radius + step, front_width=2 * me.radius, critical_margin=0.0)
+    d = me.direction
+    if d is None:
+        return None
+    front_length, front_width = me.radius + step, 2 * me.radius
+    if not (math.isfinite(front_length) and front_length > 0 and math.isfinite(front_width) and front_width > 0):
+        BehaviorParams(front_length=front_length, front_width=front_width, critical_margin=0.0)  # raises
+    # areas.in_critical_area of each swept disc against that area, its arithmetic inlined (no
+    # RobotView per disc: this runs for every robot at every control step)
+    (mx, my), (ux, uy) = me.position, d
+    length = min(front_length, me.straight + me.radius)
     hit = []
     for o in others:
         if o.id == me.id:
@@ -34,7 +41,12 @@ def safety_stop(me: RobotView, others: Iterable[RobotView], step: float, margin:
         dx, dy = (sweep or {}).get(o.id, (0.0, 0.0))
         n = 1 + int(math.ceil(math.hypot(dx, dy) / _SWEEP_STEP))
         x, y = o.position
-        if any(in_critical_area(me, replace(o, position=(x + dx * k / max(n - 1, 1), y + dy * k / max(n - 1, 1)),
-                                            radius=o.radius + margin), area) for k in range(n)):
-            hit.append(o)
+        r = o.radius + margin
+        last = max(n - 1, 1)
+        for k in range(n):
+            rx, ry = x + dx * k / last - mx, y + dy * k / last - my
+            s, lat = rx * ux + ry * uy, -rx * uy + ry * ux
+            if 0.0 <= s <= length + r and abs(lat) <= front_width / 2 + r and abs(lat) < me.radius + 0.0 / 2 + r:
+                hit.append(o)
+                break
     return min(hit, key=lambda o: math.dist(o.position, me.position), default=None)

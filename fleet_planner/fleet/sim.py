@@ -5,8 +5,10 @@ Each robot is a :class:`~.agent.RobotAgent` (the same as one agent process drive
 safety net or behaviour layer, its picks, places and charging), so a simulated robot behaves
 exactly as a real robot's agent does. What is shared is done once per step for all of them: who
 hears whom comes from one k-d tree query over the fleet's last statuses (:mod:`.neighbours`, the
-selection the planner's relay makes, here from statuses one step old), and robots of other
-processes can be added from the relay's records (:meth:`SimFleet.hear`).
+selection the planner's relay makes, here from statuses one step old), the robots' path tracking
+is worked out for all of them in numpy arrays (:class:`~fleet_planner.robots.TrackBatch`: the same
+result as each robot's own step), and robots of other processes can be added from the relay's
+records (:meth:`SimFleet.hear`).
 
 Times are seconds on one clock (ROS time): ``now`` is always passed in.
 """
@@ -17,7 +19,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from msg_schemas.records import GateRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..model import TimedPath
-from ..robots import RobotKind, RobotModel
+from ..robots import RobotKind, RobotModel, TrackBatch
 from ..warehouse import Warehouse
 from .agent import RobotAgent
 from .coordination import AGENT_BEHAVIOR, get_coordination
@@ -31,7 +33,8 @@ class SimFleet:
     """Simulated robots of ``members`` on ``warehouse`` under ``coordination``, stepped together."""
 
     def __init__(self, members: Sequence[FleetMember], kinds: Mapping[str, RobotKind], warehouse: Warehouse,
-                 coordination: str = "central", period_s: float = CONTROL_PERIOD_S, gated: bool = False):
+                 coordination: str = "central", period_s: float = CONTROL_PERIOD_S, gated: bool = False,
+                 batch: bool = True):
         strategy = get_coordination(coordination)
         chargers = [s.pose for s in warehouse.stations_of("charger")]
         self.agents: dict[str, RobotAgent] = {}
@@ -47,6 +50,8 @@ class SimFleet:
         if gated:  # a gated robot hears every robot its links name, however far (as the planner's relay)
             self.relay.watch = self._watched
         self.last: dict[str, RobotStatus] = {}
+        # the robots' path tracking worked out for all at once before each step (same result as one by one)
+        self.batch = TrackBatch([a.model for a in self.agents.values()]) if batch else None
         self.foreign: dict[str, RobotStatus] = {}   # robots of other processes, from the relay
 
     def __len__(self) -> int:
@@ -95,6 +100,10 @@ class SimFleet:
         known = list(self.last.values()) + [s for s in self.foreign.values() if s.id not in self.last]
         by_id = {s.id: s for s in known}
         chosen = self.relay.select(known) if known else {}
+        if self.batch is not None:
+            # each agent steps its robot over [its last tick, now] (RobotAgent.tick)
+            lasts = [a._last if a._last is not None and now > a._last else None for a in self.agents.values()]
+            self.batch.prepare(lasts, [0.0 if t is None else now - t for t in lasts])
         out = []
         for rid, agent in self.agents.items():
             agent.on_neighbours([by_id[o] for o in chosen.get(rid, ())], now)

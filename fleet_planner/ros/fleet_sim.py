@@ -17,6 +17,7 @@ from typing import Any
 
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from std_msgs.msg import String
 
@@ -66,12 +67,18 @@ class FleetSimNode(Node):
 
         self._status = self.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
         subscribe = partial(create_draining_subscription, self)
+        # the robots' own topics without rclpy's default QoS-event handlers (a log line on an
+        # incompatible publisher): each is a waitable the executor walks at every wake-up, one or
+        # two per robot and topic, whichever events the RMW has (the shared topics keep theirs)
+        quiet = SubscriptionEventCallbacks(use_default_callbacks=False)
         for rid in self.sim.agents:
-            subscribe(Path, topics.timed_path_topic(rid), partial(self._on_path, rid), topics.TIMED_PATH_QOS)
+            subscribe(Path, topics.timed_path_topic(rid), partial(self._on_path, rid), topics.TIMED_PATH_QOS,
+                      event_callbacks=quiet)
             if gated:
-                subscribe(String, topics.gate_topic(rid), self._on_gate, topics.GATE_QOS)
+                subscribe(String, topics.gate_topic(rid), self._on_gate, topics.GATE_QOS, event_callbacks=quiet)
             if hear_relay:
-                subscribe(String, topics.neighbours_topic(rid), self._on_neighbours, topics.NEIGHBOURS_QOS)
+                subscribe(String, topics.neighbours_topic(rid), self._on_neighbours, topics.NEIGHBOURS_QOS,
+                          event_callbacks=quiet)
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self._waits = None
