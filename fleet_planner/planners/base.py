@@ -2,6 +2,7 @@
 delivery simulation, the benchmarks and the tests run the same body over all of them."""
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from typing import ClassVar
@@ -47,3 +48,16 @@ class Planner(ABC):
         :class:`~fleet_planner.model.PlanningError` (with ``blockers``, the robot in the way, where
         one is known) when a robot cannot be served, ``ValueError`` when the input is not a planning
         problem this planner takes (e.g. a robot both fixed and to be planned)."""
+
+
+def incremental_problem(robots: Sequence[RobotSpec], fixed: Sequence[TimedPath], t0: float) -> list[RobotSpec]:
+    """``robots`` as a list, once the arguments of :meth:`Planner.plan_incremental` are a problem
+    it takes: ``t0`` finite and no robot both fixed and to be planned (else ``ValueError`` naming
+    the argument)."""
+    if not math.isfinite(t0):
+        raise ValueError(f"t0: must be finite (got {t0!r})")
+    robots = list(robots)
+    clash = {r.id for r in robots} & {p.robot_id for p in fixed}
+    if clash:
+        raise ValueError(f"fixed: robots {sorted(clash)} are both fixed and to be planned")
+    return robots

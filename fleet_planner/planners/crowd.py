@@ -51,7 +51,7 @@ from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from . import crowd_kernels as kern
 from . import crowd_sipp, crowd_st
-from .base import Planner, Progress
+from .base import Planner, Progress, incremental_problem
 from .crowd_lns import MAX_HORIZON, Refiner
 from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
 from .crowd_sipp import TimedRefiner
@@ -178,17 +178,10 @@ class CrowdPlanner(Planner):
         den Berg & Overmars) plans them against the continuous trajectories. ``last_incremental`` says
         which one answered. A robot the safe-interval search cannot serve (its way shut for good by a
         robot parked in a 1-cell aisle) is refused with PlanningError."""
-        import math
-
         from . import crowd_incremental as inc
         from .prior import PriorPlanner
 
-        if not math.isfinite(t0):
-            raise ValueError(f"t0: must be finite (got {t0!r})")
-        robots = list(robots)
-        clash = {r.id for r in robots} & {p.robot_id for p in fixed}
-        if clash:
-            raise ValueError(f"fixed: robots {sorted(clash)} are both fixed and to be planned")
+        robots = incremental_problem(robots, fixed, t0)
         if not robots:
             self.last_incremental = "dense"
             return []

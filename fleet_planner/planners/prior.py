@@ -48,7 +48,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, dijk
 from ..geometry import segment_point_distance_xy
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
-from .base import Planner, Progress
+from .base import Planner, Progress, incremental_problem
 
 ORDERS = ("given", "shortest", "longest")
 
@@ -120,12 +120,7 @@ class PriorPlanner(Planner):
         waypoint for ever). Paths start with the waypoint ``(start, t0)``; raises
         :class:`PlanningError` like :meth:`plan`."""
         t_start = time.perf_counter()
-        if not math.isfinite(t0):
-            raise ValueError(f"t0: must be finite (got {t0!r})")
-        robots = list(robots)
-        clash = {r.id for r in robots} & {p.robot_id for p in fixed}
-        if clash:
-            raise ValueError(f"fixed: robots {sorted(clash)} are both fixed and to be planned")
+        robots = incremental_problem(robots, fixed, t0)
         session = _Session(self, grid, robots, list(fixed), float(t0), t_start)
         paths, _, _ = session.run(self._initial_order(robots), None)
         return [TimedPath(r.id, r.radius, _compress(paths[x])) for x, r in enumerate(robots)]
