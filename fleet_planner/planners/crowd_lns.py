@@ -28,7 +28,22 @@ NIL = -1
 MAX_HORIZON = 30_000
 
 
-class Refiner:
+class LNSStats:
+    """What both large neighbourhood searches (:class:`Refiner`, :class:`.crowd_sipp.TimedRefiner`)
+    count in their ``stats`` array, which their compiled iterations update: [iterations, accepted, ...]."""
+
+    stats: np.ndarray
+
+    @property
+    def iterations(self) -> int:
+        return int(self.stats[0])
+
+    @property
+    def accepted(self) -> int:
+        return int(self.stats[1])
+
+
+class Refiner(LNSStats):
     """LNS over a discrete plan ``configs`` ((steps + 1, robots) cells) on ``graph``; ``fields`` /
     ``grow`` are the goal distance fields of the configuration search; ``weights`` per robot (its
     time per cell); ``size`` robots per neighbourhood. The iterations are compiled
@@ -61,14 +76,6 @@ class Refiner:
         self.expansion_limit = 4 * graph.n
         self.weight10 = 15        # the space-time search's heuristic weight x 10 (bounded suboptimal)
         st.seed_rng(int(seed))
-
-    @property
-    def iterations(self) -> int:
-        return int(self.stats[0])
-
-    @property
-    def accepted(self) -> int:
-        return int(self.stats[1])
 
     def weighted_cost(self) -> float:
         return float(np.dot(self.weights, self.cost))

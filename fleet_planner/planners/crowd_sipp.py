@@ -30,6 +30,8 @@ import time
 import numpy as np
 
 from .crowd_kernels import NIL, _jit
+from .crowd_lns import LNSStats
+from .crowd_st import add_member, delayed_at_random, downhill, group_cost, pick_kind, settle, shuffle_group, start_group
 
 INF = np.inf
 
@@ -235,20 +237,6 @@ def _arrival(p_dep, p_len, i, d):
 
 
 @_jit
-def _roulette(weight, total):
-    r = np.random.random() * total
-    acc = 0.0
-    for i in range(len(weight)):
-        acc += weight[i]
-        if acc > r and weight[i] > 0:
-            return i
-    for i in range(len(weight) - 1, -1, -1):
-        if weight[i] > 0:
-            return i
-    return 0
-
-
-@_jit
 def _holder(c, t0, t1, h_who, h_lo, h_hi, h_n, mark):
     """An unmarked robot holding cell c at some time in [t0, t1], or NIL."""
     for m in range(h_n[c]):
@@ -276,6 +264,7 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, goals, fields, grow, nb, 
     out_dep = np.empty(L, dtype=np.float64)
     mark = np.zeros(n, dtype=np.bool_)
     delay = np.empty(n, dtype=np.float64)
+    ones = np.ones(n)           # (a robot's cost is its arrival time)
     for _ in range(iters):
         total = 0.0
         for i in range(n):
@@ -283,65 +272,31 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, goals, fields, grow, nb, 
             total += delay[i]
         if total <= 1e-9:
             break
-        kind = 0 if np.random.random() * (strategy[0] + strategy[1]) < strategy[0] else 1
-        g = 0
+        kind = pick_kind(strategy)
         if kind == 0:       # a delayed robot and the robots in its way along a shortest path
-            a = _roulette(delay, total)
-            group[0] = a
-            mark[a] = True
+            a = start_group(delay, total, group, mark)
             g = 1
             goal = goals[a]
             j = _holder(goal, lb[a], np.inf, h_who, h_lo, h_hi, h_n, mark)
             while j != NIL and g < size:
-                group[g] = j
-                mark[j] = True
-                g += 1
+                g = add_member(j, g, group, mark)
                 j = _holder(goal, lb[a], np.inf, h_who, h_lo, h_hi, h_n, mark)
             d = fields[grow[a]]
             v = p_cell[a, 0]
             t = 0.0
             da = dur[a]
             while d[v] > 0 and g < size:
-                ways = 0
-                nxt = v
-                for e in range(deg[v]):
-                    u = nb[v, e]
-                    if d[u] < d[v]:
-                        ways += 1
-                        if np.random.random() * ways < 1.0:
-                            nxt = u
-                v = nxt
+                v = downhill(v, d, nb, deg)
                 t += da
-                j = _holder(v, t - da, t + da, h_who, h_lo, h_hi, h_n, mark)
-                if j != NIL:
-                    group[g] = j
-                    mark[j] = True
-                    g += 1
+                g = add_member(_holder(v, t - da, t + da, h_who, h_lo, h_hi, h_n, mark), g, group, mark)
         else:               # delayed robots at random
-            for _try in range(8 * size):
-                if g >= size:
-                    break
-                if np.random.random() < 0.9:
-                    a = _roulette(delay, total)
-                else:
-                    a = np.random.randint(n)
-                if not mark[a]:
-                    group[g] = a
-                    mark[a] = True
-                    g += 1
-        if g < 2:
-            for k in range(g):
-                mark[group[k]] = False
+            g = delayed_at_random(delay, total, group, mark, 1.0, 0.9)
+        if not shuffle_group(group, g, mark):            # (re-planned in random order)
             continue
-        for k in range(g - 1, 0, -1):                    # re-plan in random order
-            m = np.random.randint(k + 1)
-            group[k], group[m] = group[m], group[k]
-        before = 0.0
-        floor = 0.0
+        before = group_cost(group, g, ones, arrival)
+        floor = group_cost(group, g, ones, lb)
         for k in range(g):
             a = group[k]
-            before += arrival[a]
-            floor += lb[a]
             ln = p_len[a]
             old_len[k] = ln
             old_arr[k] = arrival[a]
@@ -374,15 +329,7 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, goals, fields, grow, nb, 
             arrival[a] = _arrival(p_dep, p_len, a, dur[a])
             room -= arrival[a] - lb[a]
             done += 1
-        after = 0.0
-        for k in range(g):
-            after += arrival[group[k]]
-        stats[0] += 1
-        if ok and after <= before + 1e-9:
-            stats[1] += 1
-            strategy[kind] = 0.9 * strategy[kind] + 0.1 * max(before - after, 0.01)
-        else:
-            strategy[kind] = max(0.9 * strategy[kind], 0.01)
+        if not settle(kind, ok, before, group_cost(group, g, ones, arrival), strategy, stats):
             for k in range(g):
                 _remove(group[k], p_cell, p_len, h_who, h_lo, h_hi, h_n)
             for k in range(g):
@@ -398,47 +345,95 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, goals, fields, grow, nb, 
     return gen
 
 
-class TimedRefiner:
+@_jit
+def prioritized(order, start_hold, p_cell, p_dep, p_len, arrival, dur, goals, fields, grow, nb, deg, h_who, h_lo,
+                h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, weight, limit,
+                failed, stats):
+    """Prioritized planning by safe-interval search: the robots of ``order`` one after the other, each at
+    its own speed against the holdings of the ones before it and the start cells of the ones after it
+    (held for ``start_hold`` x its time per cell: inf, for ever). Every robot starts as a robot parked on
+    its start (``p_len`` 1). A robot without a path stays parked on its start and is listed in
+    ``failed``; returns (the last search stamp, the number of failed robots)."""
+    n = len(order)
+    L = p_cell.shape[1]
+    out_cell = np.empty(L, dtype=np.int32)
+    out_dep = np.empty(L, dtype=np.float64)
+    nf = 0
+    for a in range(p_cell.shape[0]):
+        _put(p_cell[a, 0], a, 0.0, start_hold * dur[a], h_who, h_lo, h_hi, h_n)
+    for q in range(n):
+        a = order[q]
+        _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+        gen += 1
+        ln = sipp(a, p_cell[a, 0], goals[a], dur[a], fields[grow[a]], h_lo, h_hi, h_n, nb, deg, si_lo, si_hi,
+                  si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf, weight, limit, out_cell,
+                  out_dep, stats)
+        ok = ln > 0
+        if ok:
+            p_cell[a, :ln] = out_cell[:ln]
+            p_dep[a, :ln] = out_dep[:ln]
+            p_len[a] = ln
+            ok = _insert(a, p_cell, p_dep, p_len, dur, h_who, h_lo, h_hi, h_n)
+        if not ok:
+            p_len[a] = 1
+            p_dep[a, 0] = np.inf
+            _insert(a, p_cell, p_dep, p_len, dur, h_who, h_lo, h_hi, h_n)
+            failed[nf] = a
+            nf += 1
+        arrival[a] = _arrival(p_dep, p_len, a, dur[a])
+    return gen, nf
+
+
+class TimedRefiner(LNSStats):
     """The timed LNS over a :class:`.crowd_timing.Timing` of robots driving at constant top speeds
     (``durations``: seconds per cell); ``fields`` / ``grow`` / ``goals`` / ``nb`` / ``deg`` as in the
     configuration search; :meth:`run` improves, :meth:`moves` gives the result as a move list for
     :func:`.crowd_timing.time_move_list`."""
 
     def __init__(self, timing, starts, goals, durations, fields, grow, nb, deg, ncell: int, seed: int = 0,
-                 size: int = 4):
+                 size: int = 4, length: int = 0, holdings: int = 64):
         n = len(starts)
         self.n = n
         self.dur = np.asarray(durations, dtype=np.float64)
         self.goals = np.asarray(goals, dtype=np.int32)
         self.fields, self.grow, self.nb, self.deg = fields, grow, nb, deg
-        first = timing.first
-        counts = np.diff(first) + 1
-        self.L = int(max(2 * counts.max(initial=1), counts.max(initial=1) + 64))
+        if timing is None:      # every robot parked on its start: tables for :meth:`prioritized`
+            counts = np.ones(n, dtype=np.int64)
+            self.L = int(length)
+        else:
+            first = timing.first
+            counts = np.diff(first) + 1
+            self.L = int(max(2 * counts.max(initial=1), counts.max(initial=1) + 64))
         self.p_cell = np.zeros((n, self.L), dtype=np.int32)
         self.p_dep = np.full((n, self.L), np.inf)
         self.p_len = counts.astype(np.int64)
         self.p_cell[:, 0] = np.asarray(starts, dtype=np.int32)
-        rob = timing.robot
-        pos = np.arange(len(rob)) - first[rob]
-        self.p_cell[rob, pos + 1] = timing.dst
-        self.p_dep[rob, pos] = timing.start
-        # each move holds its source until its end: record the move's *start* and the robot's own
-        # duration; where the first timing sped a move up or slowed it (ramps: not here) the hold
-        # interval below still covers [start of move in, end of move out]
-        end_of = np.full((n, self.L), np.inf)
-        end_of[rob, pos] = timing.end
         lb = fields[grow, self.p_cell[:, 0]].astype(np.float64) * self.dur
         self.lb = lb
-        self.arrival = np.where(counts > 1, end_of[np.arange(n), np.maximum(counts - 2, 0)], 0.0)
-        # holdings exactly as the first timing has them
-        cells_n = np.zeros(ncell, dtype=np.int64)
-        np.add.at(cells_n, self.p_cell[np.arange(self.L)[None, :] < counts[:, None]], 1)
-        K = int(max(16, 2 * cells_n.max(initial=1) + 8))
+        if timing is None:
+            self.arrival = np.zeros(n)
+            K = int(holdings)
+        else:
+            rob = timing.robot
+            pos = np.arange(len(rob)) - first[rob]
+            self.p_cell[rob, pos + 1] = timing.dst
+            self.p_dep[rob, pos] = timing.start
+            # each move holds its source until its end: record the move's *start* and the robot's own
+            # duration; where the first timing sped a move up or slowed it (ramps: not here) the hold
+            # interval below still covers [start of move in, end of move out]
+            end_of = np.full((n, self.L), np.inf)
+            end_of[rob, pos] = timing.end
+            self.arrival = np.where(counts > 1, end_of[np.arange(n), np.maximum(counts - 2, 0)], 0.0)
+            # holdings exactly as the first timing has them
+            cells_n = np.zeros(ncell, dtype=np.int64)
+            np.add.at(cells_n, self.p_cell[np.arange(self.L)[None, :] < counts[:, None]], 1)
+            K = int(max(16, 2 * cells_n.max(initial=1) + 8))
         self.h_who = np.full((ncell, K), NIL, dtype=np.int32)
         self.h_lo = np.zeros((ncell, K))
         self.h_hi = np.zeros((ncell, K))
         self.h_n = np.zeros(ncell, dtype=np.int32)
-        _fill(self.p_cell, self.p_dep, self.p_len, end_of, self.h_who, self.h_lo, self.h_hi, self.h_n)
+        if timing is not None:
+            _fill(self.p_cell, self.p_dep, self.p_len, end_of, self.h_who, self.h_lo, self.h_hi, self.h_n)
         ks = K + 1
         self.si_lo = np.zeros((ncell, ks))
         self.si_hi = np.zeros((ncell, ks))
@@ -458,13 +453,16 @@ class TimedRefiner:
 
         crowd_st.seed_rng(int(seed))
 
-    @property
-    def iterations(self) -> int:
-        return int(self.stats[0])
-
-    @property
-    def accepted(self) -> int:
-        return int(self.stats[1])
+    def prioritized(self, order, start_hold: float = np.inf) -> np.ndarray:
+        """Plan the robots of ``order`` one after the other (:func:`prioritized`) on tables made with
+        ``timing=None``; returns the robots without a path (left parked on their starts)."""
+        failed = np.empty(self.n, dtype=np.int64)
+        self.gen, nf = prioritized(np.asarray(order, dtype=np.int64), float(start_hold), self.p_cell, self.p_dep,
+                                   self.p_len, self.arrival, self.dur, self.goals, self.fields, self.grow, self.nb,
+                                   self.deg, self.h_who, self.h_lo, self.h_hi, self.h_n, self.si_lo, self.si_hi,
+                                   self.si_n, self.si_gen, self.gen, self.node_gen, self.node_t, self.node_par,
+                                   self.node_closed, self.weight, self.limit, failed, self.stats)
+        return failed[:nf].copy()
 
     def total(self) -> float:
         return float(self.arrival.sum())

@@ -179,6 +179,106 @@ def _roulette(weight, total):
     return 0
 
 
+# The large neighbourhood searches' shared steps (this module's over the discrete plan and
+# :mod:`.crowd_sipp`'s over the timed plan): they differ only in how they find the robots in a delayed
+# robot's way (their own tables), how they re-plan, and the cost of a robot (a weighted arrival step,
+# an arrival time with weight 1).
+@_jit
+def pick_kind(strategy):
+    """Which neighbourhood: 0 (a delayed robot and the robots in its way) or 1 (delayed robots at
+    random), drawn by the two kinds' adaptive weights."""
+    return 0 if np.random.random() * (strategy[0] + strategy[1]) < strategy[0] else 1
+
+
+@_jit
+def start_group(delay, total, group, mark):
+    """A neighbourhood of kind 0 begins with a robot drawn by its delay: returns it."""
+    a = _roulette(delay, total)
+    group[0] = a
+    mark[a] = True
+    return a
+
+
+@_jit
+def add_member(j, g, group, mark):
+    """Add robot j (NIL: nobody) to the neighbourhood of g robots unless it is in already or full;
+    returns the new size."""
+    if j != NIL and not mark[j] and g < group.shape[0]:
+        group[g] = j
+        mark[j] = True
+        g += 1
+    return g
+
+
+@_jit
+def downhill(v, d, nb, deg):
+    """One step from cell v along a shortest path to the goal of the distance field d, a random one
+    of the neighbours nearer the goal (v itself at the goal)."""
+    ways = 0
+    nxt = v
+    for e in range(deg[v]):
+        u = nb[v, e]
+        if d[u] < d[v]:
+            ways += 1
+            if np.random.random() * ways < 1.0:
+                nxt = u
+    return nxt
+
+
+@_jit
+def delayed_at_random(delay, total, group, mark, scale, share):
+    """A neighbourhood of kind 1: up to ``len(group)`` robots, each drawn by its delay when
+    ``random() * scale < share`` and uniformly otherwise; returns their number."""
+    n = delay.shape[0]
+    size = group.shape[0]
+    g = 0
+    for _try in range(8 * size):
+        if g >= size:
+            break
+        if np.random.random() * scale < share:
+            a = _roulette(delay, total)
+        else:
+            a = np.random.randint(n)
+        g = add_member(a, g, group, mark)
+    return g
+
+
+@_jit
+def shuffle_group(group, g, mark):
+    """Fewer than two robots: clear their marks and return False (no neighbourhood); otherwise put
+    the g robots in random order (the order they are re-planned in) and return True."""
+    if g < 2:
+        for k in range(g):
+            mark[group[k]] = False
+        return False
+    for k in range(g - 1, 0, -1):
+        m = np.random.randint(k + 1)
+        group[k], group[m] = group[m], group[k]
+    return True
+
+
+@_jit
+def group_cost(group, g, weights, value):
+    """Sum over the neighbourhood's robots of weight x value."""
+    total = 0.0
+    for k in range(g):
+        total += weights[group[k]] * value[group[k]]
+    return total
+
+
+@_jit
+def settle(kind, ok, before, after, strategy, stats):
+    """Count the iteration, adapt the kind's weight; True when the neighbourhood's new paths are kept
+    (all found and the weighted sum did not grow)."""
+    stats[0] += 1
+    if ok and after <= before + 1e-9:
+        stats[1] += 1
+        strategy[kind] = 0.9 * strategy[kind] + 0.1 * max(before - after, 0.01)
+        return True
+    strategy[kind] = max(0.9 * strategy[kind], 0.01)
+    return False
+
+
 @_jit
 def lns_iterations(iters, paths, occ, cost, lb, weights, goals, fields, grow, nb, deg, stamp, gen, parent, out,
                    size, limit, weight10, horizon, strategy, stats):
@@ -199,67 +299,29 @@ def lns_iterations(iters, paths, occ, cost, lb, weights, goals, fields, grow, nb
             total += delay[i]
         if total <= 0:
             break
-        kind = 0 if np.random.random() * (strategy[0] + strategy[1]) < strategy[0] else 1
-        g = 0
+        kind = pick_kind(strategy)
         if kind == 0:       # a delayed robot and the robots in its way
-            a = _roulette(delay, total)
-            group[0] = a
-            mark[a] = True
+            a = start_group(delay, total, group, mark)
             g = 1
             goal = goals[a]
             for t in range(h1 - 1, lb[a] - 1, -1):       # who is on its goal after it could be there
-                j = occ[t, goal]
-                if j != NIL and not mark[j] and g < size:
-                    group[g] = j
-                    mark[j] = True
-                    g += 1
+                g = add_member(occ[t, goal], g, group, mark)
             d = fields[grow[a]]
             v = paths[0, a]
             t = 0
             while d[v] > 0 and t < h1 - 1 and g < size:   # who is on a shortest path when it would pass
-                ways = 0
-                nxt = v
-                for e in range(deg[v]):
-                    u = nb[v, e]
-                    if d[u] < d[v]:
-                        ways += 1
-                        if np.random.random() * ways < 1.0:
-                            nxt = u
-                v = nxt
+                v = downhill(v, d, nb, deg)
                 t += 1
                 for s in (t, t - 1):
-                    j = occ[s, v]
-                    if j != NIL and not mark[j] and g < size:
-                        group[g] = j
-                        mark[j] = True
-                        g += 1
+                    g = add_member(occ[s, v], g, group, mark)
         else:               # delayed robots at random
-            spread = total + 0.1 * total
-            for _try in range(8 * size):
-                if g >= size:
-                    break
-                r = np.random.random() * spread
-                if r < total:
-                    a = _roulette(delay, total)
-                else:
-                    a = np.random.randint(n)
-                if not mark[a]:
-                    group[g] = a
-                    mark[a] = True
-                    g += 1
-        if g < 2:
-            for k in range(g):
-                mark[group[k]] = False
+            g = delayed_at_random(delay, total, group, mark, total + 0.1 * total, total)
+        if not shuffle_group(group, g, mark):            # (re-planned in random order)
             continue
-        for k in range(g - 1, 0, -1):                    # re-plan in random order
-            m = np.random.randint(k + 1)
-            group[k], group[m] = group[m], group[k]
-        before = 0.0
-        floor = 0.0
+        before = group_cost(group, g, weights, cost)
+        floor = group_cost(group, g, weights, lb)
         for k in range(g):
             a = group[k]
-            before += weights[a] * cost[a]
-            floor += weights[a] * lb[a]
             old[:, k] = paths[:, a]
             oldc[k] = cost[a]
             occupy(occ, paths, a, NIL)
@@ -282,15 +344,7 @@ def lns_iterations(iters, paths, occ, cost, lb, weights, goals, fields, grow, nb
             cost[a] = t
             room -= weights[a] * (t - lb[a])
             done += 1
-        after = 0.0
-        for k in range(g):
-            after += weights[group[k]] * cost[group[k]]
-        stats[0] += 1
-        if ok and after <= before + 1e-9:
-            stats[1] += 1
-            strategy[kind] = 0.9 * strategy[kind] + 0.1 * max(before - after, 0.01)
-        else:
-            strategy[kind] = max(0.9 * strategy[kind], 0.01)
+        if not settle(kind, ok, before, group_cost(group, g, weights, cost), strategy, stats):
             for k in range(done):
                 occupy(occ, paths, group[k], NIL)
             for k in range(g):
