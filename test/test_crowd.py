@@ -15,8 +15,9 @@ from fleet_planner.grid import GridMap
 from fleet_planner.model import Plan, PlanningError, RobotSpec, TimedPath
 from fleet_planner.planners import get_planner
 from fleet_planner.planners.crowd import CrowdPlanner
-from fleet_planner.planners.crowd_lns import Refiner
+from fleet_planner.planners.crowd_lns import Refiner, prioritized_first
 from fleet_planner.planners.crowd_pibt import CellGraph, ConfigSearch, _valid_step, remove_loops
+from fleet_planner.planners.crowd_st import arrival_steps
 from fleet_planner.planners.crowd_timing import time_moves
 
 # a 1-cell aisle with one side pocket; two robots each way must pass each other
@@ -36,6 +37,7 @@ def test_a_dense_aisle_that_prioritized_planning_refuses_is_solved():
             get_planner("prior", order="given", max_reorders=0, time_limit_s=5.0).plan(grid, list(order))
     plan = get_planner("crowd").plan(grid, POCKET_ROBOTS)
     assert plan.planner == "dense" and plan.info["solver"].startswith("dense")
+    assert plan.info["first_plan"] == "lacam"     # its own prioritized first plan failed too
     assert check_plan(grid, POCKET_ROBOTS, plan) == []
     # somebody stepped aside into the pocket
     assert any(np.any(np.isclose(p.waypoints[:, 1], 0.5)) for p in plan.paths)
@@ -226,14 +228,14 @@ def crowds(draw):
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(case=crowds())
-def test_every_crowd_plan_is_valid(case):
+@given(case=crowds(), first=st.sampled_from(["auto", "lacam"]))
+def test_every_crowd_plan_is_valid(case, first):
     """Dense random crowds (2-12 discs of mixed radii and speeds, some with acceleration limits, on a
     quarter to half of the free cells, goals a random permutation, so robots must pass each other):
     a plan is valid by the checker, or a refusal names robots."""
     grid, robots = case
     try:
-        plan = CrowdPlanner(time_limit_s=2.0).plan(grid, robots)
+        plan = CrowdPlanner(time_limit_s=2.0, first=first).plan(grid, robots)
     except PlanningError as err:
         assert err.failures and set(err.failures) <= {r.id for r in robots}
         return
@@ -264,3 +266,37 @@ def test_acceleration_limits_give_trapezoids_and_stops_only_at_run_ends():
                 # (0.6 m/s^2 brakes from top speed within 0.83 m: the cell before a stop is slower)
                 assert speed[k - 1] < r.max_speed - 0.05 and speed[k + 1] < r.max_speed - 0.05
     assert holds > 0
+
+
+def test_the_prioritized_first_plan_keeps_the_rules_and_gives_way_to_lacam_where_it_fails():
+    """The first discrete plan by prioritized planning: every step obeys the transition rules (no
+    vertex or swap conflicts, no rings), each robot ends on its goal, with a weighted sum of
+    arrivals no longer than LaCAM's plan here; where no priority order works (the pocket aisle) it
+    answers None and the planner says the configuration search planned."""
+    grid = GridMap.from_rows(["........", "..@@.@..", "........", ".@..@@..", "........"])
+    free = [(c, r) for r in range(5) for c in range(8) if not grid.blocked[r, c]]
+    rng = np.random.default_rng(4)
+    s, g = rng.permutation(len(free))[:10], rng.permutation(len(free))[:10]
+    robots = [RobotSpec(f"r{k}", 0.4, float(rng.uniform(0.7, 1.0)), grid.centre(*free[s[k]]), grid.centre(*free[g[k]]))
+              for k in range(10)]
+    graph = CellGraph(grid, 0.4)
+    starts = [graph.cell(*r.start) for r in robots]
+    search = ConfigSearch(graph, starts, [graph.cell(*r.goal) for r in robots])
+    weights = np.array([1.0 / r.max_speed for r in robots])
+    configs = prioritized_first(graph, search.fields, search.grow, starts, search.goals, weights)
+    assert configs is not None
+    assert list(configs[0]) == starts and list(configs[-1]) == list(search.goals)
+    for a, b in zip(configs[:-1], configs[1:]):
+        assert len(set(b.tolist())) == len(b) and _valid_step(a.tolist(), b.tolist(), _occ(a, graph.n))
+    lacam = search.solve_array(float("inf"))
+    def weighted(c):
+        return float(weights @ arrival_steps(c, search.goals))
+    assert weighted(configs) <= weighted(lacam)
+    plan = CrowdPlanner().plan(grid, robots)
+    assert plan.info["first_plan"] == "prioritized" and check_plan(grid, robots, plan) == []
+
+    pocket = GridMap.from_rows(POCKET)
+    graph = CellGraph(pocket, 0.45)
+    starts = [graph.cell(*r.start) for r in POCKET_ROBOTS]
+    search = ConfigSearch(graph, starts, [graph.cell(*r.goal) for r in POCKET_ROBOTS])
+    assert prioritized_first(graph, search.fields, search.grow, starts, search.goals, np.ones(4)) is None

@@ -5,7 +5,9 @@ Prioritized planning (md, PRIOR) fails by construction where robots must step as
 in 1-cell aisles. This planner searches the space of configurations instead and makes the result
 safe for discs in continuous time:
 
-1. **Configuration search** (:mod:`.crowd_pibt`): LaCAM (Okumura, "LaCAM: Search-Based Algorithm
+1. **A first plan**: prioritized planning on the same graph under the same rules where it
+   succeeds (:func:`.crowd_lns.prioritized_first`: a far shorter first plan than LaCAM's), else
+   the **configuration search** (:mod:`.crowd_pibt`): LaCAM (Okumura, "LaCAM: Search-Based Algorithm
    for Quick Multi-Agent Pathfinding", AAAI 2023) with PIBT (Okumura et al., "Priority Inheritance
    with Backtracking for Iterative Multi-agent Path Finding", AIJ 2022) as the successor generator,
    on the 4-connected graph of cell centres, with transition rules for discs (no vertex or swap
@@ -52,7 +54,7 @@ from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from . import crowd_kernels as kern
 from . import crowd_sipp, crowd_st
 from .base import Planner, Progress, incremental_problem
-from .crowd_lns import MAX_HORIZON, Refiner
+from .crowd_lns import MAX_HORIZON, Refiner, prioritized_first
 from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
 from .crowd_sipp import TimedRefiner
 from .crowd_timing import network, time_move_list, time_moves, timed_paths
@@ -67,12 +69,16 @@ class CrowdPlanner(Planner):
     ``time_limit`` (alias ``time_limit_s``): budget of the whole plan in seconds (the configuration
     search must find a first plan within it); ``refine_s``: at most this much CPU time (seconds: the
     same on a loaded machine) is spent improving the first plan (large neighbourhood search,
-    :mod:`.crowd_lns`; 0 switches it off; None: 1 s up to 400 robots, 1 s more per 150 beyond); ``seed``:
+    :mod:`.crowd_lns`; 0 switches it off; None: what is left of 1.1 s after the first plan up to 400
+    robots, 1 s more per 150 beyond, at least 0.2 s); ``seed``:
     tie-breaking; ``network``: also return the (M,D) network of the chosen order (``Plan.network``);
     ``margin``: what a robot following another into a cell keeps on top of r_i + r_j (robots on
     distinct cells keep the cell step, >= r_i + r_j); ``timed_refine_s``: CPU seconds of the
     speed-aware refinement of the timed plan (:mod:`.crowd_sipp`; None: 0.5 s up to 500 robots, else 0;
     it runs only where no robot has ``max_accel``: its safe intervals are at constant top speed).
+    ``first``: the first discrete plan: "auto" tries prioritized planning (:func:`.crowd_lns.prioritized_first`,
+    at most 0.5 s + 1 ms per robot of CPU) and lets the configuration search plan when it fails, "lacam"
+    always the configuration search (the plan's info says which: ``first_plan``).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
@@ -82,7 +88,7 @@ class CrowdPlanner(Planner):
 
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
                  network: bool = True, time_limit_s: float | None = None, margin: float = 0.02,
-                 timed_refine_s: float | None = None):
+                 timed_refine_s: float | None = None, first: str = "auto"):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
@@ -93,6 +99,9 @@ class CrowdPlanner(Planner):
         if timed_refine_s is not None and not timed_refine_s >= 0:
             raise ValueError(f"timed_refine_s: must be >= 0 (got {timed_refine_s!r})")
         self.timed_refine_s = None if timed_refine_s is None else float(timed_refine_s)
+        if first not in ("auto", "lacam"):
+            raise ValueError(f"first: 'auto' or 'lacam' (got {first!r})")
+        self.first = first
         self.time_limit_s = float(limit)
         self.refine_s = None if refine_s is None else float(refine_s)
         self.seed = int(seed)
@@ -105,7 +114,7 @@ class CrowdPlanner(Planner):
         kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
         crowd_st.warm_up()
         crowd_sipp.warm_up()
-        t_start = time.perf_counter()
+        t_start, c_start = time.perf_counter(), time.process_time()
         deadline = t_start + self.time_limit_s
         robots = list(robots)
         if not robots:
@@ -120,16 +129,25 @@ class CrowdPlanner(Planner):
         if cut:
             raise PlanningError({robots[i].id: "its goal cannot be reached from its start on the grid graph "
                                  "of cells its disc fits on" for i in cut})
-        try:
-            configs = search.solve_array(deadline)
-        except SearchFailed as exc:
-            raise PlanningError({r.id: f"dense solver: {exc.reason}" for r in robots}) from None
-        t_search = time.perf_counter() - t_start
         res = grid.resolution
         durations = np.array([res / r.max_speed for r in robots])
-        info: dict = {"solver": SOLVER, "steps_first": int(configs.shape[0] - 1),
+        configs = None
+        if self.first == "auto":
+            configs = prioritized_first(graph, search.fields, search.grow, starts, search.goals, durations,
+                                        cpu_s=0.5 + len(robots) / 1000)
+        first = "prioritized" if configs is not None else "lacam"
+        if configs is None:
+            try:
+                configs = search.solve_array(deadline)
+            except SearchFailed as exc:
+                raise PlanningError({r.id: f"dense solver: {exc.reason}" for r in robots}) from None
+        t_search = time.perf_counter() - t_start
+        info: dict = {"solver": SOLVER, "first_plan": first, "steps_first": int(configs.shape[0] - 1),
                       "configurations": search.expanded, "search_s": round(t_search, 3)}
-        refine_s = self.refine_s if self.refine_s is not None else 1.0 + max(0, len(robots) - 400) / 150.0
+        # (the default: the first plan and its refinement share 1.1 s of CPU up to 400 robots, 1 s more per 150
+        # beyond, and the refinement gets at least 0.2 s)
+        refine_s = self.refine_s if self.refine_s is not None else \
+            max(0.2, 1.1 + max(0, len(robots) - 400) / 150.0 - (time.process_time() - c_start))
         if refine_s > 0 and len(robots) > 1 and configs.shape[0] + 64 < MAX_HORIZON:
             if progress:
                 progress(1, 3, "refinement (LNS)")

@@ -113,3 +113,48 @@ class Refiner(LNSStats):
             now = self.weighted_cost()
             if now < best - 1e-9:
                 best, best_at = now, self.iterations
+
+
+def prioritized_first(graph, fields: np.ndarray, grow: np.ndarray, starts, goals: np.ndarray, weights: np.ndarray,
+                      tries: int = 3, hold: int = 3, cpu_s: float = float("inf"),
+                      give_up: int = 20) -> np.ndarray | None:
+    """A first discrete plan by prioritized planning (:func:`.crowd_st.prioritized`), far shorter than
+    LaCAM's (warehouse-10-20-10-2-1, 400 robots: speed-weighted sum 1.23 over free-space arrivals
+    against LaCAM's 1.96): robots with the shortest weighted distance first, each by the space-time
+    search against the ones before it and the start cells of the ones after it for ``hold`` steps.
+    Where a few robots find no path (parked robots can shut a 1-cell aisle), the failed robots go
+    first and the plan is made again, at most ``tries`` times or ``cpu_s`` CPU seconds; None when
+    none succeeded or more than one robot in ``give_up`` failed in a pass (prioritized planning is
+    not complete: the configuration search then plans; on warehouse-10-20-10-2-1 at 1000 robots a
+    tenth of them failed pass after pass)."""
+    starts = np.asarray(starts, dtype=np.int32)
+    n = len(starts)
+    lb = fields[grow, starts].astype(np.int64)
+    h = int(3 * lb.max(initial=0) + 64)
+    if h >= MAX_HORIZON or n == 0:
+        return None
+    cpu_end = time.process_time() + cpu_s
+    order = np.argsort(lb * np.asarray(weights, dtype=float), kind="stable").astype(np.int64)
+    size = (h + 1) * graph.n
+    stamp = np.zeros(size, dtype=np.int32)
+    parent = np.zeros(size, dtype=np.int32)
+    out = np.empty(h + 1, dtype=np.int32)
+    failed = np.empty(n, dtype=np.int64)
+    max_failed = max(2, n // give_up)
+    gen = 0
+    for _ in range(tries):
+        paths = np.tile(starts, (h + 1, 1))
+        occ = np.full((h + 1, graph.n), NIL, dtype=np.int32)
+        cost = np.zeros(n, dtype=np.int64)
+        if gen > 2**31 - 1 - 2 * n:
+            stamp[:] = 0
+            gen = 0
+        gen, nf = st.prioritized(order, hold, paths, occ, cost, goals, fields, grow, graph.nb, graph.deg, stamp, gen,
+                                 parent, out, 4 * graph.n, 15, failed, max_failed)
+        if nf == 0:
+            return paths[:int(cost.max(initial=0)) + 1].copy()
+        if nf > max_failed or time.process_time() > cpu_end:
+            return None
+        first = failed[:nf]
+        order = np.concatenate([first, order[~np.isin(order, first)]])
+    return None

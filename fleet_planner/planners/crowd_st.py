@@ -358,6 +358,44 @@ def lns_iterations(iters, paths, occ, cost, lb, weights, goals, fields, grow, nb
 
 
 @_jit
+def prioritized(order, hold, paths, occ, cost, goals, fields, grow, nb, deg, stamp, gen, parent, out, limit,
+                weight10, failed, max_failed):
+    """Prioritized planning on the discrete tables: the robots of ``order`` one after the other by
+    :func:`st_search` against the ones before it and the start cells of the ones after it (held for
+    the first ``hold`` steps). ``paths`` comes with every robot on its start at every step and
+    ``occ`` empty. A robot without a path is left out of the tables and listed in ``failed``; more
+    than ``max_failed`` of them stop the pass. Returns (the last search stamp, the number of failed
+    robots)."""
+    horizon = occ.shape[0] - 1
+    n = len(order)
+    top = min(hold, horizon)
+    for q in range(n):
+        a = order[q]
+        for t in range(top + 1):
+            occ[t, paths[0, a]] = a
+    nf = 0
+    for q in range(n):
+        a = order[q]
+        s0 = paths[0, a]
+        for t in range(top + 1):
+            if occ[t, s0] == a:
+                occ[t, s0] = NIL
+        gen += 1
+        t = st_search(s0, goals[a], fields[grow[a]], occ, paths, nb, deg, limit, horizon, weight10, stamp, gen,
+                      parent, out)
+        if t < 0:
+            failed[nf] = a
+            nf += 1
+            if nf > max_failed:
+                break
+            continue
+        paths[:, a] = out
+        occupy(occ, paths, a, a)
+        cost[a] = t
+    return gen, nf
+
+
+@_jit
 def seed_rng(seed):
     """Seed numba's own generator (the one the kernels draw from)."""
     np.random.seed(seed)
@@ -388,4 +426,9 @@ def warm_up() -> None:
     lns_iterations(2, paths, occ, cost, lb, np.ones(2), goals, fields, grow, nb, deg, np.zeros(size, dtype=np.int32),
                    0, np.zeros(size, dtype=np.int32), np.empty(paths.shape[0], dtype=np.int32), 2, 100,
                    20, paths.shape[0] - 1, np.ones(2), np.zeros(2, dtype=np.int64))
+    paths[:] = paths[0]
+    occ[:] = NIL
+    prioritized(np.array([1, 0], dtype=np.int64), 3, paths, occ, cost, goals, fields, grow, nb, deg,
+                np.zeros(size, dtype=np.int32), 0, np.zeros(size, dtype=np.int32),
+                np.empty(paths.shape[0], dtype=np.int32), 100, 15, np.empty(2, dtype=np.int64), 2)
     _WARM = True
