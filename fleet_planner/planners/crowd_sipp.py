@@ -345,45 +345,6 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, goals, fields, grow, nb, 
     return gen
 
 
-@_jit
-def prioritized(order, start_hold, p_cell, p_dep, p_len, arrival, dur, goals, fields, grow, nb, deg, h_who, h_lo,
-                h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, weight, limit,
-                failed, stats):
-    """Prioritized planning by safe-interval search: the robots of ``order`` one after the other, each at
-    its own speed against the holdings of the ones before it and the start cells of the ones after it
-    (held for ``start_hold`` x its time per cell: inf, for ever). Every robot starts as a robot parked on
-    its start (``p_len`` 1). A robot without a path stays parked on its start and is listed in
-    ``failed``; returns (the last search stamp, the number of failed robots)."""
-    n = len(order)
-    L = p_cell.shape[1]
-    out_cell = np.empty(L, dtype=np.int32)
-    out_dep = np.empty(L, dtype=np.float64)
-    nf = 0
-    for a in range(p_cell.shape[0]):
-        _put(p_cell[a, 0], a, 0.0, start_hold * dur[a], h_who, h_lo, h_hi, h_n)
-    for q in range(n):
-        a = order[q]
-        _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n)
-        gen += 1
-        ln = sipp(a, p_cell[a, 0], goals[a], dur[a], fields[grow[a]], h_lo, h_hi, h_n, nb, deg, si_lo, si_hi,
-                  si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf, weight, limit, out_cell,
-                  out_dep, stats)
-        ok = ln > 0
-        if ok:
-            p_cell[a, :ln] = out_cell[:ln]
-            p_dep[a, :ln] = out_dep[:ln]
-            p_len[a] = ln
-            ok = _insert(a, p_cell, p_dep, p_len, dur, h_who, h_lo, h_hi, h_n)
-        if not ok:
-            p_len[a] = 1
-            p_dep[a, 0] = np.inf
-            _insert(a, p_cell, p_dep, p_len, dur, h_who, h_lo, h_hi, h_n)
-            failed[nf] = a
-            nf += 1
-        arrival[a] = _arrival(p_dep, p_len, a, dur[a])
-    return gen, nf
-
-
 class TimedRefiner(LNSStats):
     """The timed LNS over a :class:`.crowd_timing.Timing` of robots driving at constant top speeds
     (``durations``: seconds per cell); ``fields`` / ``grow`` / ``goals`` / ``nb`` / ``deg`` as in the
@@ -391,49 +352,40 @@ class TimedRefiner(LNSStats):
     :func:`.crowd_timing.time_move_list`."""
 
     def __init__(self, timing, starts, goals, durations, fields, grow, nb, deg, ncell: int, seed: int = 0,
-                 size: int = 4, length: int = 0, holdings: int = 64):
+                 size: int = 4):
         n = len(starts)
         self.n = n
         self.dur = np.asarray(durations, dtype=np.float64)
         self.goals = np.asarray(goals, dtype=np.int32)
         self.fields, self.grow, self.nb, self.deg = fields, grow, nb, deg
-        if timing is None:      # every robot parked on its start: tables for :meth:`prioritized`
-            counts = np.ones(n, dtype=np.int64)
-            self.L = int(length)
-        else:
-            first = timing.first
-            counts = np.diff(first) + 1
-            self.L = int(max(2 * counts.max(initial=1), counts.max(initial=1) + 64))
+        first = timing.first
+        counts = np.diff(first) + 1
+        self.L = int(max(2 * counts.max(initial=1), counts.max(initial=1) + 64))
         self.p_cell = np.zeros((n, self.L), dtype=np.int32)
         self.p_dep = np.full((n, self.L), np.inf)
         self.p_len = counts.astype(np.int64)
         self.p_cell[:, 0] = np.asarray(starts, dtype=np.int32)
+        rob = timing.robot
+        pos = np.arange(len(rob)) - first[rob]
+        self.p_cell[rob, pos + 1] = timing.dst
+        self.p_dep[rob, pos] = timing.start
+        # each move holds its source until its end: record the move's *start* and the robot's own
+        # duration; where the first timing sped a move up or slowed it (ramps: not here) the hold
+        # interval below still covers [start of move in, end of move out]
+        end_of = np.full((n, self.L), np.inf)
+        end_of[rob, pos] = timing.end
         lb = fields[grow, self.p_cell[:, 0]].astype(np.float64) * self.dur
         self.lb = lb
-        if timing is None:
-            self.arrival = np.zeros(n)
-            K = int(holdings)
-        else:
-            rob = timing.robot
-            pos = np.arange(len(rob)) - first[rob]
-            self.p_cell[rob, pos + 1] = timing.dst
-            self.p_dep[rob, pos] = timing.start
-            # each move holds its source until its end: record the move's *start* and the robot's own
-            # duration; where the first timing sped a move up or slowed it (ramps: not here) the hold
-            # interval below still covers [start of move in, end of move out]
-            end_of = np.full((n, self.L), np.inf)
-            end_of[rob, pos] = timing.end
-            self.arrival = np.where(counts > 1, end_of[np.arange(n), np.maximum(counts - 2, 0)], 0.0)
-            # holdings exactly as the first timing has them
-            cells_n = np.zeros(ncell, dtype=np.int64)
-            np.add.at(cells_n, self.p_cell[np.arange(self.L)[None, :] < counts[:, None]], 1)
-            K = int(max(16, 2 * cells_n.max(initial=1) + 8))
+        self.arrival = np.where(counts > 1, end_of[np.arange(n), np.maximum(counts - 2, 0)], 0.0)
+        # holdings exactly as the first timing has them
+        cells_n = np.zeros(ncell, dtype=np.int64)
+        np.add.at(cells_n, self.p_cell[np.arange(self.L)[None, :] < counts[:, None]], 1)
+        K = int(max(16, 2 * cells_n.max(initial=1) + 8))
         self.h_who = np.full((ncell, K), NIL, dtype=np.int32)
         self.h_lo = np.zeros((ncell, K))
         self.h_hi = np.zeros((ncell, K))
         self.h_n = np.zeros(ncell, dtype=np.int32)
-        if timing is not None:
-            _fill(self.p_cell, self.p_dep, self.p_len, end_of, self.h_who, self.h_lo, self.h_hi, self.h_n)
+        _fill(self.p_cell, self.p_dep, self.p_len, end_of, self.h_who, self.h_lo, self.h_hi, self.h_n)
         ks = K + 1
         self.si_lo = np.zeros((ncell, ks))
         self.si_hi = np.zeros((ncell, ks))
@@ -452,17 +404,6 @@ class TimedRefiner(LNSStats):
         from . import crowd_st
 
         crowd_st.seed_rng(int(seed))
-
-    def prioritized(self, order, start_hold: float = np.inf) -> np.ndarray:
-        """Plan the robots of ``order`` one after the other (:func:`prioritized`) on tables made with
-        ``timing=None``; returns the robots without a path (left parked on their starts)."""
-        failed = np.empty(self.n, dtype=np.int64)
-        self.gen, nf = prioritized(np.asarray(order, dtype=np.int64), float(start_hold), self.p_cell, self.p_dep,
-                                   self.p_len, self.arrival, self.dur, self.goals, self.fields, self.grow, self.nb,
-                                   self.deg, self.h_who, self.h_lo, self.h_hi, self.h_n, self.si_lo, self.si_hi,
-                                   self.si_n, self.si_gen, self.gen, self.node_gen, self.node_t, self.node_par,
-                                   self.node_closed, self.weight, self.limit, failed, self.stats)
-        return failed[:nf].copy()
 
     def total(self) -> float:
         return float(self.arrival.sum())
