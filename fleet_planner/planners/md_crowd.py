@@ -19,8 +19,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
+from .. import _path_kernels
 from ..grid import GridMap
 from ..model import Plan, RobotSpec
 
@@ -62,28 +62,32 @@ class Crowding:
 
 
 def crowding(grid: GridMap, robots: Sequence[RobotSpec], margin: float = 0.0) -> Crowding:
-    """Measure the instance (compiled code only: run labelling and counting by SciPy and NumPy)."""
+    """Measure the instance (compiled code only: runs counted by NumPy, aisles labelled by a numba kernel)."""
     if not robots:
         return Crowding(0, 0, 0)
     free = ~np.asarray(grid.blocked, dtype=bool)
     two = 4 * max(r.radius for r in robots) + 2 * margin   # two widest discs side by side
-    lanes = np.zeros_like(free)
-    for axis in (0, 1):   # runs of free cells along each row (axis 1) and each column (axis 0)
-        structure = np.zeros((3, 3), dtype=bool)
-        structure[1, :] = axis == 1
-        structure[:, 1] = structure[:, 1] | (axis == 0)
-        structure[1, 1] = True
-        runs, count = ndimage.label(free, structure=structure)
-        if count:
-            length = np.bincount(runs.ravel())[runs] * grid.resolution
-            lanes |= free & (length < two)
-    aisles, count = ndimage.label(lanes)
+    # runs of free cells along each row and each column, too short for two discs side by side
+    lanes = free & ((_run_lengths(free) * grid.resolution < two) | (_run_lengths(free.T).T * grid.resolution < two))
+    count = _path_kernels.count_components4(np.ascontiguousarray(lanes))   # aisles: 4-connected lanes
     if not count:
         return Crowding(len(robots), 0, 0)
     pts = np.array([p for r in robots for p in (r.start, r.goal)], dtype=float)
     cols = np.clip(np.floor(pts[:, 0] / grid.resolution).astype(int), 0, grid.width - 1)
     rows = np.clip(np.floor(pts[:, 1] / grid.resolution).astype(int), 0, grid.height - 1)
-    return Crowding(len(robots), int(count), int(np.count_nonzero(aisles[rows, cols])))
+    return Crowding(len(robots), int(count), int(np.count_nonzero(lanes[rows, cols])))
+
+
+def _run_lengths(free: np.ndarray) -> np.ndarray:
+    """Per cell, the length (cells) of the run of free cells along its row that holds it (0 where
+    blocked)."""
+    h, w = free.shape
+    flat = np.zeros((h, w + 1), dtype=bool)
+    flat[:, :w] = free   # a blocked column after each row: runs never wrap
+    flat = flat.ravel()
+    ids = np.cumsum(flat & ~np.concatenate([[False], flat[:-1]]))
+    counts = np.bincount(ids, weights=flat)
+    return np.where(flat, counts[ids], 0.0).reshape(h, w + 1)[:, :w]
 
 
 def sum_of_arrivals(plan: Plan) -> float:
