@@ -1,13 +1,13 @@
 """The compiled inner loops of single-robot path finding (numba): the A* over the move graph of
-:class:`~fleet_planner.paths.PathFinder`, the moves cut by keep-out discs, the exact sight-line
+:class:`~fleet_planner.paths.PathFinder` (with the moves cut by keep-out discs), the exact sight-line
 test of string pulling and the shortest chain of vertices in sight, and connected components.
 
 Why numba (issue 8): path finding was most of md's planning time at 100 robots - first a
 pure-Python A*, then SciPy's Dijkstra on reduced weights, whose per-call set-up (weight arrays
 over the whole graph, a CSR matrix, an octile field per start and goal) cost more than the search;
 string pulling tested every sight line with GEOS through shapely.  Here one search touches only
-the nodes A* expands, the cut moves are marked in place (a stamp per edge, no per-call arrays over
-the graph), and a sight line is tested against the wall cells it passes near, exactly.  The
+the nodes A* expands, the moves through keep-out discs are found lazily (only those out of
+expanded nodes are tested), and a sight line is tested against the wall cells it passes near, exactly.  The
 functions are plain Python over numpy arrays, so without numba they run as they are (correct,
 slowly).  Importing this module imports neither SciPy nor shapely.
 """
@@ -195,40 +195,16 @@ def pull_string(pts, blocked, res, limit, discs):
 # the move graph
 # ---------------------------------------------------------------------------------------------
 @_jit
-def cut_disc_moves(cut, stamp, node_of, weights, dcol, drow, discs, res, w, h, wp):
-    """Mark ``cut[9 * node + d] = stamp`` for every allowed move d out of a traversable cell that
-    passes within a disc (segment-to-centre distance <= keep-out ``discs[k, 2]``).  A move passing
-    within k of the centre has both ends within k + sqrt 2 res, so only those cells are looked at
-    (and the reverse move is found from the other end)."""
-    for k in range(discs.shape[0]):
-        cx, cy, keep = discs[k, 0], discs[k, 1], discs[k, 2]
-        reach = keep + _SQRT2 * res + 1e-9
-        c_lo = max(int(math.floor((cx - reach) / res)), 0)
-        c_hi = min(int(math.floor((cx + reach) / res)), w - 1)
-        r_lo = max(int(math.floor((cy - reach) / res)), 0)
-        r_hi = min(int(math.floor((cy + reach) / res)), h - 1)
-        for r in range(r_lo, r_hi + 1):
-            ty = (r + 0.5) * res
-            for c in range(c_lo, c_hi + 1):
-                node = node_of[(r + 1) * wp + c + 1]
-                if node < 0:
-                    continue
-                tx = (c + 0.5) * res
-                if math.hypot(tx - cx, ty - cy) > reach:
-                    continue
-                for d in range(8):
-                    if weights[node, d] == _INF or cut[9 * node + d] == stamp:
-                        continue
-                    hx, hy = tx + dcol[d] * res, ty + drow[d] * res
-                    if point_segment_distance(cx, cy, tx, ty, hx, hy) <= keep:
-                        cut[9 * node + d] = stamp
-
-
-@_jit
-def astar(heads, weights, col, row, cut, stamp, src, src_cost, tgt, tgt_cost, start_c, start_r, goal_c, goal_r,
-          slack, tie):
+def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src_cost, tgt, tgt_cost,
+          start_c, start_r, goal_c, goal_r, slack, tie):
     """Nodes of a shortest path from a source node (entered at ``src_cost``) to a target node (left
-    at ``tgt_cost``) over the allowed moves not cut (``cut[9 * v + d] == stamp``); empty if none.
+    at ``tgt_cost``) over the allowed moves not cut (``cut[9 * v + d] == stamp``) that pass no
+    nearer than their keep-out ``discs[k, 2]`` to any disc centre ``discs[k, :2]`` (metres; ``col``
+    and ``row`` are padded cell indices, cells ``res`` wide); empty if none.
+
+    The discs are tested lazily, when a node is expanded: they are bucketed on a coarse grid of
+    squares at least as wide as the farthest a disc can reach (keep-out + a move's length), so the
+    discs that can cut a move out of a node are in the 3 x 3 squares around it.
 
     A* with the octile distance to the goal cell less ``slack`` (consistent for these moves, 0 at
     every target, which is within ``slack`` of the goal cell).  Ties: every move into a cell also
@@ -236,6 +212,29 @@ def astar(heads, weights, col, row, cut, stamp, src, src_cost, tgt, tgt_cost, st
     equal-length paths the one nearest that line is found (it pulls straighter); the heuristic
     stays consistent since those costs are >= 0."""
     v_count = heads.shape[0]
+    # the discs by coarse square (CSR): square (bc, br) holds the discs whose centre is in it
+    n_discs = discs.shape[0]
+    reach_max = _SQRT2 * res
+    for k in range(n_discs):
+        reach_max = max(reach_max, discs[k, 2] + _SQRT2 * res + 1e-9)
+    side = reach_max
+    nbc = int(col.max() * res / side) + 2 if v_count else 1
+    nbr = int(row.max() * res / side) + 2 if v_count else 1
+    d_ptr = np.zeros(nbc * nbr + 1, dtype=np.int64)
+    d_sq = np.empty(n_discs, dtype=np.int64)
+    for k in range(n_discs):
+        bc = min(max(int(discs[k, 0] / side), 0), nbc - 1)
+        br = min(max(int(discs[k, 1] / side), 0), nbr - 1)
+        d_sq[k] = br * nbc + bc
+        d_ptr[d_sq[k] + 1] += 1
+    for q in range(nbc * nbr):
+        d_ptr[q + 1] += d_ptr[q]
+    d_fill = d_ptr[:-1].copy()
+    d_idx = np.empty(n_discs, dtype=np.int64)
+    for k in range(n_discs):
+        d_idx[d_fill[d_sq[k]]] = k
+        d_fill[d_sq[k]] += 1
+    near = np.empty(max(n_discs, 1), dtype=np.int64)
     g = np.full(v_count, _INF)
     parent = np.full(v_count, -1, dtype=np.int64)
     closed = np.zeros(v_count, dtype=np.bool_)
@@ -301,6 +300,19 @@ def astar(heads, weights, col, row, cut, stamp, src, src_cost, tgt, tgt_cost, st
             continue
         closed[u] = True
         gu = g[u]
+        # the discs within reach of this cell's centre
+        n_near = 0
+        tx, ty = (col[u] - 0.5) * res, (row[u] - 0.5) * res
+        if n_discs:
+            bc0, br0 = int(tx / side), int(ty / side)
+            for br in range(max(br0 - 1, 0), min(br0 + 2, nbr)):
+                for bc in range(max(bc0 - 1, 0), min(bc0 + 2, nbc)):
+                    q = br * nbc + bc
+                    for m in range(d_ptr[q], d_ptr[q + 1]):
+                        k = d_idx[m]
+                        if math.hypot(discs[k, 0] - tx, discs[k, 1] - ty) <= discs[k, 2] + _SQRT2 * res + 1e-9:
+                            near[n_near] = k
+                            n_near += 1
         for d in range(9):
             if d == 8:
                 if tcost[u] == _INF:
@@ -317,6 +329,15 @@ def astar(heads, weights, col, row, cut, stamp, src, src_cost, tgt, tgt_cost, st
                     continue
                 v = heads[u, d]
                 if closed[v]:
+                    continue
+                hit = False
+                for m in range(n_near):
+                    k = near[m]
+                    if point_segment_distance(discs[k, 0], discs[k, 1], tx, ty,
+                                              tx + dcol[d] * res, ty + drow[d] * res) <= discs[k, 2]:
+                        hit = True
+                        break
+                if hit:
                     continue
                 nv = gu + wgt + tie * abs((col[v] - start_c) * ay - (row[v] - start_r) * ax) / norm
                 if nv >= g[v]:

@@ -11,8 +11,9 @@ straighter).  That adds at most 1e-12 * cells * distance, under 1e-6 cells on an
 cells, while two grid paths of different length differ by at least about 1e-4 cells (lengths are
 a + b sqrt 2 with integers a, b): the length found is the shortest for the move set.
 
-Per-call changes (moves removed by keep-out discs or extra walls) are marked in a stamp array
-over the edges (one integer per edge, the search's stamp where the move is cut), so nothing of the
+Per-call changes: moves removed by extra walls are marked in a stamp array over the edges (one
+integer per edge, the search's stamp where the move is cut); moves through keep-out discs are
+tested by the search when it expands their tail (the discs bucketed by place), so nothing of the
 size of the graph is built per call.  Nothing here imports SciPy.
 """
 from __future__ import annotations
@@ -135,7 +136,6 @@ class MoveGraph:
         src_cost = np.fromiter(sources.values(), dtype=float, count=len(sources))
         tgt = self.node_of[np.fromiter(targets, dtype=np.int64, count=len(targets))]
         tgt_cost = np.fromiter(targets.values(), dtype=float, count=len(targets))
-        h, w = self.shape
         with self._lock:
             if self._cut is None:
                 self._cut = np.zeros(9 * self.n_cells, dtype=np.int64)
@@ -144,11 +144,10 @@ class MoveGraph:
             cut = self._cut
             if len(removed):
                 cut[removed] = stamp
-            if len(discs):
-                K.cut_disc_moves(cut, stamp, self.node_of, self.weights, _DCOL, _DROW,
-                                 np.ascontiguousarray(discs, dtype=float), float(res), w, h, self.wp)
-            nodes = K.astar(self.heads, self.weights, self.col, self.row, cut, stamp, src, src_cost, tgt, tgt_cost,
-                            float(start[0]), float(start[1]), float(goal[0]), float(goal[1]), float(slack), _TIE)
+            nodes = K.astar(self.heads, self.weights, self.col, self.row, cut, stamp,
+                            np.ascontiguousarray(discs, dtype=float).reshape(-1, 3), float(res), _DCOL, _DROW,
+                            src, src_cost, tgt, tgt_cost, float(start[0]), float(start[1]), float(goal[0]),
+                            float(goal[1]), float(slack), _TIE)
         if not len(nodes):
             return None
         return self.cells[nodes].tolist()

@@ -254,7 +254,7 @@ class PathFinder:
     def _removed_edges(self, graph: MoveGraph, cells: np.ndarray) -> tuple[np.ndarray, frozenset[int]]:
         """Edge ids of the moves lost to the extra walls (cells too close to them stop being
         traversable; their flat indices are returned too).  The moves through the ``avoid`` discs
-        are cut by the search itself (:func:`fleet_planner._path_kernels.cut_disc_moves`)."""
+        are cut by the search itself (:func:`fleet_planner._path_kernels.astar`)."""
         h, w, wp = self.grid.height, self.grid.width, self._wp
         if not len(cells):
             return np.zeros(0, dtype=np.int64), frozenset()
