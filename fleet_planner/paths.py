@@ -221,6 +221,7 @@ class PathFinder:
         cells each segment passes near, in compiled code (:func:`fleet_planner._path_kernels.segment_free`)."""
         if not len(a):
             return np.ones(0, dtype=bool)
+        discs = _discs_near(discs, np.vstack([a, b]))
         return K.segments_free(np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(b, dtype=float),
                                self._blocked if walls is None else walls, float(self.grid.resolution),
                                self.radius - _TOL, np.ascontiguousarray(discs, dtype=float).reshape(-1, 3))
@@ -236,7 +237,7 @@ class PathFinder:
         if len(pts) <= 2:
             return pts
         keep = K.pull_string(np.ascontiguousarray(pts, dtype=float), walls, float(self.grid.resolution),
-                             self.radius - _TOL, np.ascontiguousarray(discs, dtype=float).reshape(-1, 3))
+                             self.radius - _TOL, _discs_near(discs, pts))
         return pts[keep]
 
     # -- cut moves ----------------------------------------------------------------------------
@@ -306,6 +307,17 @@ def _corners(path: np.ndarray) -> np.ndarray:
         return path
     step = np.diff(path)
     return path[np.concatenate([[True], step[1:] != step[:-1], [True]])]
+
+
+def _discs_near(discs: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """The discs (rows x, y, keep-out) that reach into the bounding box of ``pts``: the only ones
+    a segment between two of those points can come within keep-out of."""
+    discs = np.ascontiguousarray(discs, dtype=float).reshape(-1, 3)
+    if len(discs) < 8:
+        return discs
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    reach = discs[:, 2:]
+    return np.ascontiguousarray(discs[np.all((discs[:, :2] >= lo - reach) & (discs[:, :2] <= hi + reach), axis=1)])
 
 
 def _point(name: str, p) -> np.ndarray:
