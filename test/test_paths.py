@@ -482,3 +482,42 @@ def test_threads_sharing_a_move_graph_get_the_answers_of_sequential_calls():
         assert (got is None) == (want is None)
         if got is not None:
             assert polyline_length(got) == pytest.approx(polyline_length(want), abs=1e-9)
+
+
+def test_compiled_search_finds_the_shortest_grid_path_around_discs():
+    # oracle: SciPy's Dijkstra over the same moves, those passing within a disc removed up front
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from fleet_planner.geometry import segment_point_distance
+
+    rng = np.random.default_rng(5)
+    grid = GridMap(rng.random((16, 22)) < 0.18)
+    finder = PathFinder(grid, 0.3)
+    graph = finder._move_graph()
+    free = np.argwhere(finder.free)
+    tails, dirs = np.nonzero(np.isfinite(graph.weights))
+    heads = graph.heads[tails, dirs]
+    centre = np.column_stack([graph.col - 0.5, graph.row - 0.5])
+    compared = 0
+    for _ in range(40):
+        (r0, c0), (r1, c1) = free[rng.choice(len(free), 2, replace=False)]
+        start, goal = (c0 + 0.5, r0 + 0.5), (c1 + 0.5, r1 + 0.5)
+        discs = [((float(x), float(y)), float(k)) for x, y, k in
+                 zip(rng.random(6) * 22, rng.random(6) * 16, rng.uniform(0.3, 0.9, 6))]
+        discs = [d for d in discs if np.hypot(*np.subtract(d[0], start)) > d[1]
+                 and np.hypot(*np.subtract(d[0], goal)) > d[1]]
+        keep = np.ones(len(tails), dtype=bool)
+        for (x, y), k in discs:
+            keep &= segment_point_distance(centre[tails], centre[heads], np.array([x, y])) > k
+        w = np.where(dirs >= 4, np.sqrt(2.0), 1.0)[keep]
+        matrix = csr_matrix((w, (tails[keep], heads[keep])), shape=(graph.n_cells, graph.n_cells))
+        s, g = (graph.node_of[(r + 1) * graph.wp + c + 1] for r, c in ((r0, c0), (r1, c1)))
+        want = dijkstra(matrix, indices=s)[g]
+        path = finder.find(start, goal, avoid=discs, smooth=False)
+        if not np.isfinite(want):
+            assert path is None
+            continue
+        compared += 1
+        assert abs(polyline_length(path) - want) < 1e-6
+    assert compared > 20

@@ -10,8 +10,11 @@ column) is too short for two of the widest discs side by side; they group into a
 (4-connected). The instance is crowded when robots' starts and goals in lanes are many per aisle
 (``lane_load``, measured on the MovingAI warehouse with 1-cell aisles: 0.24 at 100 robots, 0.49 at
 200 - md plans both - 0.90 at 400 and 1.12 at 500, which md refuses and the dense solver plans in
-about 1.3 s CPU), or when there are simply more robots than md's pairwise collision model plans
-within the default budget (``crowd_robots``; md took more than 90 s at 1000).
+about 1.3 s CPU), or when there are simply many robots (``crowd_robots``: md took more than
+90 s at 1000; at 400 and 500 robots on warehouse-10-20-10-2-2 and warehouse-20-40-10-2-2 md
+planned in 5-12 s CPU and the dense solver's plan, planned after it, had the lower sum of
+arrivals on all four (1.13-1.16 over free; md's own 1.139 against 1.128 at 400 on
+warehouse-20-40-10-2-2), so md's plan there only spent the budget: 9-18 s CPU in all).
 """
 from __future__ import annotations
 
@@ -27,7 +30,7 @@ from ..model import Plan, RobotSpec
 #: starts and goals in lanes per aisle from which an instance is crowded (see the module docstring)
 LANE_LOAD = 0.7
 #: robots from which md hands the instance to the dense solver at once
-CROWD_ROBOTS = 750
+CROWD_ROBOTS = 400
 #: fewer robots than this are never crowded and md's plan is not compared with the dense solver's:
 #: md is cheap there, and small hand-worked cases stay md's
 MIN_ROBOTS = 10
