@@ -216,6 +216,7 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, time_limi
 
         resource.setrlimit(resource.RLIMIT_CPU, (math.ceil(cpu_limit), math.ceil(cpu_limit) + 1))
     try:
+        grid = GridMap(grid.blocked.copy(), grid.resolution, grid.name)   # no caches of earlier runs
         t0, c0 = time.perf_counter(), time.process_time()
         plan = _planner(name, time_limit).plan(grid, robots)
         elapsed = time.perf_counter() - t0
@@ -360,11 +361,14 @@ def main(argv=None) -> int:
         print(f"bench_md: no maps directory {args.maps_dir}: using a generated warehouse with random "
               f"start/goal pairs instead of MovingAI maps", file=sys.stderr)
         instances = [generated_instance(n_max, args.seed)]
-    for name in args.planners:   # import and run every planner once now (lazy imports, caches of
-        # nothing the runs share: each run is a fresh fork), so that no run pays for the imports
-        small = instances[0].robots[:2]
+    # import and run every planner once now (and the dense solver md v2 compares with) on a small
+    # generated warehouse: imports and numba's cache loads happen once per process, as in a running
+    # planner node, so no run pays for them; each run then plans on a fresh copy of its map, so its
+    # map set-up (inflated masks, move graphs) is timed
+    warm = generated_instance(20, args.seed)
+    for name in list(args.planners) + (["dense"] if "dense" in planner_names() else []):
         try:
-            _planner(name, args.time_limit).plan(instances[0].grid, small)
+            _planner(name, args.time_limit).plan(warm.grid, warm.robots)
         except PlanningError:
             pass
     rows: list[Row] = []

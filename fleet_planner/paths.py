@@ -16,12 +16,12 @@ neighbours of a diagonal move to be traversable (no corner cutting) therefore ke
 as clear as its cells.  Keep-out discs are not on the lattice, so moves that pass within a disc are
 removed exactly (segment-to-centre distance), not only the cells whose centre lies inside it.
 
-How it runs: the A* is done in compiled code, by SciPy's Dijkstra on reduced weights
-(:mod:`fleet_planner._pathgraph`, exact: optimal for this move set); the move graph, its
-components and the disc cuts are built once per map and move table and shared by every finder
-with that table.  String pulling tests all its sight lines in one batch, each first by a cheap
-exact rejection (a point of the segment inside a wall cell), then by the exact distance tests,
-and keeps the shortest chain of vertices in sight of each other.
+How it runs (issue 8): the A* is compiled (numba, :mod:`fleet_planner._path_kernels`, exact:
+optimal for this move set); the move graph and its components are built once per map and move
+table and shared by every finder with that table; the moves through the ``avoid`` discs are cut
+in place by the search.  String pulling is a compiled dynamic programme for the shortest chain of
+vertices in sight of each other, where a sight line is tested by its exact distance to the wall
+cells it passes near (no GEOS, no SciPy: neither is imported by a search).
 """
 from __future__ import annotations
 
@@ -29,14 +29,12 @@ import math
 import threading
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
-from typing import NamedTuple
 
 import numpy as np
-import shapely
 
+from . import _path_kernels as K
 from ._pathgraph import DIRS as _DIRS
 from ._pathgraph import MoveGraph, dilate
-from .geometry import segment_point_distance
 from .grid import GridMap
 
 Point = tuple[float, float]
@@ -45,52 +43,9 @@ Disc = tuple[Point, float]
 
 _SQRT2 = math.sqrt(2.0)
 _TOL = 1e-9
-_CUT_CACHE_SIZE = 100_000  # disc centres whose nearby moves are remembered per move graph
-_CUT_HEADROOM = 1.25       # a centre's moves are computed out to this times the keep-out asked for
 _RESULT_CACHE_SIZE = 256   # find() answers remembered per PathFinder (same inputs, same answer)
-_PAIR_BATCH = 5000         # string pulling tests all vertex pairs at once up to this many pairs
-_SAMPLES = 17              # points per segment of the cheap wall rejection
 # bit d of a cell's move mask says move _DIRS[d] = (dcol, drow) is allowed
 _BIT = {d: 1 << k for k, d in enumerate(_DIRS)}
-
-
-class _ExtraWalls(NamedTuple):
-    """The ``blocked_cells`` of one call: their boxes and the wall raster with them."""
-
-    boxes: np.ndarray
-    solid: np.ndarray
-
-
-class _WallIndex:
-    """The walls of a map for exact distance tests: one box per horizontal run of blocked cells
-    in an STRtree (built in milliseconds; no union of the boxes is needed, since the distance to
-    the walls is the smallest distance to a box), and the map's edge, tested analytically."""
-
-    def __init__(self, grid: GridMap):
-        res = grid.resolution
-        runs = np.diff(np.pad(grid.blocked, ((0, 0), (1, 1))).astype(np.int8), axis=1)
-        row, c0 = np.nonzero(runs == 1)
-        _, c1 = np.nonzero(runs == -1)   # row-major order: the ends pair up with the starts
-        self.tree = shapely.STRtree(shapely.box(c0 * res, row * res, c1 * res, (row + 1) * res))
-        self.size = (grid.width * res, grid.height * res)
-
-    @classmethod
-    def of(cls, grid: GridMap) -> _WallIndex:
-        index = grid.__dict__.get("_path_wall_index")
-        if index is None:
-            index = grid.__dict__["_path_wall_index"] = cls(grid)
-        return index
-
-    def near(self, a: np.ndarray, b: np.ndarray, geoms: np.ndarray, limit: float) -> np.ndarray:
-        """True for segments ``a[i] -> b[i]`` (``geoms[i]``) within ``limit`` of a wall or the
-        outside of the map.  Inside the (convex) map the distance to its edge is smallest at an
-        end of the segment, and an end outside the map is at distance 0."""
-        w, h = self.size
-        edge = np.minimum(np.minimum(a, b).min(axis=1), np.minimum(w - np.maximum(a[:, 0], b[:, 0]),
-                                                                  h - np.maximum(a[:, 1], b[:, 1])))
-        out = edge <= limit
-        out[self.tree.query(geoms, predicate="dwithin", distance=limit)[0]] = True
-        return out
 
 
 class PathFinder:
@@ -98,8 +53,8 @@ class PathFinder:
 
     The inflated free mask and the allowed moves of every cell are computed once here; the move
     graph for the compiled search is built at the first search and kept.  Each :meth:`find` then
-    costs one compiled A* (the cut moves of its ``avoid`` discs and ``blocked_cells`` only change
-    edge weights) and a few vectorised shapely calls for the smoothing.
+    costs one compiled A* (the cut moves of its ``avoid`` discs and ``blocked_cells`` are marked
+    per search) and one compiled string pulling.
     """
 
     def __init__(self, grid: GridMap, radius: float):
@@ -147,7 +102,7 @@ class PathFinder:
             moves[1:-1, 1:-1] &= self._lanes.move_mask((h, w))
         self._free_p = free_p
         #: padded wall cells (the outside of the map is a wall): a point inside one is not free
-        self._solid = np.pad(grid.blocked, 1, constant_values=True)
+        self._blocked = np.ascontiguousarray(grid.blocked, dtype=bool)
         self._moves = moves.ravel()
         # when a cell b stops being traversable, its neighbour at b + rel loses these moves:
         # the move into b, and the diagonal moves that cut b's corner
@@ -162,11 +117,7 @@ class PathFinder:
                 if rel[0] == 0:
                     mask |= _BIT[(1, -rel[1])] | _BIT[(-1, -rel[1])]
             self._lost.append((rel[0] + rel[1] * self._wp, mask))
-        # undirected moves for disc clearing: (dcol, drow, direction at the tail, at the head)
-        self._half_moves = [(dcol, drow, _DIRS.index((dcol, drow)), _DIRS.index((-dcol, -drow)))
-                            for dcol, drow in ((1, 0), (0, 1), (1, 1), (-1, 1))]
         self._graph: MoveGraph | None = None
-        self._walls = _WallIndex.of(grid)
         self._results: OrderedDict[tuple, np.ndarray | None] = OrderedDict()
         self._results_lock = threading.Lock()
 
@@ -211,25 +162,21 @@ class PathFinder:
         outside every ``avoid`` disc ``(centre, keep_out)`` (no disc is ignored here).
         """
         pa, pb = _point("a", a), _point("b", b)
-        return bool(self._free_many(pa[None], pb[None], _discs(avoid), None)[0])
+        return bool(self._free_many(pa[None], pb[None], _discs(avoid))[0])
 
     # -- the search ---------------------------------------------------------------------------
     def _find(self, start: np.ndarray, goal: np.ndarray, discs: np.ndarray, cells: np.ndarray,
               smooth: bool) -> np.ndarray | None:
-        extra_walls = None
+        walls = self._blocked   # the wall cells, with the extra walls of this call
         if len(cells):
-            res = self.grid.resolution
-            boxes = shapely.box(cells[:, 0] * res, cells[:, 1] * res, (cells[:, 0] + 1) * res, (cells[:, 1] + 1) * res)
-            solid = self._solid.copy()
-            solid[cells[:, 1] + 1, cells[:, 0] + 1] = True
-            extra_walls = _ExtraWalls(boxes, solid)
-
-        if smooth and self._free_many(start[None], goal[None], discs, extra_walls)[0]:
+            walls = walls.copy()
+            walls[cells[:, 1], cells[:, 0]] = True
+        if smooth and self._free_many(start[None], goal[None], discs, walls)[0]:
             return np.array([start, goal])
         graph = self._move_graph()
-        removed, walled = self._removed_edges(graph, discs, cells)
-        sources = self._connect(start, walled, discs, extra_walls)
-        targets = self._connect(goal, walled, discs, extra_walls)
+        removed, walled = self._removed_edges(graph, cells)
+        sources = self._connect(start, walled, discs, walls)
+        targets = self._connect(goal, walled, discs, walls)
         if not sources or not targets:
             return None
         # extra walls and discs only cut the static map further: different static parts = no path
@@ -244,7 +191,7 @@ class PathFinder:
         slack = 0.0 if list(targets) == [g_flat] else _SQRT2
         start_col, start_row = self.grid.cell_of(*start)
         cell_path = graph.search(sources, targets, (start_col + 1, start_row + 1), (goal_col + 1, goal_row + 1),
-                                 slack, removed)
+                                 slack, removed, discs, self.grid.resolution)
         if cell_path is None:
             return None
         corners = _corners(np.array(cell_path))
@@ -252,7 +199,7 @@ class PathFinder:
         centres = np.column_stack([c - 0.5, r - 0.5]) * self.grid.resolution
         pts = np.vstack([start, centres, goal])
         pts = pts[np.concatenate([[True], np.any(pts[1:] != pts[:-1], axis=1)])]  # start/goal on a centre
-        return self._pull_string(pts, discs, extra_walls) if smooth else pts
+        return self._pull_string(pts, discs, walls) if smooth else pts
 
     def _move_graph(self) -> MoveGraph:
         """The move graph, built at the first search and shared (through the map object) by every
@@ -268,94 +215,30 @@ class PathFinder:
 
     # -- geometry -----------------------------------------------------------------------------
     def _free_many(self, a: np.ndarray, b: np.ndarray, discs: np.ndarray,
-                   extra_walls: _ExtraWalls | None) -> np.ndarray:
-        """Vectorised :meth:`segment_free` over segments ``a[i] -> b[i]`` (and extra walls).
-
-        A cheap exact rejection comes first: points sampled along each segment (every half cell)
-        that fall in a wall cell prove it is not free.  The disc distances and the GEOS distance
-        test, which decide, run only on the segments that remain.
-        """
-        ok = np.ones(len(a), dtype=bool)
+                   walls: np.ndarray | None = None) -> np.ndarray:
+        """Vectorised :meth:`segment_free` over segments ``a[i] -> b[i]``, against the wall cells
+        ``walls`` (``blocked[row, col]``; the map's own by default): exact distances to the wall
+        cells each segment passes near, in compiled code (:func:`fleet_planner._path_kernels.segment_free`)."""
         if not len(a):
-            return ok
-        ok &= ~self._crosses_wall(a, b, self._solid if extra_walls is None else extra_walls.solid)
-        if len(discs) and ok.any():  # only discs reaching into the segments' bounding box can touch them
-            idx = np.nonzero(ok)[0]
-            sa, sb = a[idx], b[idx]
-            lo, hi = np.minimum(sa, sb).min(axis=0), np.maximum(sa, sb).max(axis=0)
-            reach = discs[:, 2:]
-            discs = discs[np.all((discs[:, :2] >= lo - reach) & (discs[:, :2] <= hi + reach), axis=1)]
-            if len(discs):
-                dist = segment_point_distance(sa[:, None, :], sb[:, None, :], discs[None, :, :2])
-                ok[idx] = np.all(dist > discs[None, :, 2], axis=1)
-        if not ok.any():
-            return ok
-        idx = np.nonzero(ok)[0]
-        sa, sb = a[idx], b[idx]
-        # prepared dwithin is wrong for zero-length lines (GEOS 3.14), so those are points
-        degenerate = np.all(sa == sb, axis=1)
-        geoms = np.where(degenerate, shapely.points(sa),
-                         shapely.linestrings(np.stack([sa, sb], axis=1)))
-        limit = self.radius - _TOL
-        free = ~self._walls.near(sa, sb, geoms, limit)
-        if extra_walls is not None and free.any():
-            free[free] = ~shapely.dwithin(extra_walls.boxes[None, :], geoms[free][:, None], limit).any(axis=1)
-        ok[idx] = free
-        return ok
+            return np.ones(0, dtype=bool)
+        discs = _discs_near(discs, np.vstack([a, b]))
+        return K.segments_free(np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(b, dtype=float),
+                               self._blocked if walls is None else walls, float(self.grid.resolution),
+                               self.radius - _TOL, np.ascontiguousarray(discs, dtype=float).reshape(-1, 3))
 
-    def _crosses_wall(self, a: np.ndarray, b: np.ndarray, solid: np.ndarray) -> np.ndarray:
-        """True for segments with a sampled point in a wall cell of ``solid`` (padded): such a
-        segment touches a wall, so it is not free.  Points are half a cell apart (ends included),
-        at most ``_SAMPLES`` per segment: a long segment through the shelves is caught anyway, and
-        what is missed is decided by the exact test."""
-        res = self.grid.resolution
-        count = np.minimum(np.ceil(np.hypot(*(b - a).T) / (0.5 * res)).astype(np.int64) + 1, _SAMPLES)
-        first = np.concatenate([[0], np.cumsum(count)[:-1]])
-        seg = np.repeat(np.arange(len(a)), count)
-        t = (np.arange(int(count.sum())) - first[seg]) / np.maximum(count - 1, 1)[seg]
-        p = a[seg] + t[:, None] * (b[seg] - a[seg])
-        hp, wp = solid.shape
-        col = np.clip(np.floor(p[:, 0] / res).astype(np.int64) + 1, 0, wp - 1)
-        row = np.clip(np.floor(p[:, 1] / res).astype(np.int64) + 1, 0, hp - 1)
-        return np.logical_or.reduceat(solid[row, col], first)
-
-    def _pull_string(self, pts: np.ndarray, discs: np.ndarray, extra_walls: _ExtraWalls | None) -> np.ndarray:
+    def _pull_string(self, pts: np.ndarray, discs: np.ndarray, walls: np.ndarray) -> np.ndarray:
         """String pulling: the shortest chain of vertices, each in free sight of the next.
 
         Consecutive vertices are joined by grid moves (or checked connector pieces), so keeping
-        them is always allowed and the result is never less valid than the grid path.  The sight
-        lines of all pairs of vertices are tested in one batch and the shortest chain over them
-        is found by a compiled Dijkstra (never longer than jumping greedily to the farthest
-        vertex in sight); for very long vertex lists the greedy jumps are kept, with the sight
-        lines from each kept vertex tested in one batch.
+        them is always allowed and the result is never less valid than the grid path.  The chain
+        is a dynamic programme over the vertices in compiled code, which tests a sight line only
+        where it would shorten the chain (:func:`fleet_planner._path_kernels.pull_string`).
         """
-        n = len(pts)
-        if n <= 2:
+        if len(pts) <= 2:
             return pts
-        if n * (n - 1) // 2 > _PAIR_BATCH:
-            out = [0]
-            k = 0
-            while k < n - 1:
-                later = np.arange(k + 2, n)
-                ok = self._free_many(np.repeat(pts[k:k + 1], len(later), axis=0), pts[later], discs, extra_walls)
-                seen = later[ok]
-                k = int(seen[-1]) if len(seen) else k + 1
-                out.append(k)
-            return pts[out]
-        from scipy.sparse import csr_matrix
-        from scipy.sparse.csgraph import dijkstra
-
-        i, j = np.nonzero(np.triu(np.ones((n, n), dtype=bool), 2))
-        ok = self._free_many(pts[i], pts[j], discs, extra_walls)
-        i = np.concatenate([np.arange(n - 1), i[ok]])
-        j = np.concatenate([np.arange(1, n), j[ok]])
-        # lengths + a tiny cost per vertex: of equal chains, the one with fewer vertices
-        length = np.hypot(*(pts[j] - pts[i]).T) + 1e-12
-        _, pred = dijkstra(csr_matrix((length, (i, j)), shape=(n, n)), indices=0, return_predecessors=True)
-        out = [n - 1]
-        while out[-1] != 0:
-            out.append(int(pred[out[-1]]))
-        return pts[out[::-1]]
+        keep = K.pull_string(np.ascontiguousarray(pts, dtype=float), walls, float(self.grid.resolution),
+                             self.radius - _TOL, _discs_near(discs, pts))
+        return pts[keep]
 
     # -- cut moves ----------------------------------------------------------------------------
     def _extra_cells(self, blocked_cells: Iterable[tuple[int, int]]) -> np.ndarray:
@@ -369,98 +252,27 @@ class PathFinder:
                   & (cells[:, 1] >= 0) & (cells[:, 1] < self.grid.height))
         return np.unique(cells[inside], axis=0)
 
-    def _removed_edges(self, graph: MoveGraph, discs: np.ndarray,
-                       cells: np.ndarray) -> tuple[np.ndarray, frozenset[int]]:
+    def _removed_edges(self, graph: MoveGraph, cells: np.ndarray) -> tuple[np.ndarray, frozenset[int]]:
         """Edge ids of the moves lost to the extra walls (cells too close to them stop being
-        traversable; their flat indices are returned too) and of every move through a disc."""
+        traversable; their flat indices are returned too).  The moves through the ``avoid`` discs
+        are cut by the search itself (:func:`fleet_planner._path_kernels.astar`)."""
         h, w, wp = self.grid.height, self.grid.width, self._wp
-        parts = [np.zeros(0, dtype=np.int64)]
-        walled: frozenset[int] = frozenset()
-        if len(cells):
-            near = (cells[:, None, :] + self._kernel_offsets[None]).reshape(-1, 2)
-            inside = (near[:, 0] >= 0) & (near[:, 0] < w) & (near[:, 1] >= 0) & (near[:, 1] < h)
-            near = near[inside]
-            near = near[self.free[near[:, 1], near[:, 0]]]
-            flat = np.unique((near[:, 1] + 1) * wp + near[:, 0] + 1)
-            walled = frozenset(flat.tolist())
-            lost = np.zeros_like(self._moves)
-            for rel, mask in self._lost:
-                lost[flat + rel] |= np.uint8(mask)
-            lost &= self._moves
-            changed = np.nonzero(lost)[0]
-            parts.append(graph.edges(changed, lost[changed]))
-        if len(discs):
-            parts.append(self._disc_edges(graph, discs))
-        return np.concatenate(parts), walled
-
-    def _disc_edges(self, graph: MoveGraph, discs: np.ndarray) -> np.ndarray:
-        """Edge ids of every move passing within a disc (distance <= keep-out).
-
-        The same centres (parked robots) come back in call after call with keep-outs that differ
-        by the other robot's radius, so each centre's nearby moves and their distances to it are
-        computed once (out to a little more than the keep-out asked for, in one vectorised batch
-        for all new centres) and each call only compares those distances with its keep-outs.
-        """
-        keys = list(zip(discs[:, 0].tolist(), discs[:, 1].tolist()))
-        keep_outs = discs[:, 2].tolist()
-        new: dict[tuple[float, float], float] = {}
-        for key, k in zip(keys, keep_outs):
-            entry = graph.cuts.get(key)
-            if entry is None or entry[0] < k:
-                new[key] = max(new.get(key, 0.0), k * _CUT_HEADROOM)
-        if new:
-            if len(graph.cuts) + len(new) > _CUT_CACHE_SIZE:
-                graph.cuts.clear()
-            graph.cuts.update(self._compute_cuts(graph, new))
-        entries = [graph.cuts[key] for key in keys]
-        eids = np.concatenate([e[1] for e in entries])
-        dist = np.concatenate([e[2] for e in entries])
-        limit = np.repeat(discs[:, 2], [len(e[1]) for e in entries])
-        return eids[dist <= limit]
-
-    def _compute_cuts(self, graph: MoveGraph, want: dict[tuple[float, float], float]) -> dict:
-        res, h, w, wp = self.grid.resolution, self.grid.height, self.grid.width, self._wp
-        keys = list(want)
-        centres = np.array(keys, dtype=float)
-        keep = np.array([want[k] for k in keys])
-        # a move (length <= sqrt(2) res) passing within k of P has both ends within k + sqrt(2) res
-        reach = keep + _SQRT2 * res + _TOL
-        span = int(math.ceil(float(reach.max()) / res)) + 1
-        wc, wr = (a.ravel() for a in np.meshgrid(np.arange(-span, span + 1), np.arange(-span, span + 1)))
-        base = np.floor(centres / res).astype(np.int64)
-        col = (base[:, 0, None] + wc[None]).ravel()
-        row = (base[:, 1, None] + wr[None]).ravel()
-        which = np.repeat(np.arange(len(keys)), wc.size)
-        tail = np.column_stack([(col + 0.5) * res, (row + 0.5) * res])
-        near = ((col >= 0) & (col < w) & (row >= 0) & (row < h)
-                & (np.hypot(*(tail - centres[which]).T) <= reach[which]))
-        col, row, which, tail = col[near], row[near], which[near], tail[near]
-        flat = (row + 1) * wp + col + 1
-        out_eid, out_dist, out_which = [], [], []
-        for dcol, drow, d_tail, d_head in self._half_moves:
-            has = graph.has_move(flat, d_tail)  # moves are symmetric: the reverse edge exists too
-            if not has.any():
-                continue
-            t, f, wh = tail[has], flat[has], which[has]
-            dist = segment_point_distance(t, t + (dcol * res, drow * res), centres[wh])
-            hit = dist <= keep[wh]
-            fwd = graph.edge_ids(f[hit], d_tail)
-            back = graph.edge_ids(f[hit] + dcol + drow * wp, d_head)
-            out_eid += [fwd, back]
-            out_dist += [dist[hit]] * 2
-            out_which += [wh[hit]] * 2
-        if not out_eid:
-            empty = (np.zeros(0, dtype=np.int64), np.zeros(0))
-            return {key: (want[key], *empty) for key in keys}
-        all_eid, all_dist, all_which = (np.concatenate(x) for x in (out_eid, out_dist, out_which))
-        order = np.argsort(all_which, kind="stable")
-        bounds = np.searchsorted(all_which[order], np.arange(len(keys) + 1))
-        all_eid, all_dist = all_eid[order], all_dist[order]
-        return {key: (want[key], all_eid[bounds[n]:bounds[n + 1]], all_dist[bounds[n]:bounds[n + 1]])
-                for n, key in enumerate(keys)}
+        if not len(cells):
+            return np.zeros(0, dtype=np.int64), frozenset()
+        near = (cells[:, None, :] + self._kernel_offsets[None]).reshape(-1, 2)
+        inside = (near[:, 0] >= 0) & (near[:, 0] < w) & (near[:, 1] >= 0) & (near[:, 1] < h)
+        near = near[inside]
+        near = near[self.free[near[:, 1], near[:, 0]]]
+        flat = np.unique((near[:, 1] + 1) * wp + near[:, 0] + 1)
+        lost = np.zeros_like(self._moves)
+        for rel, mask in self._lost:
+            lost[flat + rel] |= np.uint8(mask)
+        lost &= self._moves
+        changed = np.nonzero(lost)[0]
+        return graph.edges(changed, lost[changed]), frozenset(flat.tolist())
 
     def _connect(self, p: np.ndarray, walled: frozenset[int], discs: np.ndarray,
-                 extra_walls: _ExtraWalls | None) -> dict[int, float]:
+                 walls: np.ndarray) -> dict[int, float]:
         """Cells a point joins the grid at, with the connector length in cells.
 
         The point's own cell if the straight piece to its centre is free, else those of the 8
@@ -481,7 +293,7 @@ class PathFinder:
             if not cand:
                 continue
             centres = (np.array(cand, dtype=float) + 0.5) * res
-            ok = self._free_many(np.repeat(p[None], len(centres), axis=0), centres, discs, extra_walls)
+            ok = self._free_many(np.repeat(p[None], len(centres), axis=0), centres, discs, walls)
             found = {(r + 1) * self._wp + c + 1: float(np.hypot(*(centre - p))) / res
                      for (c, r), centre, good in zip(cand, centres, ok) if good}
             if found:
@@ -495,6 +307,17 @@ def _corners(path: np.ndarray) -> np.ndarray:
         return path
     step = np.diff(path)
     return path[np.concatenate([[True], step[1:] != step[:-1], [True]])]
+
+
+def _discs_near(discs: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """The discs (rows x, y, keep-out) that reach into the bounding box of ``pts``: the only ones
+    a segment between two of those points can come within keep-out of."""
+    discs = np.ascontiguousarray(discs, dtype=float).reshape(-1, 3)
+    if len(discs) < 8:
+        return discs
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    reach = discs[:, 2:]
+    return np.ascontiguousarray(discs[np.all((discs[:, :2] >= lo - reach) & (discs[:, :2] <= hi + reach), axis=1)])
 
 
 def _point(name: str, p) -> np.ndarray:

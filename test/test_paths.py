@@ -368,8 +368,8 @@ def test_a_long_detour_is_still_shortest_and_a_sealed_goal_is_none():
     assert finder.find(start, goal, blocked_cells=[(39, 2)]) is None
 
 
-def test_many_corners_are_pulled_in_one_batch_or_row_by_row(monkeypatch):
-    # a serpentine of 60 aisles: over a hundred corners, more sight lines than one batch takes
+def test_many_corners_are_pulled_to_a_valid_chain_no_longer_than_the_grid_path():
+    # a serpentine of 60 aisles: over a hundred corners (the dynamic programme over sight lines)
     rows = []
     for k in range(60):
         rows.append("......")
@@ -377,14 +377,36 @@ def test_many_corners_are_pulled_in_one_batch_or_row_by_row(monkeypatch):
     rows.append("......")
     grid = GridMap.from_rows(rows)
     start, goal = (0.5, 0.5), (0.5, len(rows) - 0.5)
-    row_by_row = PathFinder(grid, 0.45).find(start, goal)
-    assert_valid(row_by_row, grid, 0.45, start, goal)
-    import fleet_planner.paths as paths_module
+    finder = PathFinder(grid, 0.3)
+    pulled = finder.find(start, goal)
+    assert_valid(pulled, grid, 0.3, start, goal)
+    grid_path = finder.find(start, goal, smooth=False)
+    assert len(grid_path) > 100
+    assert polyline_length(pulled) <= polyline_length(grid_path) + 1e-9
 
-    monkeypatch.setattr(paths_module, "_PAIR_BATCH", 10 ** 9)
-    batched = PathFinder(grid, 0.45).find(start, goal)
-    assert_valid(batched, grid, 0.45, start, goal)
-    assert polyline_length(batched) <= polyline_length(row_by_row) + 1e-9
+
+def test_sight_lines_agree_with_exact_geometry_on_random_segments():
+    # the compiled sight-line test against GEOS distances to the union of the wall cells
+    rng = np.random.default_rng(3)
+    blocked = rng.random((14, 18)) < 0.12
+    grid = GridMap(blocked, resolution=0.5)
+    walls = shapely.union_all([box(c * 0.5, r * 0.5, (c + 1) * 0.5, (r + 1) * 0.5)
+                               for r, c in zip(*np.nonzero(blocked))])
+    finder = PathFinder(grid, 0.3)
+    w, h = 18 * 0.5, 14 * 0.5
+    a = rng.random((3000, 2)) * (w, h)
+    b = a + rng.normal(0.0, 1.0, (3000, 2))
+    b[::50] = a[::50]   # points
+    disc = ((4.0, 3.0), 0.6)
+    got = finder._free_many(a, b, np.array([[4.0, 3.0, 0.6]]))
+    for i in range(len(a)):
+        geom = LineString([a[i], b[i]]) if np.any(a[i] != b[i]) else Point(a[i])
+        inside = bool(np.all(np.minimum(a[i], b[i]) > 0.3 - 1e-9)) and bool(
+            np.all(np.maximum(a[i], b[i]) < (w - 0.3 + 1e-9, h - 0.3 + 1e-9)))
+        want = (inside and geom.distance(walls) > 0.3 - 1e-9
+                and geom.distance(Point(disc[0])) > disc[1])
+        assert got[i] == want, (a[i], b[i])
+    assert 300 < got.sum() < len(a) - 300   # both answers are common
 
 
 def test_radii_that_inflate_alike_share_one_move_graph():
@@ -460,3 +482,42 @@ def test_threads_sharing_a_move_graph_get_the_answers_of_sequential_calls():
         assert (got is None) == (want is None)
         if got is not None:
             assert polyline_length(got) == pytest.approx(polyline_length(want), abs=1e-9)
+
+
+def test_compiled_search_finds_the_shortest_grid_path_around_discs():
+    # oracle: SciPy's Dijkstra over the same moves, those passing within a disc removed up front
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from fleet_planner.geometry import segment_point_distance
+
+    rng = np.random.default_rng(5)
+    grid = GridMap(rng.random((16, 22)) < 0.18)
+    finder = PathFinder(grid, 0.3)
+    graph = finder._move_graph()
+    free = np.argwhere(finder.free)
+    tails, dirs = np.nonzero(np.isfinite(graph.weights))
+    heads = graph.heads[tails, dirs]
+    centre = np.column_stack([graph.col - 0.5, graph.row - 0.5])
+    compared = 0
+    for _ in range(40):
+        (r0, c0), (r1, c1) = free[rng.choice(len(free), 2, replace=False)]
+        start, goal = (c0 + 0.5, r0 + 0.5), (c1 + 0.5, r1 + 0.5)
+        discs = [((float(x), float(y)), float(k)) for x, y, k in
+                 zip(rng.random(6) * 22, rng.random(6) * 16, rng.uniform(0.3, 0.9, 6))]
+        discs = [d for d in discs if np.hypot(*np.subtract(d[0], start)) > d[1]
+                 and np.hypot(*np.subtract(d[0], goal)) > d[1]]
+        keep = np.ones(len(tails), dtype=bool)
+        for (x, y), k in discs:
+            keep &= segment_point_distance(centre[tails], centre[heads], np.array([x, y])) > k
+        w = np.where(dirs >= 4, np.sqrt(2.0), 1.0)[keep]
+        matrix = csr_matrix((w, (tails[keep], heads[keep])), shape=(graph.n_cells, graph.n_cells))
+        s, g = (graph.node_of[(r + 1) * graph.wp + c + 1] for r, c in ((r0, c0), (r1, c1)))
+        want = dijkstra(matrix, indices=s)[g]
+        path = finder.find(start, goal, avoid=discs, smooth=False)
+        if not np.isfinite(want):
+            assert path is None
+            continue
+        compared += 1
+        assert abs(polyline_length(path) - want) < 1e-6
+    assert compared > 20

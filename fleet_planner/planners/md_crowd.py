@@ -10,8 +10,11 @@ column) is too short for two of the widest discs side by side; they group into a
 (4-connected). The instance is crowded when robots' starts and goals in lanes are many per aisle
 (``lane_load``, measured on the MovingAI warehouse with 1-cell aisles: 0.24 at 100 robots, 0.49 at
 200 - md plans both - 0.90 at 400 and 1.12 at 500, which md refuses and the dense solver plans in
-about 1.3 s CPU), or when there are simply more robots than md's pairwise collision model plans
-within the default budget (``crowd_robots``; md took more than 90 s at 1000).
+about 1.3 s CPU), or when there are simply many robots (``crowd_robots``: md took more than
+90 s at 1000; at 400 and 500 robots on warehouse-10-20-10-2-2 and warehouse-20-40-10-2-2 md
+planned in 5-12 s CPU and the dense solver's plan, planned after it, had the lower sum of
+arrivals on all four (1.13-1.16 over free; md's own 1.139 against 1.128 at 400 on
+warehouse-20-40-10-2-2), so md's plan there only spent the budget: 9-18 s CPU in all).
 """
 from __future__ import annotations
 
@@ -19,15 +22,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
+from .. import _path_kernels
 from ..grid import GridMap
 from ..model import Plan, RobotSpec
 
 #: starts and goals in lanes per aisle from which an instance is crowded (see the module docstring)
 LANE_LOAD = 0.7
 #: robots from which md hands the instance to the dense solver at once
-CROWD_ROBOTS = 750
+CROWD_ROBOTS = 400
 #: fewer robots than this are never crowded and md's plan is not compared with the dense solver's:
 #: md is cheap there, and small hand-worked cases stay md's
 MIN_ROBOTS = 10
@@ -62,28 +65,32 @@ class Crowding:
 
 
 def crowding(grid: GridMap, robots: Sequence[RobotSpec], margin: float = 0.0) -> Crowding:
-    """Measure the instance (compiled code only: run labelling and counting by SciPy and NumPy)."""
+    """Measure the instance (compiled code only: runs counted by NumPy, aisles labelled by a numba kernel)."""
     if not robots:
         return Crowding(0, 0, 0)
     free = ~np.asarray(grid.blocked, dtype=bool)
     two = 4 * max(r.radius for r in robots) + 2 * margin   # two widest discs side by side
-    lanes = np.zeros_like(free)
-    for axis in (0, 1):   # runs of free cells along each row (axis 1) and each column (axis 0)
-        structure = np.zeros((3, 3), dtype=bool)
-        structure[1, :] = axis == 1
-        structure[:, 1] = structure[:, 1] | (axis == 0)
-        structure[1, 1] = True
-        runs, count = ndimage.label(free, structure=structure)
-        if count:
-            length = np.bincount(runs.ravel())[runs] * grid.resolution
-            lanes |= free & (length < two)
-    aisles, count = ndimage.label(lanes)
+    # runs of free cells along each row and each column, too short for two discs side by side
+    lanes = free & ((_run_lengths(free) * grid.resolution < two) | (_run_lengths(free.T).T * grid.resolution < two))
+    count = _path_kernels.count_components4(np.ascontiguousarray(lanes))   # aisles: 4-connected lanes
     if not count:
         return Crowding(len(robots), 0, 0)
     pts = np.array([p for r in robots for p in (r.start, r.goal)], dtype=float)
     cols = np.clip(np.floor(pts[:, 0] / grid.resolution).astype(int), 0, grid.width - 1)
     rows = np.clip(np.floor(pts[:, 1] / grid.resolution).astype(int), 0, grid.height - 1)
-    return Crowding(len(robots), int(count), int(np.count_nonzero(aisles[rows, cols])))
+    return Crowding(len(robots), int(count), int(np.count_nonzero(lanes[rows, cols])))
+
+
+def _run_lengths(free: np.ndarray) -> np.ndarray:
+    """Per cell, the length (cells) of the run of free cells along its row that holds it (0 where
+    blocked)."""
+    h, w = free.shape
+    flat = np.zeros((h, w + 1), dtype=bool)
+    flat[:, :w] = free   # a blocked column after each row: runs never wrap
+    flat = flat.ravel()
+    ids = np.cumsum(flat & ~np.concatenate([[False], flat[:-1]]))
+    counts = np.bincount(ids, weights=flat)
+    return np.where(flat, counts[ids], 0.0).reshape(h, w + 1)[:, :w]
 
 
 def sum_of_arrivals(plan: Plan) -> float:
