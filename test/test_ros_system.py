@@ -8,6 +8,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from fleet_planner.fleet import FleetMember
+from fleet_planner.fleet.jobstore import RESENT
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.demo.bringup import bring_up
 from fleet_planner.ros.demo.monitor import spin_until
@@ -91,7 +92,6 @@ BAD = [('{"schema": "fleet/task@1", "id": "B1", "pick": "chute_1", ', "B1", "not
        (Task(id="B2", pick="chute_7", place="B01-01").to_json(), "B2", "unknown station 'chute_7'"),
        (Task(id="B3", pick="chute_1", place="Q42-01").to_json(), "B3", "unknown address tag or storing site 'Q42-01'"),
        (Task(id="B4", pick="chute_1", place="B01-01", payload_kg=900.0).to_json(), "B4", "no robot can do it"),
-       (Task(id="S1", pick="chute_2", place="B02-01").to_json(), "S1", "duplicate task id 'S1'"),
        ('{"schema": "fleet/task@1", "id": "B6", "pick": "chute_1", "place": "B01-01", "payload_kg": NaN}',
         "B6", "task.payload_kg: must be a finite number (got NaN)")]
 
@@ -110,6 +110,10 @@ def test_bad_jobs_are_rejected_with_the_reason_and_a_good_one_still_completes(fl
     rejected = {e.task_id: e.reason for e in mon.events if e.event == "rejected"}
     for _, task_id, words in BAD:
         assert words in rejected[task_id], (task_id, rejected[task_id])
+    mon.submit(Task(id="S1", pick="chute_2", place="B02-01"))  # a known id: its job's state, not a new job
+    assert wait_for(fleet, lambda: any((e.reason or "").startswith(RESENT) for e in mon.events_of("S1")))
+    again = next(e for e in mon.events_of("S1") if (e.reason or "").startswith(RESENT))
+    assert again.event in ("accepted", "assigned", "picked", "done") and "S1" not in rejected
     mon.submit(Task(id="G1", pick="chute_2", place="B02-02"))
     assert wait_for(fleet, lambda: ended(fleet, "G1"))
     no_contact(fleet)

@@ -58,7 +58,7 @@ from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
 from .gate import GateBook
 from .intake import Roster
-from .jobstore import DuplicateJob, JobStore
+from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
 from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Occupancy, Target, can_do
@@ -72,6 +72,9 @@ LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
 #: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
 #: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
 STEP_BUDGET_S = 0.5
+#: finished jobs kept in memory (the latest ones); older ones are only in the job store, which
+#: still answers a re-sent id with its state (without a store such an id is a new job again)
+MAX_CLOSED_JOBS = 1000
 
 
 class FleetManager:
@@ -113,6 +116,8 @@ class FleetManager:
         self.planner = planner if planner is not None else get_planner("md", margin=self.margin)
         self.robots: dict[str, FleetRobot] = {}
         self.jobs: dict[str, Job] = {}
+        #: finished jobs still in ``jobs``, oldest first, with why they ended (at most MAX_CLOSED_JOBS)
+        self._closed: dict[str, str | None] = {}
         self._notes: list[str] = []
         self._plan_id = 0
         self.store = store
@@ -186,6 +191,12 @@ class FleetManager:
                 task = cast(Task, Task.from_dict(raw))
         except RecordError as exc:
             return [_event(_guess_id(raw), "rejected", now, reason=str(exc))]
+        try:
+            known = self._known(task.id, now)
+        except sqlite3.Error as exc:
+            return [_event(task.id, "rejected", now, reason=f"job store: cannot check the id ({exc})")]
+        if known is not None:  # ids are idempotent: the job's state, never a second job
+            return [known]
         problem = self._problem(task)
         if problem:
             return [_event(task.id, "rejected", now, reason=problem)]
@@ -205,19 +216,38 @@ class FleetManager:
         return [_event(task.id, "accepted", now)]
 
     def _record(self, job: Job, event: str, now: float, reason: str | None = None) -> None:
-        """Commit a change of ``job`` to the store (if any) before it is announced."""
+        """Commit a change of ``job`` to the store (if any) before it is announced. A finished job
+        stays in ``jobs`` until MAX_CLOSED_JOBS later ones finished (then only the store has it)."""
         if self.store is not None:
             self.store.update(job.task.id, event, job.state, job.robot, job.picked, now, reason)
+        if job.state in CLOSED:
+            self._closed.pop(job.task.id, None)
+            self._closed[job.task.id] = reason
+            while len(self._closed) > MAX_CLOSED_JOBS:
+                old = next(iter(self._closed))
+                del self._closed[old]
+                if old in self.jobs and self.jobs[old].state in CLOSED:
+                    del self.jobs[old]
+
+    def _known(self, task_id: str, now: float) -> TaskEvent | None:
+        """The event of the job's current state if ``task_id`` is a job's (in memory or in the
+        store), its reason starting with RESENT; None for a new id."""
+        job = self.jobs.get(task_id)
+        if job is not None:
+            state, picked, robot = job.state, job.picked, job.robot
+            reason = self._closed.get(task_id)
+            if reason is None and state in CLOSED and self.store is not None:
+                reason = self.store.reason(task_id)
+        else:
+            stored = self.store.get(task_id) if self.store is not None else None
+            if stored is None:
+                return None
+            state, picked, robot = stored.state, stored.picked, stored.robot
+            reason = self.store.reason(task_id) if state in CLOSED and self.store is not None else None
+        return _event(task_id, current_event(state, picked), now, robot,
+                      f"{RESENT}; {reason}" if reason else RESENT)
 
     def _problem(self, task: Task) -> str | None:
-        if task.id in self.jobs:
-            return f"task.id: duplicate task id {task.id!r} (already {self.jobs[task.id].state})"
-        try:
-            stored = self.store.get(task.id) if self.store is not None else None
-        except sqlite3.Error as exc:
-            return f"job store: cannot check the id ({exc})"
-        if stored is not None:
-            return f"task.id: duplicate task id {task.id!r} (already {stored.state})"
         station = self.warehouse.stations.get(task.pick)
         if station is None:
             chutes = ", ".join(s.name for s in self.warehouse.stations_of("chute"))
