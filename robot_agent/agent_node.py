@@ -111,6 +111,10 @@ class AgentNode(Node):
             "key file of the planner (fleet_planner/auth.py): with it, only task events, timed paths and gate "
             "records signed "
             "by one of its keys are taken, from any node (empty: only from the planner node, unsigned)")).value
+        operator_file = self.declare_parameter("auth_operator_file", "", _fixed(
+            "key file of the operators: with keys (this or auth_trust_file, whose keys it defaults to), manual "
+            "drive only by signed fleet/robot_command@1 on /robots/<id>/command (the manual service and cmd_vel "
+            "are refused)")).value
         gated = self.declare_parameter("gated", True, _fixed(
             "central: never enter a collision region before the robot ranked above has left it (by the "
             "planner's gate records on /robots/<id>/gate and the others' statuses); false: the clock alone")).value
@@ -164,7 +168,8 @@ class AgentNode(Node):
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
             subscribe(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
-        self.operator = AgentOperator(self, self.agent, robot_id, self.planner)  # manual drive, cmd_vel, e-stop
+        self.operator = AgentOperator(self, self.agent, robot_id, self.planner,  # manual drive, cmd_vel, e-stop
+                                      Keys(trust_file=operator_file or trust_file))
         self._timer = self.create_timer(1.0 / rate, self._on_timer)
         self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}, "
                                f"{mode} coordination")

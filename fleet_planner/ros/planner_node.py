@@ -151,6 +151,12 @@ class PlannerNode(Node):
                          self.declare_parameter("auth_trust_file", "", ParameterDescriptor(
             description="key file of the clients: with it, only tasks signed by one of its keys are taken "
                         "(empty: any task)", read_only=True)).value)
+        operator_file = self.declare_parameter("auth_operator_file", "", ParameterDescriptor(
+            description="key file of the operators: with keys (this, or else auth_trust_file's), only commands on "
+                        "/fleet/commands signed by one of them are obeyed, and the pause and e-stop services are "
+                        "refused but for engaging the e-stop (fleet_planner/ros/operator_services.py)",
+            read_only=True)).value
+        trust = self.get_parameter("auth_trust_file").value
         # obstacles of the intelligent space (fleet/obstacles.py): how they are predicted and forgotten
         ob_defaults = ObstacleParams()
         ob_values = {f.name: self.declare_parameter(f"obstacle_{f.name}", float(getattr(ob_defaults, f.name)), _range(
@@ -195,7 +201,7 @@ class PlannerNode(Node):
         limit = getattr(self.fleet.planner, "leg_time_limit", None)
         self._leg_limit = float(limit) if isinstance(limit, (int, float)) else None
         # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
-        self.operator = PlannerOperator(self, self.fleet, self._publish)
+        self.operator = PlannerOperator(self, self.fleet, self._publish, Keys(trust_file=operator_file or trust))
         create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
         self._timer = self.create_timer(period, self._on_timer)
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py) and the robots its
