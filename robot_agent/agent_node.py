@@ -15,6 +15,7 @@ Avoidance"; see docs/ARCHITECTURE.md), with wait messages on ``/fleet/wait_messa
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from functools import partial
 from typing import Any
@@ -68,6 +69,10 @@ def _range(description: str, lo: float, hi: float) -> ParameterDescriptor:
 
 def _fixed(description: str) -> ParameterDescriptor:
     return ParameterDescriptor(description=description, read_only=True)
+
+
+#: wall seconds a gate record refused only for a publisher without a known name is asked about again
+GATE_SETTLE_S = 5.0
 
 
 class AgentNode(Node):
@@ -152,6 +157,7 @@ class AgentNode(Node):
         events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
         self._gate_origin = OriginCheck(self, gates, planner)
+        self._gate_pending: tuple[GateRecord, float] | None = None
         self.keys = Keys(trust_file=trust_file)
         self._events_topic, self._gates_topic = events.topic_name, gates.topic_name
         self._pairing: PathPairing | None = None
@@ -223,7 +229,10 @@ class AgentNode(Node):
                     raise RecordError(f"gate {record.path_id}/{record.seq}: gate.auth: {problem} "
                                       f"({self.keys.refused} refused so far)")
             elif problem := self._gate_origin.problem():
+                if self._gate_origin.unnamed_only:  # likely the planner, just discovered: asked again (origin.py)
+                    self._gate_pending = (record, time.monotonic() + GATE_SETTLE_S)
                 raise RecordError(f"gate {record.path_id}/{record.seq}: not from the planner: {problem}")
+            self._gate_pending = None
             self.agent.on_gate(record)
         except RecordError as exc:
             self.get_logger().error(printable(f"gate record ignored: {exc}", 300), throttle_duration_sec=1.0)
@@ -298,8 +307,22 @@ class AgentNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
 
+    def _settle_gate(self) -> None:
+        """A gate record refused only because its publisher had no known name yet: taken once the
+        graph names only the planner there, dropped if another node is named or after GATE_SETTLE_S."""
+        record, until = self._gate_pending  # type: ignore[misc]
+        settled = self._gate_origin.settled()
+        if settled is None and time.monotonic() < until:
+            return
+        self._gate_pending = None
+        if settled:
+            self.get_logger().info(f"gate record {record.path_id}/{record.seq} taken: the planner is known now")
+            self.agent.on_gate(record)
+
     def _on_timer(self) -> None:
         try:
+            if self._gate_pending is not None:
+                self._settle_gate()
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_compact_json()))  # fleet/robot_status@2
             for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any

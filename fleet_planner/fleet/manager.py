@@ -572,11 +572,15 @@ class FleetManager:
             d.events.append(_event(job.task.id, "assigned", now, r.id))
 
     def _housekeeping(self, now: float, d: Decisions) -> None:
-        for r in sorted((r for r in self.robots.values() if r.free and now >= r.retry_at),
-                        key=lambda r: r.status.battery):
+        due = sorted((r for r in self.robots.values() if r.free and now >= r.retry_at), key=lambda r: r.status.battery)
+        if not due:
+            return
+        where = np.array([r.pos for r in due], dtype=float)   # (one test for all: idle robots cost little)
+        at_charger, at_stop = self._at_all(where, self.chargers), self._at_all(where, self.work_stops)
+        for r, charging, stopped in zip(due, at_charger, at_stop):
             if self._out_of_time():
                 return
-            if not r.free or self._at(r.pos, self.chargers):
+            if not r.free or charging:
                 continue
             low = r.status.battery < self.params.low_battery
             idle = now - r.idle_since >= self.params.idle_s
@@ -586,7 +590,7 @@ class FleetManager:
             if spot is not None:
                 if self._plan_leg(r, Target("charge", *spot), now, d) is None:
                     r.retry_at = now + SPOT_RETRY_S  # not planned again at every step
-            elif idle and self._at(r.pos, self.work_stops):
+            elif idle and stopped:
                 self._send_away(r, now, d)
 
     # -- helpers ---------------------------------------------------------------------------------------
@@ -723,6 +727,15 @@ class FleetManager:
             table = self._spot_trees[id(spots)] = (spots, np.asarray(list(spots.values()), dtype=float))
         at = table[1]
         return bool(np.min(np.hypot(at[:, 0] - pos[0], at[:, 1] - pos[1])) < AT_STATION_M)
+
+    def _at_all(self, where: np.ndarray, spots: Mapping[str, Point]) -> np.ndarray:
+        """For each row of ``where`` (x, y), whether it is at one of ``spots`` (as :meth:`_at`)."""
+        if not spots:
+            return np.zeros(len(where), dtype=bool)
+        self._at(tuple(where[0]), spots)  # (builds the table)
+        at = self._spot_trees[id(spots)][1]
+        gaps = np.hypot(where[:, None, 0] - at[None, :, 0], where[:, None, 1] - at[None, :, 1])
+        return gaps.min(axis=1) < AT_STATION_M
 
     # -- views for tools -------------------------------------------------------------------------------
     def trajectories(self) -> list[TimedPath]:
