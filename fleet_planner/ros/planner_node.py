@@ -64,6 +64,8 @@ MAX_NOTES_LOGGED = 40
 #: still finds the caller's frame on every call: a cost per status, not per line)
 STATUS_LOG_EVERY_S = 5.0
 
+#: the largest share of wall time the RViz markers may take (they are sent less often when they cost more)
+MARKERS_SHARE = 0.05
 #: wall seconds of leg planning per step at least, however fast the clock (one leg always goes)
 MIN_STEP_BUDGET_S = 0.05
 #: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
@@ -189,6 +191,7 @@ class PlannerNode(Node):
         self._gates: dict[str, Publisher] = {}
         self._inbox = StatusInbox()  # only the latest status of each robot is parsed (fleet/inbox.py)
         self._markers_at = -float("inf")   # (wall time, time.monotonic)
+        self._markers_gap = self._markers_period   # wall s until the next markers (see _publish)
         self._arrival_wall, self._arrival_now = -float("inf"), 0.0   # (see _arrival)
         self._said: dict[str, float] = {}   # when a line of each kind of the status path was last logged
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
@@ -393,10 +396,13 @@ class PlannerNode(Node):
         if d.legs:
             self._schedule.publish(record_to_string(self.fleet.schedule(now)))
         wall = time.monotonic()
-        if not 0.0 <= wall - self._markers_at < self._markers_period:
+        if not 0.0 <= wall - self._markers_at < self._markers_gap:
             self._markers_at = wall
             self._markers.publish(plan_markers(self.fleet.trajectories() + self.fleet.obstacles.trajectories(now),
                                                self.fleet.statuses(), self.frame_id, now))
+            # paced by their cost too: 500 robots' markers take ~0.2 s, which every second was a fifth
+            # of the planner's time and stretched the steps they fell into
+            self._markers_gap = max(self._markers_period, (time.monotonic() - wall) / MARKERS_SHARE)
 
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:
