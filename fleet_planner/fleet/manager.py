@@ -633,7 +633,9 @@ class FleetManager:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
                 r.trouble = exc.why
-                r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** r.leg_failures)
+                # (the exponent capped: a robot on its leg re-plans at every step, and 2 ** 1024 failures
+                # overflowed a float: every step of the planner then failed)
+                r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
                 r.leg_failures += 1
                 blocker = self.robots.get(exc.blocker) if exc.blocker is not None else None
                 if clear_way and blocker is not None and blocker.free:
