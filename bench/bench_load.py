@@ -12,18 +12,24 @@ for (chargers, parking): issue 9's load case. Printed per N:
   publishers' CPU (all children together), in % of one core;
 * step gaps: wall seconds between planning steps (median, max; the step period is 0.5 s) and the
   longest timer callback (step + publishing);
+* step work: CPU milliseconds inside the fleet manager's step (median, max), and the most CPU one
+  timer callback took (statuses taken, step, publishing): the work a step costs whatever else runs
+  on the machine (on a loaded machine a gap is this CPU stretched by the share of a core it gets);
 * status age: wall age of each robot's newest status at each step (median, max);
 * offline: robots the planner took for offline (all of them are alive: each one is false);
 * accept latency: wall seconds from publishing a task to its ``accepted`` event (median, max), and
-  how many of the tasks were accepted.
+  how many of the tasks were accepted (one more task goes before the measured seconds: a process's
+  first legs load numba's compiled kernels, a one-time cost of about a second).
 
 Timings on a loaded machine are noisy; CPU time is the better figure.
 
     nice .venv/bin/python bench/bench_load.py [--robots 50 100 200 500 1000] [--seconds 20] [--procs 4]
+        [--profile out/load.prof]   # cProfile of the planner process over the measured seconds (last N)
 """
 from __future__ import annotations
 
 import argparse
+import cProfile
 import json
 import math
 import os
@@ -34,6 +40,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -102,7 +109,7 @@ def publish(spec_file: str, hz: float, seconds: float) -> None:
 
 
 # -- the planner side --------------------------------------------------------------------------------------
-def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path) -> dict:
+def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path, profiler: Any = None) -> dict:
     kinds = load_kinds()
     warehouse = warehouse_for(min(n, 200))  # synthetic robots stand anywhere there is room
     members = place_robots(warehouse, kinds, n)
@@ -128,16 +135,24 @@ def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path) -> dict:
 
     fleet = node.fleet
     steps: list[float] = []
+    works: list[float] = []
+    cb_cpus: list[float] = []
+    cb_cpu0 = [0.0]
     callbacks: list[float] = []
     ages: list[float] = []
     offline = [0]
     measuring = [False]
-    step, publish_decisions = fleet.step, node._publish
+    step, publish_decisions, take = fleet.step, node._publish, node._take_statuses
+
+    def measured_take():
+        cb_cpu0[0] = time.process_time()
+        take()
 
     def measured_step(now):
-        t0 = time.monotonic()
+        t0, c0 = time.monotonic(), time.process_time()
         d = step(now)
         if measuring[0]:
+            works.append(time.process_time() - c0)
             steps.append(t0)
             wall = time.time()
             ages.extend(wall - r.status.stamp for r in fleet.robots.values())
@@ -149,10 +164,12 @@ def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path) -> dict:
         publish_decisions(d, now)
         if measuring[0] and steps:
             callbacks.append(time.monotonic() - steps[-1])
+            cb_cpus.append(time.process_time() - cb_cpu0[0])
         return t0
 
     fleet.step = measured_step  # type: ignore[method-assign]
     node._publish = measured_publish  # type: ignore[method-assign]
+    node._take_statuses = measured_take  # type: ignore[method-assign]  # (the timer's call, not the relay's)
 
     agents = []
     if opts.agents:  # real agent processes among the synthetic robots, measured
@@ -191,12 +208,17 @@ def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path) -> dict:
         warm = start + min(5.0, opts.seconds / 4)  # everyone joined; measured from then on
         chutes = [s.name for s in warehouse.stations_of("chute")]
         tags = [t for s in warehouse.stations_of("storage") for t in s.tags]
+        # one task before the measured seconds: the first legs of a process load numba's compiled
+        # kernels for their types (about 1 s, once), which is not a step gap of a running planner
+        tasks_pub.publish(String(data=Task(id=f"load_{n}_warm", pick=chutes[-1], place=tags[-1]).to_json()))
         k = 0
         while time.monotonic() - start < opts.seconds:
             executor.spin_once(timeout_sec=0.01)
             now = time.monotonic()
             if now >= warm and not measuring[0]:
                 measuring[0] = True
+                if profiler is not None:
+                    profiler.enable()
                 cpu0, wall0 = time.process_time(), now
                 kids0 = sum(proc_cpu_s(c.pid) for c in children)
                 agents0 = [proc_cpu_s(a.pid) for a in agents]
@@ -206,6 +228,8 @@ def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path) -> dict:
                 sent[task.id] = time.monotonic()
                 tasks_pub.publish(String(data=task.to_json()))
         measuring[0] = False
+        if profiler is not None:
+            profiler.disable()
         wall = time.monotonic() - wall0
         cpu = time.process_time() - cpu0
         kids = sum(proc_cpu_s(c.pid) for c in children) - kids0
@@ -234,9 +258,13 @@ def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path) -> dict:
     return {"n": n, "joined": len(fleet.robots), "cpu": 100 * cpu / wall, "pubs_cpu": 100 * kids / wall, "rss": rss,
             "gap_med": statistics.median(gaps) if gaps else math.nan, "gap_max": max(gaps, default=math.nan),
             "cb_max": max(callbacks, default=math.nan),
+            "work_med": 1e3 * statistics.median(works) if works else math.nan,
+            "work_max": 1e3 * max(works, default=math.nan),
+            "cb_cpu_max": 1e3 * max(cb_cpus, default=math.nan),
             "age_med": statistics.median(ages) if ages else math.nan, "age_max": max(ages, default=math.nan),
             "offline": offline[0], "lat_med": statistics.median(lat) if lat else math.nan,
             "lat_max": max(lat, default=math.nan), "accepted": len(accepted), "sent": len(sent),
+            "load": os.getloadavg()[0],  # the machine's 1-minute load average at the end
             "agent_cpu": statistics.mean(agent_cpu) if agent_cpu else math.nan,
             "agent_rss": statistics.mean(agent_rss) if agent_rss else math.nan}
 
@@ -251,6 +279,8 @@ def main() -> None:
                    help="of the N robots, this many are real agent processes (measured: CPU, memory)")
     p.add_argument("--hear", choices=("relay", "all"), default="relay",
                    help="what the agents hear: the planner's neighbour relay (default) or every status")
+    p.add_argument("--profile", metavar="FILE", help="cProfile the planner process over the measured seconds "
+                   "of the last N into FILE (pstats)")
     p.add_argument("--publisher", help=argparse.SUPPRESS)
     opts = p.parse_args()
     if opts.publisher:
@@ -264,15 +294,21 @@ def main() -> None:
           f"a task every 2 s, ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}"
           + (f"; {opts.agents} of them real agents hearing {opts.hear}" if opts.agents else ""))
     print(f"{'N':>5} {'joined':>6} {'planner CPU%':>12} {'pubs CPU%':>9} {'RSS MB':>6} {'gap med s':>9} "
-          f"{'gap max s':>9} {'cb max s':>8} {'age med s':>9} {'age max s':>9} {'offline':>7} {'accept med s':>12} "
-          f"{'accept max s':>12} {'accepted':>8}" + (f" {'agent CPU%':>10} {'agent MB':>8}" if opts.agents else ""))
+          f"{'gap max s':>9} {'cb max s':>8} {'step ms med':>11} {'step ms max':>11} {'cb CPU ms max':>13} "
+          f"{'age med s':>9} {'age max s':>9} {'offline':>7} {'accept med s':>12} "
+          f"{'accept max s':>12} {'accepted':>8} {'load':>5}"
+          + (f" {'agent CPU%':>10} {'agent MB':>8}" if opts.agents else ""))
     try:
-        for n in opts.robots:
-            r = run(context, n, opts, tmp)
+        for i, n in enumerate(opts.robots):
+            profiler = cProfile.Profile() if opts.profile and i == len(opts.robots) - 1 else None
+            r = run(context, n, opts, tmp, profiler)
+            if profiler is not None:
+                profiler.dump_stats(opts.profile)
             print(f"{r['n']:>5} {r['joined']:>6} {r['cpu']:>12.0f} {r['pubs_cpu']:>9.0f} {r['rss']:>6.0f} "
-                  f"{r['gap_med']:>9.2f} {r['gap_max']:>9.2f} {r['cb_max']:>8.2f} {r['age_med']:>9.2f} "
+                  f"{r['gap_med']:>9.2f} {r['gap_max']:>9.2f} {r['cb_max']:>8.2f} {r['work_med']:>11.1f} "
+                  f"{r['work_max']:>11.1f} {r['cb_cpu_max']:>13.1f} {r['age_med']:>9.2f} "
                   f"{r['age_max']:>9.2f} {r['offline']:>7} {r['lat_med']:>12.2f} {r['lat_max']:>12.2f} "
-                  f"{r['accepted']:>4}/{r['sent']:<3}"
+                  f"{r['accepted']:>4}/{r['sent']:<3} {r['load']:>5.1f}"
                   + (f" {r['agent_cpu']:>10.1f} {r['agent_rss']:>8.0f}" if opts.agents else ""), flush=True)
     finally:
         rclpy.try_shutdown(context=context)

@@ -602,6 +602,7 @@ class Command(Record):
     priority: int | None = spec(optional(integer()), default=None)
     station: str | None = spec(optional(nonempty), default=None)
     reason: str | None = spec(optional(text), default=None)
+    auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with operator keys)
 
     def _check_together(self) -> None:
         for name in COMMAND_NEEDS[self.command]:
@@ -713,14 +714,37 @@ class OperatorState(Record):
     manual: tuple[str, ...] = spec(list_of(ros_id, unique=True), default=())
 
 
+@dataclass(frozen=True)
+class RobotCommand(Record):
+    """The operator's hand on one robot, for its agent (``/robots/<id>/command``): switch manual
+    drive (``manual``) and/or a velocity command in manual drive (``linear`` m/s forward, ``angular``
+    rad/s, as a Twist's ``linear.x`` / ``angular.z``). Where operator keys are configured this signed
+    record is the only way (the SetBool ``manual`` service and Twist ``cmd_vel`` carry no signature
+    and are refused); a switch is answered on ``/fleet/command_replies`` with the same ``id``."""
+
+    SCHEMA: ClassVar[str] = "fleet/robot_command@1"
+    NAME: ClassVar[str] = "robot_command"
+
+    id: str = spec(nonempty)
+    robot_id: str = spec(ros_id)
+    manual: bool | None = spec(optional(boolean), default=None)
+    linear: float | None = spec(optional(number()), default=None)
+    angular: float | None = spec(optional(number()), default=None)
+    auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with operator keys)
+
+    def _check_together(self) -> None:
+        if self.manual is None and self.linear is None and self.angular is None:
+            raise RecordError("robot_command.manual: a command needs manual, linear or angular")
+
+
 RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours,
-                                     Command, CommandReply, ObstacleRecord, GateRecord, OperatorState)
+                                     Command, CommandReply, ObstacleRecord, GateRecord, OperatorState, RobotCommand)
 
 __all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Check", "Command", "CommandReply",
            "EVENTS_NEEDING_REASON", "GATE_LINK", "GateRecord", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS",
            "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS", "MAX_OBSTACLE_SPEED",
            "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours", "OBSTACLE_KINDS", "ObstacleRecord",
-           "OperatorState", "PathAuth", "RECORDS", "Record", "RecordError", "RobotStatus", "Schedule", "TASK_EVENTS",
-           "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer", "list_of",
-           "load_json", "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id", "spec",
-           "text", "unsigned_json"]
+           "OperatorState", "PathAuth", "RECORDS", "Record", "RecordError", "RobotCommand", "RobotStatus", "Schedule",
+           "TASK_EVENTS", "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer",
+           "list_of", "load_json", "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id",
+           "spec", "text", "unsigned_json"]

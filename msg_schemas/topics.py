@@ -112,11 +112,13 @@ PAUSE_FLEET_SERVICE = "fleet/pause"
 ESTOP_SERVICE = "fleet/estop"
 #: geometry_msgs/Twist to a robot in manual drive: best effort, so any teleop publisher matches
 CMD_VEL_QOS = _qos(10, reliable=False)
+#: ``fleet/robot_command@1`` to one agent (``robot_topic(id, "command")``): manual drive, signed with operator keys
+ROBOT_COMMAND_QOS = _qos(10)
 
 
 def robot_topic(robot_id: str, name: str) -> str:
-    """``/robots/<robot_id>/<name>``: ``pause`` (SetBool, planner), ``manual`` (SetBool, agent),
-    ``cmd_vel`` (Twist, agent); ValueError if the id cannot be part of a topic name."""
+    """``/robots/<robot_id>/<name>``: ``manual`` (SetBool, agent), ``cmd_vel`` (Twist, agent),
+    ``command`` (``fleet/robot_command@1``, agent); ValueError if the id cannot be part of a topic name."""
     problem = robot_id_problem(robot_id)
     if problem:
         raise ValueError(f"robot id {problem}")

@@ -15,6 +15,7 @@ Avoidance"; see docs/ARCHITECTURE.md), with wait messages on ``/fleet/wait_messa
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from functools import partial
 from typing import Any
@@ -70,6 +71,10 @@ def _fixed(description: str) -> ParameterDescriptor:
     return ParameterDescriptor(description=description, read_only=True)
 
 
+#: wall seconds a gate record refused only for a publisher without a known name is asked about again
+GATE_SETTLE_S = 5.0
+
+
 class AgentNode(Node):
     """One robot. ``warehouse`` and ``kinds`` may be handed in (tests); otherwise they are read from the
     files named by the parameters ``warehouse_file`` and ``kinds_file`` (empty: the shipped ones).
@@ -111,6 +116,10 @@ class AgentNode(Node):
             "key file of the planner (fleet_planner/auth.py): with it, only task events, timed paths and gate "
             "records signed "
             "by one of its keys are taken, from any node (empty: only from the planner node, unsigned)")).value
+        operator_file = self.declare_parameter("auth_operator_file", "", _fixed(
+            "key file of the operators: with keys (this or auth_trust_file, whose keys it defaults to), manual "
+            "drive only by signed fleet/robot_command@1 on /robots/<id>/command (the manual service and cmd_vel "
+            "are refused)")).value
         gated = self.declare_parameter("gated", True, _fixed(
             "central: never enter a collision region before the robot ranked above has left it (by the "
             "planner's gate records on /robots/<id>/gate and the others' statuses); false: the clock alone")).value
@@ -148,6 +157,7 @@ class AgentNode(Node):
         events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
         self._gate_origin = OriginCheck(self, gates, planner)
+        self._gate_pending: tuple[GateRecord, float] | None = None
         self.keys = Keys(trust_file=trust_file)
         self._events_topic, self._gates_topic = events.topic_name, gates.topic_name
         self._pairing: PathPairing | None = None
@@ -164,7 +174,8 @@ class AgentNode(Node):
         if self.agent.strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
             subscribe(String, topics.WAIT_MESSAGES, self._on_wait_message, topics.WAIT_MESSAGES_QOS)
-        self.operator = AgentOperator(self, self.agent, robot_id, self.planner)  # manual drive, cmd_vel, e-stop
+        self.operator = AgentOperator(self, self.agent, robot_id, self.planner,  # manual drive, cmd_vel, e-stop
+                                      Keys(trust_file=operator_file or trust_file))
         self._timer = self.create_timer(1.0 / rate, self._on_timer)
         self.get_logger().info(f"robot {robot_id} ({kind}) at ({x:g}, {y:g}), battery {battery:.0%}, "
                                f"{mode} coordination")
@@ -218,7 +229,10 @@ class AgentNode(Node):
                     raise RecordError(f"gate {record.path_id}/{record.seq}: gate.auth: {problem} "
                                       f"({self.keys.refused} refused so far)")
             elif problem := self._gate_origin.problem():
+                if self._gate_origin.unnamed_only:  # likely the planner, just discovered: asked again (origin.py)
+                    self._gate_pending = (record, time.monotonic() + GATE_SETTLE_S)
                 raise RecordError(f"gate {record.path_id}/{record.seq}: not from the planner: {problem}")
+            self._gate_pending = None
             self.agent.on_gate(record)
         except RecordError as exc:
             self.get_logger().error(printable(f"gate record ignored: {exc}", 300), throttle_duration_sec=1.0)
@@ -293,8 +307,22 @@ class AgentNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
 
+    def _settle_gate(self) -> None:
+        """A gate record refused only because its publisher had no known name yet: taken once the
+        graph names only the planner there, dropped if another node is named or after GATE_SETTLE_S."""
+        record, until = self._gate_pending  # type: ignore[misc]
+        settled = self._gate_origin.settled()
+        if settled is None and time.monotonic() < until:
+            return
+        self._gate_pending = None
+        if settled:
+            self.get_logger().info(f"gate record {record.path_id}/{record.seq} taken: the planner is known now")
+            self.agent.on_gate(record)
+
     def _on_timer(self) -> None:
         try:
+            if self._gate_pending is not None:
+                self._settle_gate()
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_compact_json()))  # fleet/robot_status@2
             for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any

@@ -18,6 +18,7 @@ from fleet_planner.fleet import (
     load_fleet,
     samples_to_path,
 )
+from fleet_planner.fleet.jobstore import RESENT
 from fleet_planner.grid import GridMap
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import RobotModel, load_kinds
@@ -164,12 +165,13 @@ def test_bad_tasks_are_rejected_naming_the_problem(raw, words):
     assert fm.jobs == {}
 
 
-def test_good_tasks_are_accepted_by_tag_or_site_and_a_duplicate_id_is_rejected():
+def test_good_tasks_are_accepted_by_tag_or_site_and_a_known_id_gets_the_jobs_state():
     fm = manager()
     assert [e.event for e in fm.submit(task("J1", place="B02-03"), 0.0)] == ["accepted"]
     assert [e.event for e in fm.submit(json.dumps(task("J2", place="B04").to_dict()), 0.0)] == ["accepted"]
-    [dup] = fm.submit(task("J1", pick="chute_2"), 1.0)
-    assert dup.event == "rejected" and "duplicate task id 'J1'" in dup.reason
+    [dup] = fm.submit(task("J1", pick="chute_2"), 1.0)  # (a copy, changed or not, is not a second job)
+    assert (dup.event, dup.task_id, dup.stamp) == ("accepted", "J1", 1.0) and dup.reason.startswith(RESENT)
+    assert len(fm.jobs) == 2
     assert fm.jobs["J1"].place.name == "B02" and fm.jobs["J2"].place.name == "B04"
     assert fm.jobs["J1"].pick.name == "chute_1"
 

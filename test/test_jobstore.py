@@ -12,6 +12,8 @@ import textwrap
 from test_dispatch import FAST, PARKING, WH, Sim, manager, status, task
 
 from fleet_planner.fleet import DispatchParams, FleetManager, JobStore
+from fleet_planner.fleet import manager as manager_module
+from fleet_planner.fleet.jobstore import RESENT
 
 FLEET = [("r1", "cargo", 2.25, 10.75, 1.0), ("r2", "cargo", 4.25, 10.75, 1.0), ("r3", "cargo", 6.25, 10.75, 1.0)]
 TASKS = [task(f"J{i}", pick=f"chute_{1 + i % 2}", place=f"B0{1 + i % 4}-01") for i in range(10)]
@@ -54,14 +56,54 @@ def test_accepted_jobs_survive_a_dropped_manager_and_go_on(tmp_path):
         assert events.count("picked") == 1 and events.count("done") == 1
 
 
-def test_a_known_id_is_a_duplicate_after_a_restart(tmp_path):
+def test_a_known_id_gets_the_jobs_state_after_a_restart(tmp_path):
     path = tmp_path / "jobs.db"
     fm = FleetManager(WH, FAST, store=JobStore(path))
     fm.submit(TASKS[0], 1.0)
     fm2 = FleetManager(WH, FAST, store=JobStore(path))
     (ev,) = fm2.submit(TASKS[0], 2.0)
-    assert ev.event == "rejected" and "duplicate task id 'J0'" in ev.reason
-    assert len(fm2.jobs) == 1
+    assert (ev.event, ev.robot_id) == ("accepted", None) and ev.reason.startswith(RESENT)
+    assert len(fm2.jobs) == 1 and [t.event for t in JobStore(path).history("J0")] == ["accepted", "reloaded"]
+
+
+def test_a_re_sent_id_gets_its_current_event_also_once_only_the_store_has_the_job(tmp_path, monkeypatch):
+    """Ids are idempotent for good: a copy of an id is answered with the event of the job's state now
+    (assigned, picked, done, failed with its reason), whether the job is still in memory or, finished
+    long ago, only in the store, and before or after a restart; never a second job."""
+    monkeypatch.setattr(manager_module, "MAX_CLOSED_JOBS", 3)
+    path = tmp_path / "jobs.db"
+    sim = Sim(FLEET)
+    sim.fm = FleetManager(WH, FAST, DispatchParams(), PARKING, store=JobStore(path))
+    seen: dict[str, set] = {}
+
+    def answer(t):
+        (ev,) = sim.fm.submit(t, sim.t)
+        assert ev.reason.startswith(RESENT) and ev.task_id == t.id, ev
+        job = sim.fm.jobs.get(t.id)
+        if job is not None and job.state == "active":  # the robot on it, as the planner last said
+            assert ev.event == ("picked" if job.picked else "assigned") and ev.robot_id == job.robot
+        seen.setdefault(t.id, set()).add(ev.event)
+        return ev
+
+    def all_done():
+        for t in TASKS[:4]:
+            answer(t)
+        return all(sim.last(t.id) == "done" for t in TASKS)
+
+    sim.submit(*TASKS)
+    assert sim.run_until(all_done, limit=1500.0)
+    assert {"accepted", "assigned", "picked", "done"} <= set.union(*seen.values())
+    assert len(sim.fm.jobs) == 3  # finished jobs leave memory; the store keeps them
+    for fm in (sim.fm, FleetManager(WH, FAST, store=JobStore(path))):  # before and after a restart
+        for t in TASKS:
+            (ev,) = fm.submit(t, 9999.0)
+            assert (ev.event, ev.task_id) == ("done", t.id) and ev.robot_id in {"r1", "r2", "r3"}
+    assert JobStore(path).counts() == {"done": 10}
+    store = JobStore(path)
+    store.add(task("F1"), 99, 1.0)
+    store.update("F1", "failed", "failed", "r2", True, 2.0, "robot r2 is offline with the goods")
+    (ev,) = FleetManager(WH, FAST, store=JobStore(path)).submit(task("F1"), 3.0)
+    assert ev.event == "failed" and ev.robot_id == "r2" and ev.reason == f"{RESENT}; robot r2 is offline with the goods"
 
 
 def test_a_manager_killed_with_sigkill_loses_nothing(tmp_path):
@@ -83,7 +125,8 @@ def test_a_manager_killed_with_sigkill_loses_nothing(tmp_path):
     assert done.returncode == -signal.SIGKILL
     fm = FleetManager(WH, FAST, store=JobStore(path))
     assert sorted(fm.jobs) == sorted(f"K{i}" for i in range(10))
-    assert fm.submit(task("K3"), 2.0)[0].event == "rejected"
+    (again,) = fm.submit(task("K3"), 2.0)
+    assert again.event == "accepted" and again.reason.startswith(RESENT) and len(fm.jobs) == 10
 
 
 def test_goods_picked_before_a_restart_are_placed_not_picked_again(tmp_path):

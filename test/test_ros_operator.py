@@ -63,17 +63,17 @@ def still(fleet, rid, seconds):
     return math.dist((status(fleet, rid).x, status(fleet, rid).y), (st0.x, st0.y)) <= 1e-6
 
 
-def test_pausing_a_robot_over_its_service_holds_it_and_resuming_lets_it_finish(fleet):
+def test_pausing_a_robot_by_command_holds_it_and_resuming_lets_it_finish(fleet):
     mon = fleet.monitor
     mon.submit(Task(id="OP1", pick="chute_1", place="B01-02"))
     assert wait_for(fleet, lambda: any(e.event == "assigned" for e in mon.events_of("OP1")))
     rid = next(e.robot_id for e in mon.events_of("OP1") if e.event == "assigned")
     assert wait_for(fleet, lambda: status(fleet, rid).mode == "driving")
-    res = call(fleet, topics.robot_topic(rid, "pause"), True)
-    assert res.success and "paused" in res.message
+    res = command(fleet, command="pause", robot_id=rid)
+    assert res.ok and "paused" in res.message
     wait_for(fleet, lambda: status(fleet, rid).mode != "driving")
     assert still(fleet, rid, 3.0), "a paused robot moved"
-    assert call(fleet, topics.robot_topic(rid, "pause"), False).success
+    assert command(fleet, command="resume", robot_id=rid).ok
     assert wait_for(fleet, lambda: ended(fleet, "OP1"))
     no_contact(fleet)
 

@@ -8,6 +8,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from fleet_planner.fleet import FleetMember
+from fleet_planner.fleet.jobstore import RESENT
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.demo.bringup import bring_up
 from fleet_planner.ros.demo.monitor import spin_until
@@ -91,7 +92,6 @@ BAD = [('{"schema": "fleet/task@1", "id": "B1", "pick": "chute_1", ', "B1", "not
        (Task(id="B2", pick="chute_7", place="B01-01").to_json(), "B2", "unknown station 'chute_7'"),
        (Task(id="B3", pick="chute_1", place="Q42-01").to_json(), "B3", "unknown address tag or storing site 'Q42-01'"),
        (Task(id="B4", pick="chute_1", place="B01-01", payload_kg=900.0).to_json(), "B4", "no robot can do it"),
-       (Task(id="S1", pick="chute_2", place="B02-01").to_json(), "S1", "duplicate task id 'S1'"),
        ('{"schema": "fleet/task@1", "id": "B6", "pick": "chute_1", "place": "B01-01", "payload_kg": NaN}',
         "B6", "task.payload_kg: must be a finite number (got NaN)")]
 
@@ -110,6 +110,10 @@ def test_bad_jobs_are_rejected_with_the_reason_and_a_good_one_still_completes(fl
     rejected = {e.task_id: e.reason for e in mon.events if e.event == "rejected"}
     for _, task_id, words in BAD:
         assert words in rejected[task_id], (task_id, rejected[task_id])
+    mon.submit(Task(id="S1", pick="chute_2", place="B02-01"))  # a known id: its job's state, not a new job
+    assert wait_for(fleet, lambda: any((e.reason or "").startswith(RESENT) for e in mon.events_of("S1")))
+    again = next(e for e in mon.events_of("S1") if (e.reason or "").startswith(RESENT))
+    assert again.event in ("accepted", "assigned", "picked", "done") and "S1" not in rejected
     mon.submit(Task(id="G1", pick="chute_2", place="B02-02"))
     assert wait_for(fleet, lambda: ended(fleet, "G1"))
     no_contact(fleet)
@@ -134,7 +138,7 @@ def test_a_robot_whose_agent_dies_is_marked_offline_and_another_robot_does_its_j
 
 def test_a_restarted_planner_node_with_the_same_job_store_keeps_its_open_jobs(ros_context, tmp_path):
     """kill -9 in spirit: the first node is dropped without a word to its store; the second, on the
-    same file, has every accepted job open and refuses a re-sent id."""
+    same file, has every accepted job open and answers a re-sent id with its job's state."""
     from fleet_planner.ros.planner_node import PlannerNode
 
     store = [Parameter("job_store", value=str(tmp_path / "jobs.db"))]
@@ -150,6 +154,6 @@ def test_a_restarted_planner_node_with_the_same_job_store_keeps_its_open_jobs(ro
     try:
         assert {t.id for t in tasks} <= set(second.fleet.jobs)
         [again] = second.fleet.submit(tasks[0], 1.0)
-        assert again.event == "rejected" and "duplicate" in (again.reason or "")
+        assert again.event == "accepted" and (again.reason or "").startswith(RESENT) and len(second.fleet.jobs) == 3
     finally:
         second.destroy_node()

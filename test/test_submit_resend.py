@@ -1,7 +1,8 @@
 """``fleet-submit`` when the planner's first answer is lost (DDS discovery is not symmetric: the
 planner's event writer can match our reader a moment after our task writer matched its reader):
-with nothing heard for a while it sends the task once more, takes the planner's "duplicate task id
-(already ...)" answer to that copy as "it has the job" and follows the job to its end. A fake
+with nothing heard for a while it sends the task once more, takes the planner's answer to that copy
+(the job's current event, its reason starting with RESENT) as "it has the job" and follows the job to
+its end. A fake
 planner that never answers the first copy stands in for the lost ``accepted``."""
 import threading
 
@@ -9,6 +10,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import String
 
+from fleet_planner.fleet.jobstore import RESENT
 from fleet_planner.ros import submit
 from fleet_planner.ros.submit import Submitter, follow
 from msg_schemas import topics
@@ -16,8 +18,8 @@ from msg_schemas.records import Task, TaskEvent
 
 
 class FakePlanner:
-    """Takes tasks; the first copy of an id goes unanswered, a later one gets the planner's
-    duplicate-id rejection naming ``state``, then (with ``then``) that event."""
+    """Takes tasks; the first copy of an id goes unanswered, a later one gets the planner's answer
+    to a known id (the event ``state``, reason RESENT), then (with ``then``) that event."""
 
     def __init__(self, context, state: str, then: str | None):
         self.node = rclpy.create_node("fake_planner", context=context)
@@ -39,8 +41,9 @@ class FakePlanner:
         n = self.copies[task.id] = self.copies.get(task.id, 0) + 1
         if n == 1:
             return  # its "accepted" is lost
-        reason = f"task.id: duplicate task id {task.id!r} (already {self.state})"
-        self._events.publish(String(data=TaskEvent(task_id=task.id, event="rejected", stamp=1.0,
+        reason = RESENT + ("; the robot broke down" if self.state == "failed" else "")
+        self._events.publish(String(data=TaskEvent(task_id=task.id, event=self.state, stamp=1.0,
+                                                   robot_id=None if self.state == "accepted" else "r1",
                                                    reason=reason).to_json()))
         if self.then is not None:
             self._events.publish(String(data=TaskEvent(task_id=task.id, event=self.then, stamp=2.0,
@@ -70,14 +73,15 @@ def run(ros_context, task_id, state, then, monkeypatch):
 
 
 def test_a_lost_first_answer_makes_fleet_submit_send_once_more_and_follow_the_job(ros_context, monkeypatch):
-    code, node, fake = run(ros_context, "RS1", "active", "done", monkeypatch)
+    code, node, fake = run(ros_context, "RS1", "assigned", "done", monkeypatch)
     assert fake.copies == {"RS1": 2} and node.sent == 2
-    assert node.already == "active" and [e.event for e in node.events] == ["done"]
-    assert code == 0  # the duplicate-id answer to its own second copy is not a rejection of the job
+    assert node.already == "assigned" and [e.event for e in node.events] == ["assigned", "done"]
+    assert code == 0  # the answer to its own second copy is the job's state, not a rejection
 
 
 def test_a_job_the_planner_already_finished_ends_the_run_with_that_outcome(ros_context, monkeypatch):
     code, node, fake = run(ros_context, "RS2", "failed", None, monkeypatch)
     assert node.sent == 2 and node.already == "failed" and code == 1
+    assert "the robot broke down" in node.events[-1].reason
     code, node, fake = run(ros_context, "RS3", "done", None, monkeypatch)
     assert node.already == "done" and code == 0

@@ -23,6 +23,20 @@ from msg_schemas.records import Task
 
 #: the states a job is finished in (never reloaded)
 CLOSED = ("done", "failed", "cancelled")
+#: how the answer to a task whose id is known already begins its reason: the event is the job's
+#: current state (:func:`current_event`), not news (``fleet-submit`` reads it so)
+RESENT = "re-sent task id: the job's state now"
+
+
+def current_event(state: str, picked: bool) -> str:
+    """The task event that tells a job's ``state`` to a client sending its id again: ``accepted``
+    (queued), ``assigned`` or ``picked`` (active: on its robot, before or after the pick), ``done``,
+    ``failed`` or ``cancelled``: what the planner last said about the job."""
+    if state == "queued":
+        return "accepted"
+    if state == "active":
+        return "picked" if picked else "assigned"
+    return state
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
@@ -164,6 +178,12 @@ class JobStore:
         row = self._db.execute("SELECT COALESCE(MAX(seq) + 1, 0) FROM jobs").fetchone()
         return int(row[0])
 
+    def reason(self, job_id: str) -> str | None:
+        """The reason of the job's last change that gave one (why it failed or was cancelled)."""
+        row = self._db.execute("SELECT reason FROM transitions WHERE job = ? AND reason IS NOT NULL "
+                               "ORDER BY n DESC LIMIT 1", (job_id,)).fetchone()
+        return None if row is None else str(row[0])
+
     def history(self, job_id: str) -> list[Transition]:
         rows = self._db.execute("SELECT event, state, robot, picked, stamp, reason FROM transitions "
                                 "WHERE job = ? ORDER BY n", (job_id,)).fetchall()
@@ -179,4 +199,4 @@ def _job(row: tuple[str, int, str, str | None, int]) -> StoredJob:
     return StoredJob(cast(Task, Task.from_json(text)), int(seq), state, robot, bool(picked))
 
 
-__all__ = ["CLOSED", "DuplicateJob", "JobStore", "StoredJob", "Transition"]
+__all__ = ["CLOSED", "RESENT", "DuplicateJob", "JobStore", "StoredJob", "Transition", "current_event"]

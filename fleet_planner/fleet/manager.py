@@ -58,7 +58,7 @@ from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
 from .gate import GateBook
 from .intake import Roster
-from .jobstore import DuplicateJob, JobStore
+from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
 from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Occupancy, Target, can_do
@@ -72,6 +72,9 @@ LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
 #: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
 #: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
 STEP_BUDGET_S = 0.5
+#: finished jobs kept in memory (the latest ones); older ones are only in the job store, which
+#: still answers a re-sent id with its state (without a store such an id is a new job again)
+MAX_CLOSED_JOBS = 1000
 
 
 class FleetManager:
@@ -113,6 +116,8 @@ class FleetManager:
         self.planner = planner if planner is not None else get_planner("md", margin=self.margin)
         self.robots: dict[str, FleetRobot] = {}
         self.jobs: dict[str, Job] = {}
+        #: finished jobs still in ``jobs``, oldest first, with why they ended (at most MAX_CLOSED_JOBS)
+        self._closed: dict[str, str | None] = {}
         self._notes: list[str] = []
         self._plan_id = 0
         self.store = store
@@ -186,6 +191,12 @@ class FleetManager:
                 task = cast(Task, Task.from_dict(raw))
         except RecordError as exc:
             return [_event(_guess_id(raw), "rejected", now, reason=str(exc))]
+        try:
+            known = self._known(task.id, now)
+        except sqlite3.Error as exc:
+            return [_event(task.id, "rejected", now, reason=f"job store: cannot check the id ({exc})")]
+        if known is not None:  # ids are idempotent: the job's state, never a second job
+            return [known]
         problem = self._problem(task)
         if problem:
             return [_event(task.id, "rejected", now, reason=problem)]
@@ -205,19 +216,38 @@ class FleetManager:
         return [_event(task.id, "accepted", now)]
 
     def _record(self, job: Job, event: str, now: float, reason: str | None = None) -> None:
-        """Commit a change of ``job`` to the store (if any) before it is announced."""
+        """Commit a change of ``job`` to the store (if any) before it is announced. A finished job
+        stays in ``jobs`` until MAX_CLOSED_JOBS later ones finished (then only the store has it)."""
         if self.store is not None:
             self.store.update(job.task.id, event, job.state, job.robot, job.picked, now, reason)
+        if job.state in CLOSED:
+            self._closed.pop(job.task.id, None)
+            self._closed[job.task.id] = reason
+            while len(self._closed) > MAX_CLOSED_JOBS:
+                old = next(iter(self._closed))
+                del self._closed[old]
+                if old in self.jobs and self.jobs[old].state in CLOSED:
+                    del self.jobs[old]
+
+    def _known(self, task_id: str, now: float) -> TaskEvent | None:
+        """The event of the job's current state if ``task_id`` is a job's (in memory or in the
+        store), its reason starting with RESENT; None for a new id."""
+        job = self.jobs.get(task_id)
+        if job is not None:
+            state, picked, robot = job.state, job.picked, job.robot
+            reason = self._closed.get(task_id)
+            if reason is None and state in CLOSED and self.store is not None:
+                reason = self.store.reason(task_id)
+        else:
+            stored = self.store.get(task_id) if self.store is not None else None
+            if stored is None:
+                return None
+            state, picked, robot = stored.state, stored.picked, stored.robot
+            reason = self.store.reason(task_id) if state in CLOSED and self.store is not None else None
+        return _event(task_id, current_event(state, picked), now, robot,
+                      f"{RESENT}; {reason}" if reason else RESENT)
 
     def _problem(self, task: Task) -> str | None:
-        if task.id in self.jobs:
-            return f"task.id: duplicate task id {task.id!r} (already {self.jobs[task.id].state})"
-        try:
-            stored = self.store.get(task.id) if self.store is not None else None
-        except sqlite3.Error as exc:
-            return f"job store: cannot check the id ({exc})"
-        if stored is not None:
-            return f"task.id: duplicate task id {task.id!r} (already {stored.state})"
         station = self.warehouse.stations.get(task.pick)
         if station is None:
             chutes = ", ".join(s.name for s in self.warehouse.stations_of("chute"))
@@ -542,11 +572,15 @@ class FleetManager:
             d.events.append(_event(job.task.id, "assigned", now, r.id))
 
     def _housekeeping(self, now: float, d: Decisions) -> None:
-        for r in sorted((r for r in self.robots.values() if r.free and now >= r.retry_at),
-                        key=lambda r: r.status.battery):
+        due = sorted((r for r in self.robots.values() if r.free and now >= r.retry_at), key=lambda r: r.status.battery)
+        if not due:
+            return
+        where = np.array([r.pos for r in due], dtype=float)   # (one test for all: idle robots cost little)
+        at_charger, at_stop = self._at_all(where, self.chargers), self._at_all(where, self.work_stops)
+        for r, charging, stopped in zip(due, at_charger, at_stop):
             if self._out_of_time():
                 return
-            if not r.free or self._at(r.pos, self.chargers):
+            if not r.free or charging:
                 continue
             low = r.status.battery < self.params.low_battery
             idle = now - r.idle_since >= self.params.idle_s
@@ -556,7 +590,7 @@ class FleetManager:
             if spot is not None:
                 if self._plan_leg(r, Target("charge", *spot), now, d) is None:
                     r.retry_at = now + SPOT_RETRY_S  # not planned again at every step
-            elif idle and self._at(r.pos, self.work_stops):
+            elif idle and stopped:
                 self._send_away(r, now, d)
 
     # -- helpers ---------------------------------------------------------------------------------------
@@ -599,7 +633,9 @@ class FleetManager:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
                 r.trouble = exc.why
-                r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** r.leg_failures)
+                # (the exponent capped: a robot on its leg re-plans at every step, and 2 ** 1024 failures
+                # overflowed a float: every step of the planner then failed)
+                r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
                 r.leg_failures += 1
                 blocker = self.robots.get(exc.blocker) if exc.blocker is not None else None
                 if clear_way and blocker is not None and blocker.free:
@@ -693,6 +729,15 @@ class FleetManager:
             table = self._spot_trees[id(spots)] = (spots, np.asarray(list(spots.values()), dtype=float))
         at = table[1]
         return bool(np.min(np.hypot(at[:, 0] - pos[0], at[:, 1] - pos[1])) < AT_STATION_M)
+
+    def _at_all(self, where: np.ndarray, spots: Mapping[str, Point]) -> np.ndarray:
+        """For each row of ``where`` (x, y), whether it is at one of ``spots`` (as :meth:`_at`)."""
+        if not spots:
+            return np.zeros(len(where), dtype=bool)
+        self._at(tuple(where[0]), spots)  # (builds the table)
+        at = self._spot_trees[id(spots)][1]
+        gaps = np.hypot(where[:, None, 0] - at[None, :, 0], where[:, None, 1] - at[None, :, 1])
+        return gaps.min(axis=1) < AT_STATION_M
 
     # -- views for tools -------------------------------------------------------------------------------
     def trajectories(self) -> list[TimedPath]:

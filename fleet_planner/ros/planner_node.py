@@ -64,6 +64,8 @@ MAX_NOTES_LOGGED = 40
 #: still finds the caller's frame on every call: a cost per status, not per line)
 STATUS_LOG_EVERY_S = 5.0
 
+#: the largest share of wall time the RViz markers may take (they are sent less often when they cost more)
+MARKERS_SHARE = 0.05
 #: wall seconds of leg planning per step at least, however fast the clock (one leg always goes)
 MIN_STEP_BUDGET_S = 0.05
 #: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
@@ -151,6 +153,12 @@ class PlannerNode(Node):
                          self.declare_parameter("auth_trust_file", "", ParameterDescriptor(
             description="key file of the clients: with it, only tasks signed by one of its keys are taken "
                         "(empty: any task)", read_only=True)).value)
+        operator_file = self.declare_parameter("auth_operator_file", "", ParameterDescriptor(
+            description="key file of the operators: with keys (this, or else auth_trust_file's), only commands on "
+                        "/fleet/commands signed by one of them are obeyed, and the pause and e-stop services are "
+                        "refused but for engaging the e-stop (fleet_planner/ros/operator_services.py)",
+            read_only=True)).value
+        trust = self.get_parameter("auth_trust_file").value
         # obstacles of the intelligent space (fleet/obstacles.py): how they are predicted and forgotten
         ob_defaults = ObstacleParams()
         ob_values = {f.name: self.declare_parameter(f"obstacle_{f.name}", float(getattr(ob_defaults, f.name)), _range(
@@ -183,6 +191,7 @@ class PlannerNode(Node):
         self._gates: dict[str, Publisher] = {}
         self._inbox = StatusInbox()  # only the latest status of each robot is parsed (fleet/inbox.py)
         self._markers_at = -float("inf")   # (wall time, time.monotonic)
+        self._markers_gap = self._markers_period   # wall s until the next markers (see _publish)
         self._arrival_wall, self._arrival_now = -float("inf"), 0.0   # (see _arrival)
         self._said: dict[str, float] = {}   # when a line of each kind of the status path was last logged
         # every waiting task and status at each wake-up: fresh statuses before each step (see drain.py)
@@ -195,7 +204,7 @@ class PlannerNode(Node):
         limit = getattr(self.fleet.planner, "leg_time_limit", None)
         self._leg_limit = float(limit) if isinstance(limit, (int, float)) else None
         # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
-        self.operator = PlannerOperator(self, self.fleet, self._publish)
+        self.operator = PlannerOperator(self, self.fleet, self._publish, Keys(trust_file=operator_file or trust))
         create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
         self._timer = self.create_timer(period, self._on_timer)
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py) and the robots its
@@ -387,10 +396,13 @@ class PlannerNode(Node):
         if d.legs:
             self._schedule.publish(record_to_string(self.fleet.schedule(now)))
         wall = time.monotonic()
-        if not 0.0 <= wall - self._markers_at < self._markers_period:
+        if not 0.0 <= wall - self._markers_at < self._markers_gap:
             self._markers_at = wall
             self._markers.publish(plan_markers(self.fleet.trajectories() + self.fleet.obstacles.trajectories(now),
                                                self.fleet.statuses(), self.frame_id, now))
+            # paced by their cost too: 500 robots' markers take ~0.2 s, which every second was a fifth
+            # of the planner's time and stretched the steps they fell into
+            self._markers_gap = max(self._markers_period, (time.monotonic() - wall) / MARKERS_SHARE)
 
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:

@@ -12,14 +12,14 @@ With keys (``fleet_planner/auth.py``): ``--key FILE`` signs the task with the fi
 DDS discovery is not symmetric: the planner's event writer may match our reader a moment after our
 task writer matched its reader, and then its first answer (``accepted``) is lost. When nothing at
 all is heard for ``RESEND_S`` after sending, the task is sent once more (signed anew): the planner
-takes an id once for good and answers the second copy with a ``rejected`` naming the job's state
-(``duplicate task id ... (already queued)``), which here means "it has the job" and is followed on,
-not taken as the end (a job already done or failed ends the run with that outcome).
+takes an id once for good and answers a copy of a known id with the job's current event (``accepted``,
+``assigned``, ``picked``, ``done``, ``failed`` or ``cancelled``, its reason starting with
+:data:`~fleet_planner.fleet.jobstore.RESENT`), which is followed on like any event (a job already
+done or failed ends the run with that outcome).
 """
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 import time
 import uuid
@@ -32,6 +32,7 @@ from rclpy.publisher import Publisher
 from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
+from fleet_planner.fleet.jobstore import RESENT
 from fleet_planner.model import CAPABILITIES
 from fleet_planner.ros.entry import run_node
 from fleet_planner.ros.origin import OriginCheck
@@ -43,7 +44,6 @@ from msg_schemas.records import RecordError, Task, TaskEvent
 ENDS = {"done": 0, "rejected": 1, "failed": 1, "cancelled": 1}
 #: wall seconds without any event after sending before the task is sent once more
 RESEND_S = 3.0
-_DUPLICATE = re.compile(r"task\.id: duplicate task id .*?(?: \(already (\w+)\))?$")
 
 
 def planner_matched(node: Node, tasks_pub: Publisher, events_sub: Subscription) -> bool:
@@ -66,7 +66,7 @@ class Submitter(Node):
         self.keys = keys or Keys()
         self.events: list[TaskEvent] = []
         self.sent = 0
-        #: the job's state as the planner named it answering our second copy (None: not heard)
+        #: the job's state (an event) as the planner told it answering a copy of a known id (None: not heard)
         self.already: str | None = None
         self._pub = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
         self._sub = self.create_subscription(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
@@ -82,10 +82,7 @@ class Submitter(Node):
     @property
     def ended(self) -> str | None:
         """How the job ended (an event in ENDS), None while it runs."""
-        end = next((e.event for e in self.events if e.event in ENDS), None)
-        if end is None and self.already in ENDS:
-            return self.already
-        return end
+        return next((e.event for e in self.events if e.event in ENDS), None)
 
     def _on_event(self, msg: String) -> None:
         try:
@@ -104,10 +101,11 @@ class Submitter(Node):
             self.get_logger().warning(f"task event {ev.event} ignored: not from the planner: {problem}",
                                       throttle_duration_sec=2.0)
             return
-        dup = _DUPLICATE.match(ev.reason or "") if ev.event == "rejected" and self.sent > 1 else None
-        if dup is not None:  # the answer to our second copy: the planner has the job
-            self.already = dup.group(1) or "known"
-            return
+        if (ev.reason or "").startswith(RESENT):  # the job's state, answering a copy: the planner has it
+            self.already = ev.event
+            last = self.events[-1] if self.events else None
+            if last is not None and (last.event, last.robot_id) == (ev.event, ev.robot_id):
+                return  # what we heard already
         self.events.append(ev)
 
 

@@ -352,7 +352,7 @@ class ConsoleNode(OperatorClient):
                 raise BadRequest("command: must be a JSON object")
             cmd = Command.from_dict({**fields, "schema": Command.SCHEMA, "id": f"console_{uuid.uuid4().hex[:10]}"})
             assert isinstance(cmd, Command)
-            if cmd.command in _SERVICE_COMMANDS:  # the standard services
+            if cmd.command in _SERVICE_COMMANDS and cmd.robot_id is None:  # the standard services
                 pending.service = self._set_bool(_service_of(cmd), cmd.command in ("pause", "estop"))
             else:
                 if not self.commands_heard():
@@ -407,4 +407,4 @@ def _robot_id(value: Any) -> str:
 def _service_of(cmd: Command) -> str:
     if cmd.command in ("estop", "release"):
         return topics.ESTOP_SERVICE
-    return topics.robot_topic(cmd.robot_id, "pause") if cmd.robot_id else topics.PAUSE_FLEET_SERVICE
+    return topics.PAUSE_FLEET_SERVICE  # (one robot is paused by a command: operator_services.py)
