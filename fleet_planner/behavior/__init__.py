@@ -10,6 +10,8 @@ controller, and many robots make a steppable fleet. By concern, innermost first:
 * :mod:`.views`      - :class:`RobotView`, what a robot knows of itself or hears from a neighbour;
 * :mod:`.areas`      - the geometry of traffic: front and critical areas, :func:`front_area_check`,
   :func:`collision_type` (rear-end / head-on / side);
+* :mod:`.clearance`  - a robot's distance to the walls from the blocked cells around it (compiled;
+  the map's GEOS distance was a large part of a 100-robot step);
 * :mod:`.rules`      - the traffic rules: :func:`select_behavior` (Algorithms 1-4,
   SolveActiveAndWaitCollision), :func:`low_order`, :func:`id_key`;
 * :mod:`.docking`    - one robot docks at a station at a time: :class:`DockingArbiter` (shared),

@@ -17,7 +17,8 @@ import numpy as np
 from ..grid import GridMap
 from ..model import Behavior, PlanningError, Point
 from ..paths import PathFinder
-from .areas import Collision, collision_type, front_area_check, front_coords, in_critical_area, robots_in_front
+from .areas import Collision, collision_type, front_coords, in_critical_area, robots_in_front, scan_front_area
+from .clearance import Clearance
 from .deadlock import WaitMessage, on_wait_message, virtual_wall_cells
 from .docking import Docking, HeardDocking
 from .params import DEFAULT_PARAMS, EPS, BehaviorParams
@@ -75,6 +76,7 @@ class BehaviorController:
         if self.radius not in finders:
             finders[self.radius] = PathFinder(grid, self.radius)
         self.finder = finders[self.radius]
+        self.clearance = Clearance.of(grid)
         self._heard_docking: HeardDocking | None = None
         if docking is None:
             docking = self._heard_docking = HeardDocking(robot_id)
@@ -144,16 +146,27 @@ class BehaviorController:
     def view(self) -> RobotView:
         """What the robot broadcasts about itself."""
         nxt, remaining, straight = None, 0.0, 0.0
+        x, y = self.pos.tolist()
         if self.path is not None:
             assert self.tail is not None and self.run is not None   # set with the path
-            nxt = (float(self.path[self.wp, 0]), float(self.path[self.wp, 1]))
-            ahead = math.dist(self.pos, nxt)
+            nxt = tuple(self.path[self.wp].tolist())
+            ahead = math.dist((x, y), nxt)
             remaining, straight = ahead + float(self.tail[self.wp]), ahead + float(self.run[self.wp])
             if self.escape_to is not None and self.goal is not None:   # escaping: still bound for the goal
                 remaining += math.dist(self.escape_to, self.goal)
-        return RobotView(self.id, self.position, self.radius, self.behavior, nxt, remaining, straight,
+        return RobotView(self.id, (x, y), self.radius, self.behavior, nxt, remaining, straight,
                          self.station, self.partner, self.no_space,
                          self.holds[0] if self.holds else None, self.dock_since, self.retreat)
+
+    def remaining(self) -> float:
+        """``view().remaining`` (the length of the rest of the path), without building the view."""
+        if self.path is None:
+            return 0.0
+        assert self.tail is not None   # set with the path
+        remaining = math.dist(tuple(self.pos.tolist()), tuple(self.path[self.wp].tolist())) + float(self.tail[self.wp])
+        if self.escape_to is not None and self.goal is not None:
+            remaining += math.dist(self.escape_to, self.goal)
+        return remaining
 
     def step(self, now: float, dt: float, heard: Sequence[RobotView], inbox: Sequence[WaitMessage] = (), *,
              reach: Mapping[str, float] | None = None, speed: float | None = None,
@@ -208,8 +221,9 @@ class BehaviorController:
         assert self.partner is not None   # only a robot waiting for a partner forwards
         return self.partner, forward
 
-    def decide(self, now: float, sensed: Sequence[RobotView]) -> None:
-        """Sensing and behaviour selection from the views of the robots in range.
+    def decide(self, now: float, sensed: Sequence[RobotView], me: RobotView | None = None) -> None:
+        """Sensing and behaviour selection from the views of the robots in range (``me``: my
+        :meth:`view` now, if the caller has it already).
 
         A behaviour left and taken up again within the step on the same path (e.g. Avoid completed
         for one partner and started for the next) keeps its start time, so the timeouts see one
@@ -218,7 +232,7 @@ class BehaviorController:
         self.time = float(now)
         sensed = list(sensed)
         before, path, since, blocked_since = self.behavior, self.path, self.since, self.blocked_since
-        self._select(self.view(), sensed)
+        self._select(self.view() if me is None else me, sensed)
         if self.behavior is before and self.path is path:
             self.since, self.blocked_since = since, blocked_since
 
@@ -342,12 +356,15 @@ class BehaviorController:
                 return
         if self._skip_covered_waypoints(sensed) or self.path is not path:
             me = self.view()
-        in_front = robots_in_front(me, sensed, self.params)
+        front = scan_front_area(me, sensed, self.params)
+        in_front = [o for o, _ in front]
         self._end_retreat(in_front)
         if self._yield_to_retreat(me, sensed, in_front):
             return
         self._complete(me, sensed, in_front)
-        me = self._apply_rules(me, in_front, sensed)
+        # the paper's FrontAreaCheck over my front area (front_area_check, from the same pass)
+        checked = next((o for o, critical in front if critical), in_front[0] if in_front else None)
+        me = self._apply_rules(me, in_front, sensed, checked)
         if self._failed(me, sensed, in_front):
             self._replan(sensed)
         elif (self.params.escape_after > 0 and self.escape_to is None and self.behavior is not B.WAIT_FOR_DOCKING
@@ -383,15 +400,17 @@ class BehaviorController:
         (the paper's obstacle) or, ours, one waiting (see :meth:`_select_holding`)."""
         return not other.travelling or other.behavior.is_wait
 
-    def _apply_rules(self, me: RobotView, in_front: list[RobotView], sensed: list[RobotView]) -> RobotView:
+    def _apply_rules(self, me: RobotView, in_front: list[RobotView], sensed: list[RobotView],
+                     other: RobotView | None) -> RobotView:
         """The traffic rules (IV.B) against the robot the front area check selects; returns my view
         as the rules saw it (with the behaviour left by :meth:`_complete`). A retreating robot
         facing a robot it cannot pass waits for it to give way (:meth:`_yield_to_retreat`) instead
-        of starting an Exchange that would turn it round again."""
-        other = front_area_check(me, in_front, self.params)
+        of starting an Exchange that would turn it round again. ``other``: the robot
+        :func:`~.areas.front_area_check` selects from ``in_front``."""
         if other is None:
             return me
-        me = replace(me, behavior=self.behavior, partner=self.partner)
+        if me.behavior is not self.behavior or me.partner != self.partner:
+            me = replace(me, behavior=self.behavior, partner=self.partner)
         if self.retreat is not None and self._cannot_pass(me, other, sensed):
             self._set(B.WAIT_KEEP_DISTANCE, other.id)
             return me
@@ -635,9 +654,11 @@ class BehaviorController:
         avoid the standing robot on the way); otherwise the behaviours fail and it re-plans."""
         assert self.path is not None
         skipped = False
+        standing = [o for o in sensed if not o.travelling]
+        if not standing:
+            return False
         while self.wp < len(self.path) - 1 and any(
-                not o.travelling and math.dist(o.position, self.path[self.wp]) < self.radius + o.radius
-                for o in sensed):
+                math.dist(o.position, self.path[self.wp]) < self.radius + o.radius for o in standing):
             if not self.finder.segment_free(self.position, tuple(self.path[self.wp + 1])):
                 break
             self.wp += 1
@@ -696,7 +717,7 @@ class BehaviorController:
         s_p = max(0.0, float(np.dot(np.asarray(partner.position) - self.pos, u)))
         for s in (0.0, s_p):
             q = self.pos + u * s + n * lat
-            if not self.grid.disc_is_free(float(q[0]), float(q[1]), self.radius):
+            if not self.clearance.disc_is_free(float(q[0]), float(q[1]), self.radius):
                 return False
             if any(math.dist(q, o.position) < self.radius + o.radius + self.params.safety_margin
                    for o in sensed if o.id != partner.id):
@@ -844,7 +865,7 @@ class BehaviorController:
     def _map_clear(self, q: np.ndarray) -> bool:
         """The disc at ``q`` is in free space (the clearance measured last is reused while it settles it)."""
         if self.clear_at[2] - math.dist(q, self.clear_at[:2]) < self.radius:   # not sure from the last measurement
-            self.clear_at = (float(q[0]), float(q[1]), self.grid.clearance(float(q[0]), float(q[1])))
+            self.clear_at = (float(q[0]), float(q[1]), self.clearance(float(q[0]), float(q[1])))
             if self.clear_at[2] < self.radius - EPS:
                 return False
         return True
@@ -906,11 +927,12 @@ class BehaviorController:
 
     def _give_way_to_dock(self, sensed: Sequence[RobotView], step: float) -> list[tuple[np.ndarray, int]]:
         """Motions out of the way of a travelling Dock robot whose critical area I stand in."""
-        me = self.view()
+        me = None
         for o in sensed:
             if (o.behavior is not B.DOCK or o.direction is None
                     or math.dist(o.position, self.pos) > self.params.give_way_reach):
                 continue
+            me = self.view() if me is None else me
             if not in_critical_area(o, me, self.params):
                 continue
             out = self._leave_channel(o, step) or []

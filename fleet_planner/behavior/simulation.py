@@ -96,11 +96,11 @@ class BehaviorFleet:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"step: dt must be a finite number > 0, got {dt!r}")
         near = self._neighbours()
-        self._deliver(near)
         views = [r.view() for r in self._robots]
+        self._deliver(near, views)
         sensed = [[views[j] for j in near[k]] for k in range(len(self._robots))]
         for k, r in enumerate(self._robots):
-            r.decide(self.time, sensed[k])
+            r.decide(self.time, sensed[k], views[k])
         for r in self._robots:
             msg = r.wait_message(self.time)
             if msg is not None:
@@ -151,15 +151,18 @@ class BehaviorFleet:
         return [[j for j in found if j != k]
                 for k, found in enumerate(tree.query_ball_point(tree.data, self.params.comm_range))]
 
-    def _deliver(self, near: list[list[int]]) -> None:
-        """Hand over last step's WaitMessages (only within communication range)."""
+    def _deliver(self, near: list[list[int]], views: list[RobotView]) -> None:
+        """Hand over last step's WaitMessages (only within communication range). ``views``: the
+        robots' views, kept up to date (a robot that receives a message may re-plan)."""
         inbox, self._inbox = self._inbox, []
+        comm = self.params.comm_range
         for sender, receiver, msg in inbox:
             k = self._index.get(receiver)
-            if k is None or math.dist(self.controller(sender).pos, self._robots[k].pos) > self.params.comm_range:
+            if k is None or math.dist(self.controller(sender).pos, self._robots[k].pos) > comm:
                 continue
             r = self._robots[k]
-            forward = r.receive(self.time, msg, [self._robots[j].view() for j in near[k]])
+            forward = r.receive(self.time, msg, [views[j] for j in near[k]])
+            views[k] = r.view()
             if forward is not None:
                 self._inbox.append((r.id, *forward))
 

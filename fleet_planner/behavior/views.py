@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 from ..model import Behavior, Point
 from .params import EPS
@@ -45,19 +46,25 @@ class RobotView:
     dock_since: float | None = None
     retreat: tuple[float, str] | None = None
 
-    @property
+    def __post_init__(self) -> None:
+        # the travel direction, once per view (the rules read it many times a step): stored as
+        # the cached properties' values, so reading them is a plain attribute look-up
+        direction = None
+        if self.next_waypoint is not None:
+            dx = self.next_waypoint[0] - self.position[0]
+            dy = self.next_waypoint[1] - self.position[1]
+            d = math.hypot(dx, dy)
+            if d >= EPS:
+                direction = dx / d, dy / d
+        self.__dict__["direction"] = direction
+        self.__dict__["travelling"] = direction is not None
+
+    @cached_property
     def direction(self) -> tuple[float, float] | None:
         """Unit vector from the position to the next waypoint (the travel direction), or None."""
-        if self.next_waypoint is None:
-            return None
-        dx = self.next_waypoint[0] - self.position[0]
-        dy = self.next_waypoint[1] - self.position[1]
-        d = math.hypot(dx, dy)
-        if d < EPS:
-            return None
-        return dx / d, dy / d
+        return self.__dict__["direction"]   # set at construction (see __post_init__)
 
-    @property
+    @cached_property
     def travelling(self) -> bool:
         """Has somewhere to go (a robot without a path is a standing obstacle to the others)."""
         return self.direction is not None

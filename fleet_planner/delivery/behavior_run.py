@@ -120,7 +120,7 @@ class _BehaviorRun:
         rules = self.rules
         r.pos = (float(self.pos[r.idx, 0]), float(self.pos[r.idx, 1]))
         if r.phase == "drive":   # progress: 1 m less path left than ever before on this leg
-            left = self.fleet.view(r.id).remaining
+            left = self.fleet.controller(r.id).remaining()
             if left <= r.best_left - 1.0:
                 r.best_left = left
                 r.progress_t = t
