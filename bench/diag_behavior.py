@@ -50,16 +50,11 @@ def save(run, path: Path) -> None:
 
 
 def load(path: Path):
-    """A run saved by :func:`save`. Unpickling breaks the sharing of a move graph's CSR matrix with
-    the index array its searches rewrite, so the matrices are dropped (rebuilt at the next search)."""
+    """A run saved by :func:`save` (the compiled path search keeps no state that pickling could break)."""
     import pickle
 
     _pickle_locks()
-    run = pickle.loads(path.read_bytes())
-    for grid in {id(g): g for g in (run.problem.grid, run.fleet.grid)}.values():
-        for graph in grid.__dict__.get("_path_move_graphs", {}).values():
-            graph._csr = None
-    return run
+    return pickle.loads(path.read_bytes())
 
 
 def report(run, near: bool = False, quiet: bool = False) -> collections.Counter:
