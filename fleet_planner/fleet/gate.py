@@ -240,6 +240,8 @@ class GateBook:
         self.records: dict[str, GateRecord] = {}
         #: per robot, the paths it may be driving: its latest leg and the one its status names
         self.paths: dict[str, dict[int, TimedPath]] = {}
+        #: id of a live path -> (the path, its bounding box) (:meth:`_box`)
+        self._boxes: dict[int, tuple[TimedPath, np.ndarray]] = {}
 
     def _live(self, o: FleetRobot) -> dict[int, TimedPath]:
         paths = self.paths.get(o.id, {})
@@ -266,6 +268,7 @@ class GateBook:
         watch: dict[str, int] = {}
         grown: dict[str, list[Link]] = {}
         self.conflicts: list[str] = []
+        lo, hi = mine.xy.min(axis=0), mine.xy.max(axis=0)
         for o in fleet:
             if o is r or o.immobile:
                 continue
@@ -274,7 +277,13 @@ class GateBook:
                 continue
             latest = max(paths)
             recorded = o.id in self.records and self.records[o.id].path_id == latest
+            # a path whose bounding box keeps farther than the regions' reach from the new leg's
+            # has no region with it (its samples lie in that box): skipped, nothing else changes
+            near = r.radius + o.radius + self.pad_m + self.sample_m + 1e-6
             for pid, p in paths.items():
+                box = self._box(p)
+                if np.any(box[0] > hi + near) or np.any(box[1] < lo - near):
+                    continue
                 on_it = o.status.path_id == pid
                 done = travelled(o.status) if on_it else None
                 done = 0.0 if done is None else min(done, p.length)
@@ -325,6 +334,17 @@ class GateBook:
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
                                             links=kept + added, watch=watch)))
         return out
+
+    def _box(self, p: TimedPath) -> np.ndarray:
+        """The bounding box (2 x 2: min, max) of the waypoints of a live path, kept with it."""
+        box = self._boxes.get(id(p))
+        if box is None or box[0] is not p:
+            if len(self._boxes) > 4 * len(self.paths) + 64:  # (only live paths' boxes are kept)
+                live = {id(q) for ps in self.paths.values() for q in ps.values()}
+                self._boxes = {k: v for k, v in self._boxes.items() if k in live}
+            xy = p.waypoints[:, :2]
+            box = self._boxes[id(p)] = (p, np.array([xy.min(axis=0), xy.max(axis=0)]))
+        return box[1]
 
     def _may_be_in(self, p: TimedPath, done: float, reach: float, path: TimedPath, mine: _Samples,
                    i_mine: np.ndarray, clear: float) -> bool:
