@@ -363,7 +363,7 @@ class FleetManager:
     def _decide(self, now: float, d: Decisions) -> None:
         self._find_immobile(now, d)
         self._watch_obstacles(now, d)
-        self._find_rejected(d)
+        self._find_rejected(now, d)
         if self.store is not None:
             for r in self.robots.values():
                 self._adopt(r)
@@ -387,14 +387,17 @@ class FleetManager:
             elif r.online and not r.immobile and r.status.mode == "error":
                 self._immobilise(r, now, d, "out of battery")
 
-    def _find_rejected(self, d: Decisions) -> None:
+    def _find_rejected(self, now: float, d: Decisions) -> None:
         """A robot whose status names its latest leg as rejected stands where it is (it stopped):
-        its leg is planned again from there, never assumed driven."""
+        its leg is planned again from there, never assumed driven, and legs of others planned
+        around the leg it never took re-plan if they pass where it stands."""
         for r in self.robots.values():
             if r.leg is not None and r.status.rejected_path_id == r.leg.path_id and not r.immobile:
                 d.notes.append(f"robot {r.id} could not take leg {r.leg.path_id}: planning it again from "
                                f"({r.status.x:.2f}, {r.status.y:.2f})")
                 r.leg, r.replan = None, r.target is not None
+                self._changed(r)
+                self._replan_around(r, r.pos, now)
 
     def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
         """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
