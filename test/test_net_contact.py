@@ -77,3 +77,21 @@ def test_a_new_leg_whose_start_jumps_onto_another_robot_is_refused():
     assert (m.x, m.y) == (0.0, 0.0)
     d.follow(path, 0.0, 1, 0.0, {"b": _status(RobotModel("b", KIND, 0.0, 3.0), 0.0)})   # clear: taken
     assert (m.x, m.y) == start
+
+
+def test_a_robot_that_drove_on_past_a_legs_start_joins_the_leg_where_it_is():
+    # the leg was planned from where the robot was 1 s ago (the planner was busy): it starts 1 m behind it
+    m = RobotModel("a", KIND, 3.0, 0.0)
+    d = CentralDriver(m, gated=True)
+    v = KIND.max_speed
+    leg = TimedPath("a", KIND.radius, np.array([[3.0 - v, 0.0, 0.0], [9.0, 0.0, (6.0 + v) / v]]))
+    d.follow(leg, 10.0, 1, 11.0)                      # due at 3.0 by now (t = 11)
+    assert (m.x, m.y) == (3.0, 0.0) and m.travelled == pytest.approx(v)
+    # ... but not if the leg's schedule is not there yet (it waits at its start first), nor off its way
+    waits = TimedPath("a", KIND.radius, np.array([[3.0 - v, 0.0, 0.0], [3.0 - v, 0.0, 5.0], [9.0, 0.0, 12.0]]))
+    away = TimedPath("a", KIND.radius, np.array([[3.0 - v, 0.0, 0.0], [3.0 - v, 5.0, 5.0]]))
+    for path in (waits, away):
+        m2 = RobotModel("b", KIND, 3.0, 0.0)
+        with pytest.raises(ValueError, match="starts"):
+            CentralDriver(m2, gated=True).follow(path, 10.0, 1, 11.0)
+        assert (m2.x, m2.y) == (3.0, 0.0)

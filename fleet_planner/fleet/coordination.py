@@ -217,6 +217,40 @@ class CentralCoordination(Coordination):
         return CentralDriver(model, gated)
 
 
+#: a robot joins a leg that started behind it if it is this close (m) to the leg's way ...
+JOIN_TOL_M = 0.05
+#: ... within this far (m) along it
+JOIN_WITHIN_M = 6.0
+
+
+def _arc_of(wp: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+
+
+def join_at(path: TimedPath, t0: float, pos: Point, now: float) -> float:
+    """Where (m along ``path``, whose times count from ``t0``) a robot at ``pos`` at ``now`` joins
+    it: the first point of its first :data:`JOIN_WITHIN_M` within :data:`JOIN_TOL_M` of ``pos``,
+    provided the schedule is due there by ``now`` (a robot never runs ahead of its schedule); 0.0
+    if there is none (it must then stand on the path's start)."""
+    wp = path.waypoints
+    if len(wp) < 2:
+        return 0.0
+    arc = _arc_of(wp)
+    a, b = wp[:-1, :2], wp[1:, :2]
+    p = np.asarray(pos, dtype=float)
+    ab = b - a
+    den = np.sum(ab * ab, axis=1)
+    u = np.clip(np.sum((p - a) * ab, axis=1) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+    dist = np.hypot(*(a + u[:, None] * ab - p).T)
+    s = arc[:-1] + u * np.sqrt(den)
+    ok = np.nonzero((dist <= JOIN_TOL_M) & (den > 0) & (s <= JOIN_WITHIN_M))[0]
+    if not len(ok):
+        return 0.0
+    j = float(s[ok[0]])
+    due = float(np.interp(now - t0, wp[:, 2], arc))
+    return j if j <= due + JOIN_TOL_M else 0.0
+
+
 class CentralDriver(Driver):
     """A robot driving each leg's timed path, with a safety net: it waits rather than drive into a
     robot in its critical area (:meth:`must_wait` says how). ``gated``: it also never drives
@@ -236,10 +270,17 @@ class CentralDriver(Driver):
         """Take the leg (RobotModel.follow puts the robot on its first waypoint, at most its radius
         away); ValueError, and the robot stays where it is, if that jump would bring it closer than
         the sum of radii plus :data:`NET_MARGIN_M` to a robot in ``heard`` (as the net would stop
-        it driving there: a leg planned from a stale position must not put it into another)."""
+        it driving there: a leg planned from a stale position must not put it into another).
+        A robot that drove on past the leg's start while the leg was on its way joins it where it
+        is (:func:`join_at`), if it lies on the leg and no further than the leg's schedule is due."""
+        m = self.model
+        at = 0.0
+        wp0 = path.waypoints[0, :2]
+        if now is not None and math.hypot(wp0[0] - m.x, wp0[1] - m.y) > m.kind.radius:
+            at = join_at(path, t0, (m.x, m.y), now)
         if heard:
-            m = self.model
-            start = path.waypoints[0, :2]
+            start = path.waypoints[0, :2] if at == 0.0 else np.array(point_at_arc(
+                path.waypoints[:, :2], _arc_of(path.waypoints), at))
             if math.hypot(start[0] - m.x, start[1] - m.y) > 1e-6:
                 way = np.array([[m.x, m.y], start], dtype=float)
                 sweep = {st.id: (0.0, 0.0) for st in heard.values()}
@@ -249,7 +290,7 @@ class CentralDriver(Driver):
                 if blocker is not None:
                     raise ValueError(f"robot {m.id!r}: timed path starts {math.dist(start, (m.x, m.y)):.3f} m "
                                      f"from the robot, towards robot {blocker.id!r}")
-        self.model.follow(path, t0, path_id)
+        self.model.follow(path, t0, path_id, at=at)
         self.stopped = False
 
     def refused(self, path_id: int) -> None:

@@ -416,7 +416,9 @@ class FleetManager:
                                f"({r.status.x:.2f}, {r.status.y:.2f})")
                 r.leg, r.replan = None, r.target is not None
                 self._changed(r)
-                self._replan_around(r, r.pos, now)
+                for o in self._replan_around(r, r.pos, now):
+                    if self.gates is not None:  # their links keep them off it: an optimisation, not a hold
+                        o.conflict = False
 
     def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
         """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
@@ -512,7 +514,8 @@ class FleetManager:
         """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
         that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
         more must stop at once, not drive on for another ``lead_s``."""
-        path_id = max(round(now * 1e9), r.last_path_id + 1)
+        ahead = self.leg_delay_s if r.on_leg else 0.0  # where it is when the hold reaches it (as measured)
+        path_id = max(round((now + ahead) * 1e9), r.last_path_id + 1)
         x, y = self.strategy.start_of(r, path_id / 1e9, self._gate_limit(r))
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
         if not self._give(r, leg, d, now):
