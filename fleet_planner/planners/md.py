@@ -744,12 +744,12 @@ def _fixed_near(finders: _Finders, robots: list[RobotSpec], fixed: Sequence[Time
     for k, tp in enumerate(fixed):
         wp = tp.waypoints
         j = max(0, int(np.searchsorted(wp[:, 2], t0, side="right")) - 1)
-        pts = wp[j:, :2]  # the piece driven at t0 on, and the rest (bounded by its waypoints)
-        if len(pts) > 1:
-            a, b = pts[:-1], pts[1:]
+        ahead = wp[j:, :2]  # the piece driven at t0 on, and the rest (bounded by its waypoints)
+        if len(ahead) > 1:
+            a, b = ahead[:-1], ahead[1:]
             smin, smax = np.minimum(a, b), np.maximum(a, b)
         else:
-            smin = smax = pts
+            smin = smax = ahead
         # a segment's box against each leg's box (grown by the fixed robot's radius)
         g = tp.radius
         hit = np.all((smin[:, None, :] <= hi[None] + g) & (smax[:, None, :] >= lo[None] - g), axis=2)
