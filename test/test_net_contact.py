@@ -82,7 +82,7 @@ def test_a_new_leg_whose_start_jumps_onto_another_robot_is_refused():
 def test_a_robot_that_drove_on_past_a_legs_start_joins_the_leg_where_it_is():
     # the leg was planned from where the robot was 1 s ago (the planner was busy): it starts 1 m behind it
     m = RobotModel("a", KIND, 3.0, 0.0)
-    d = CentralDriver(m, gated=True)
+    d = CentralDriver(m)   # not gated: the clock decides
     v = KIND.max_speed
     leg = TimedPath("a", KIND.radius, np.array([[3.0 - v, 0.0, 0.0], [9.0, 0.0, (6.0 + v) / v]]))
     d.follow(leg, 10.0, 1, 11.0)                      # due at 3.0 by now (t = 11)
@@ -93,5 +93,22 @@ def test_a_robot_that_drove_on_past_a_legs_start_joins_the_leg_where_it_is():
     for path in (waits, away):
         m2 = RobotModel("b", KIND, 3.0, 0.0)
         with pytest.raises(ValueError, match="starts"):
-            CentralDriver(m2, gated=True).follow(path, 10.0, 1, 11.0)
+            CentralDriver(m2).follow(path, 10.0, 1, 11.0)
         assert (m2.x, m2.y) == (3.0, 0.0)
+
+
+def test_a_gated_robot_joins_a_leg_behind_it_short_of_its_gate_not_by_the_clock():
+    v = KIND.max_speed
+    # planned from standstill at its start 1 m behind: the clock is due behind the robot; the gate decides
+    leg = TimedPath("a", KIND.radius, np.array([[2.0, 0.0, 0.0], [2.0, 0.0, 3.0], [9.0, 0.0, 3.0 + 7.0 / v]]))
+    for entry, joins in ((5.0, True), (0.5, False)):
+        m = RobotModel("a", KIND, 3.0, 0.0)
+        d = CentralDriver(m, gated=True)
+        link = {"robot": "b", "path_id": 7, "exit": 1.0, "entry": entry}
+        d.on_gate(GateRecord(robot_id="a", path_id=1, seq=0, stamp=0.0, links=(link,), watch={"b": 7}))
+        if joins:
+            d.follow(leg, 10.0, 1, 11.0, {})
+            assert m.travelled == pytest.approx(1.0) and (m.x, m.y) == (3.0, 0.0)
+        else:  # already beyond where its gate holds it on the new leg: refused
+            with pytest.raises(ValueError, match="starts"):
+                d.follow(leg, 10.0, 1, 11.0, {})

@@ -227,11 +227,13 @@ def _arc_of(wp: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
 
 
-def join_at(path: TimedPath, t0: float, pos: Point, now: float) -> float:
+def join_at(path: TimedPath, t0: float, pos: Point, now: float, limit: float | None = None) -> float:
     """Where (m along ``path``, whose times count from ``t0``) a robot at ``pos`` at ``now`` joins
     it: the first point of its first :data:`JOIN_WITHIN_M` within :data:`JOIN_TOL_M` of ``pos``,
-    provided the schedule is due there by ``now`` (a robot never runs ahead of its schedule); 0.0
-    if there is none (it must then stand on the path's start)."""
+    provided the schedule is due there by ``now`` (a robot never runs ahead of its schedule) or,
+    with ``limit`` (a gated robot: how far its gate lets it drive along the path), short of that
+    limit (the gate, not the clock, keeps it out of the others' way: a leg planned from standstill
+    is due behind a robot that drove on); 0.0 if there is none (it must then stand on the start)."""
     wp = path.waypoints
     if len(wp) < 2:
         return 0.0
@@ -247,6 +249,8 @@ def join_at(path: TimedPath, t0: float, pos: Point, now: float) -> float:
     if not len(ok):
         return 0.0
     j = float(s[ok[0]])
+    if limit is not None:
+        return j if j < limit else 0.0
     due = float(np.interp(now - t0, wp[:, 2], arc))
     return j if j <= due + JOIN_TOL_M else 0.0
 
@@ -277,7 +281,12 @@ class CentralDriver(Driver):
         at = 0.0
         wp0 = path.waypoints[0, :2]
         if now is not None and math.hypot(wp0[0] - m.x, wp0[1] - m.y) > m.kind.radius:
-            at = join_at(path, t0, (m.x, m.y), now)
+            # gated, the leg's gate (its record comes before the leg) decides how far it may be along,
+            # not the clock: it joins only short of the nearest entry it must wait at
+            limit = None
+            if self.gated:
+                limit = gate_limit(self.gate, path_id, heard or {}) if self.gate is not None else 0.0
+            at = join_at(path, t0, (m.x, m.y), now, limit)
         if heard:
             start = path.waypoints[0, :2] if at == 0.0 else np.array(point_at_arc(
                 path.waypoints[:, :2], _arc_of(path.waypoints), at))

@@ -135,10 +135,6 @@ class FleetManager:
         self._spot_trees: dict[int, Any] = {}
         self.step_budget_s = STEP_BUDGET_S
         self._step_deadline = math.inf   # (time.monotonic) no more legs this step after it
-        #: legs sent and not yet heard of (robot -> (path id, when planned)), and the measured ROS
-        #: seconds from planning a leg to the robot's first status on it (:meth:`_heard_legs`)
-        self._sent: dict[str, tuple[int, float]] = {}
-        self.leg_delay_s = 0.0
         if store is not None:
             self._reload(store)
 
@@ -365,7 +361,6 @@ class FleetManager:
         return d
 
     def _decide(self, now: float, d: Decisions) -> None:
-        self._heard_legs()
         self._find_immobile(now, d)
         self._watch_obstacles(now, d)
         self._find_rejected(now, d)
@@ -391,20 +386,6 @@ class FleetManager:
                 self._immobilise(r, now, d, f"offline: no status for {now - r.seen:.1f} s")
             elif r.online and not r.immobile and r.status.mode == "error":
                 self._immobilise(r, now, d, "out of battery")
-
-    def _heard_legs(self) -> None:
-        """Measure how long a leg takes from planning to the robot (the planner's step, the
-        transport, a loaded clock running on): the first status naming a sent leg (taken or
-        refused) tells. A moving robot's re-planned leg starts that far ahead (:meth:`_next_path_id`)."""
-        for rid, (path_id, planned) in list(self._sent.items()):
-            r = self.robots.get(rid)
-            st = r.status if r is not None else None
-            if st is None:
-                del self._sent[rid]
-            elif st.path_id == path_id or st.rejected_path_id == path_id:
-                del self._sent[rid]
-                delay = min(max(st.stamp - planned, 0.0), self.params.lead_s)
-                self.leg_delay_s = 0.7 * self.leg_delay_s + 0.3 * delay
 
     def _find_rejected(self, now: float, d: Decisions) -> None:
         """A robot whose status names its latest leg as rejected stands where it is (it stopped):
@@ -514,8 +495,7 @@ class FleetManager:
         """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
         that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
         more must stop at once, not drive on for another ``lead_s``."""
-        ahead = self.leg_delay_s if r.on_leg else 0.0  # where it is when the hold reaches it (as measured)
-        path_id = max(round((now + ahead) * 1e9), r.last_path_id + 1)
+        path_id = max(round(now * 1e9), r.last_path_id + 1)
         x, y = self.strategy.start_of(r, path_id / 1e9, self._gate_limit(r))
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
         if not self._give(r, leg, d, now):
@@ -658,7 +638,6 @@ class FleetManager:
         r.leg, r.last_path_id = leg, leg.path_id
         r.arrived_at, r.saw_action = None, False
         d.legs.append(leg)
-        self._sent[r.id] = (leg.path_id, now)
         self._changed(r)
         return True
 
@@ -676,10 +655,9 @@ class FleetManager:
         lead = self.params.lead_s
         if r.on_leg and math.hypot(r.status.vx, r.status.vy) * lead > r.radius / 2:
             # re-planned while it drives on: a leg starting lead_s ahead would start further along
-            # its way than its radius, and the robot refuses a leg that starts beyond it (or behind
-            # it, once it drove on past the start): it starts where the robot is when the leg
-            # reaches it, as measured
-            lead = min(lead, self.leg_delay_s)
+            # its way than its radius, and the robot refuses a leg that starts beyond it (one that
+            # starts behind it on its way, once it drove on, it joins where it is: CentralDriver.follow)
+            lead = 0.0
         return max(round((now + lead) * 1e9), r.last_path_id + 1)
 
     def _occupant(self, pose: Point, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:
