@@ -217,10 +217,12 @@ class CentralCoordination(Coordination):
         return CentralDriver(model, gated)
 
 
-#: a robot joins a leg that started behind it if it is this close (m) to the leg's way ...
-JOIN_TOL_M = 0.05
+#: a robot joins a leg that started behind it if it is this close (m) to the leg's way (the leg
+#: is string-pulled anew from its start, so its way beside the robot's old one differs by some cm;
+#: the step onto it is checked against the other robots like the jump onto a start) ...
+JOIN_TOL_M = 0.2
 #: ... within this far (m) along it
-JOIN_WITHIN_M = 6.0
+JOIN_WITHIN_M = 10.0
 
 
 def _arc_of(wp: np.ndarray) -> np.ndarray:
