@@ -49,7 +49,7 @@ def main(argv=None) -> int:
         options[key] = True if low == "true" else False if low == "false" else float(value) \
             if value.replace(".", "", 1).isdigit() else value
     print(f"{'map':<10} {'N':>4} {'method':<13} {'legs':>5} {'p50 ms':>7} {'p90 ms':>7} {'p99 ms':>7} "
-          f"{'max ms':>7} {'cpu p99':>7} {'done':>9} {'CTime':>8} {'coll':>4} stop")
+          f"{'max ms':>7} {'cpu p50':>7} {'cpu p99':>7} {'cpu s':>7} {'done':>9} {'CTime':>8} {'coll':>4} stop")
     for n in [int(s) for s in args.sizes.split(",")]:
         for method in args.methods.split(","):
             cls = type(get_planner(method))
@@ -74,7 +74,7 @@ def main(argv=None) -> int:
             w, c = 1000 * np.array(wall or [0.0]), 1000 * np.array(cpu or [0.0])
             print(f"{args.map:<10} {n:>4} {method:<13} {len(wall):>5} {np.percentile(w, 50):7.1f} "
                   f"{np.percentile(w, 90):7.1f} {np.percentile(w, 99):7.1f} {w.max():7.1f} "
-                  f"{np.percentile(c, 99):7.1f} "
+                  f"{np.percentile(c, 50):7.1f} {np.percentile(c, 99):7.1f} {c.sum() / 1000:7.1f} "
                   f"{res.completed:>4}/{res.n_deliveries:<4} {res.ctime:8.1f} {res.collisions:>4} {res.stop}",
                   flush=True)
     return 0

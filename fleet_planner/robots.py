@@ -165,11 +165,13 @@ class RobotModel:
         self._pre: tuple | None = None      # this step's tracking worked out ahead (TrackBatch.prepare)
 
     # -- commands ---------------------------------------------------------------------------------
-    def follow(self, path: TimedPath, t0: float, path_id: int | None = None) -> None:
+    def follow(self, path: TimedPath, t0: float, path_id: int | None = None, at: float = 0.0) -> None:
         """Drive ``path``, whose times count from ``t0``. Ends charging.
 
         The robot must be within its radius of the path's first waypoint; it is put exactly there
-        (the planner plans from reported positions, so the gap is a rounding of the start).
+        (the planner plans from reported positions, so the gap is a rounding of the start). With
+        ``at`` (m along the path) it joins the path there instead: it must be within its radius of
+        that point, and it has driven ``at`` m of the path.
         """
         wp = path.waypoints
         if not np.all(np.isfinite(wp)):
@@ -177,12 +179,17 @@ class RobotModel:
         if np.any(np.diff(wp[:, 2]) < 0):
             k = int(np.argmax(np.diff(wp[:, 2]) < 0)) + 1
             raise ValueError(f"robot {self.id!r}: timed path waypoint {k} is earlier than waypoint {k - 1}")
-        gap = math.hypot(wp[0, 0] - self.x, wp[0, 1] - self.y)
+        seg = np.hypot(*np.diff(wp[:, :2], axis=0).T)
+        arc = np.concatenate([[0.0], np.cumsum(seg)])
+        at = min(max(float(at), 0.0), float(arc[-1]))
+        keep = np.concatenate([[True], seg > 0])
+        jx, jy = (float(np.interp(at, arc[keep], wp[keep, 0])), float(np.interp(at, arc[keep], wp[keep, 1]))) \
+            if at > 0 else (float(wp[0, 0]), float(wp[0, 1]))
+        gap = math.hypot(jx - self.x, jy - self.y)
         if gap > self.kind.radius:
             raise ValueError(f"robot {self.id!r}: timed path starts {gap:.3f} m from the robot "
                              f"(more than its radius {self.kind.radius:g} m)")
-        seg = np.hypot(*np.diff(wp[:, :2], axis=0).T)
-        self._S = np.concatenate([[0.0], np.cumsum(seg)])
+        self._S = arc
         self._T = wp[:, 2] + t0
         # the schedule halts on the first waypoint until its time, on every hold, and at the end
         holds = np.nonzero(seg <= _EPS)[0]
@@ -190,8 +197,8 @@ class RobotModel:
                                  np.column_stack([self._S[holds], self._T[holds + 1]]),
                                  [self._S[-1], math.inf]])
         self.path, self.path_t0, self.path_id = path, float(t0), path_id
-        self._s = 0.0
-        self.x, self.y = float(wp[0, 0]), float(wp[0, 1])
+        self._s = at
+        self.x, self.y = jx, jy
         self._charging = False
         self._steered = None
 

@@ -193,7 +193,7 @@ class RobotAgent:
         if self.hand.manual:
             return
         try:
-            self.driver.follow(path, t0, path_id, self._last)
+            self.driver.follow(path, t0, path_id, self._last, self.heard)
         except ValueError:
             self.rejected = path_id
             self.driver.refused(path_id)

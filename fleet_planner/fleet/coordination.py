@@ -90,9 +90,10 @@ class Driver(ABC):
     obstacles: ObstacleMap | None = None
 
     @abstractmethod
-    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
+    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None,
+               heard: Mapping[str, RobotStatus] | None = None) -> None:
         """Take a leg whose times count from ``t0`` (``now``: the robot's last tick, None before
-        the first); ValueError if it cannot."""
+        the first; ``heard``: the other robots' last statuses); ValueError if it cannot."""
 
     @abstractmethod
     def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
@@ -216,6 +217,46 @@ class CentralCoordination(Coordination):
         return CentralDriver(model, gated)
 
 
+#: a robot joins a leg that started behind it if it is this close (m) to the leg's way (the leg
+#: is string-pulled anew from its start, so its way beside the robot's old one differs by some cm;
+#: the step onto it is checked against the other robots like the jump onto a start) ...
+JOIN_TOL_M = 0.2
+#: ... within this far (m) along it
+JOIN_WITHIN_M = 10.0
+
+
+def _arc_of(wp: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+
+
+def join_at(path: TimedPath, t0: float, pos: Point, now: float, limit: float | None = None) -> float:
+    """Where (m along ``path``, whose times count from ``t0``) a robot at ``pos`` at ``now`` joins
+    it: the first point of its first :data:`JOIN_WITHIN_M` within :data:`JOIN_TOL_M` of ``pos``,
+    provided the schedule is due there by ``now`` (a robot never runs ahead of its schedule) or,
+    with ``limit`` (a gated robot: how far its gate lets it drive along the path), short of that
+    limit (the gate, not the clock, keeps it out of the others' way: a leg planned from standstill
+    is due behind a robot that drove on); 0.0 if there is none (it must then stand on the start)."""
+    wp = path.waypoints
+    if len(wp) < 2:
+        return 0.0
+    arc = _arc_of(wp)
+    a, b = wp[:-1, :2], wp[1:, :2]
+    p = np.asarray(pos, dtype=float)
+    ab = b - a
+    den = np.sum(ab * ab, axis=1)
+    u = np.clip(np.sum((p - a) * ab, axis=1) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+    dist = np.hypot(*(a + u[:, None] * ab - p).T)
+    s = arc[:-1] + u * np.sqrt(den)
+    ok = np.nonzero((dist <= JOIN_TOL_M) & (den > 0) & (s <= JOIN_WITHIN_M))[0]
+    if not len(ok):
+        return 0.0
+    j = float(s[ok[0]])
+    if limit is not None:
+        return j if j < limit else 0.0
+    due = float(np.interp(now - t0, wp[:, 2], arc))
+    return j if j <= due + JOIN_TOL_M else 0.0
+
+
 class CentralDriver(Driver):
     """A robot driving each leg's timed path, with a safety net: it waits rather than drive into a
     robot in its critical area (:meth:`must_wait` says how). ``gated``: it also never drives
@@ -228,9 +269,39 @@ class CentralDriver(Driver):
         self.gated = gated
         self.gate: GateRecord | None = None
         self.stopped = False
+        self._arc: tuple[TimedPath, np.ndarray, np.ndarray] | None = None   # its path's arc lengths (_way)
 
-    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
-        self.model.follow(path, t0, path_id)
+    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None,
+               heard: Mapping[str, RobotStatus] | None = None) -> None:
+        """Take the leg (RobotModel.follow puts the robot on its first waypoint, at most its radius
+        away); ValueError, and the robot stays where it is, if that jump would bring it closer than
+        the sum of radii plus :data:`NET_MARGIN_M` to a robot in ``heard`` (as the net would stop
+        it driving there: a leg planned from a stale position must not put it into another).
+        A robot that drove on past the leg's start while the leg was on its way joins it where it
+        is (:func:`join_at`), if it lies on the leg and no further than the leg's schedule is due."""
+        m = self.model
+        at = 0.0
+        wp0 = path.waypoints[0, :2]
+        if now is not None and math.hypot(wp0[0] - m.x, wp0[1] - m.y) > m.kind.radius:
+            # gated, the leg's gate (its record comes before the leg) decides how far it may be along,
+            # not the clock: it joins only short of the nearest entry it must wait at
+            limit = None
+            if self.gated:
+                limit = gate_limit(self.gate, path_id, heard or {}) if self.gate is not None else 0.0
+            at = join_at(path, t0, (m.x, m.y), now, limit)
+        if heard:
+            start = path.waypoints[0, :2] if at == 0.0 else np.array(point_at_arc(
+                path.waypoints[:, :2], _arc_of(path.waypoints), at))
+            if math.hypot(start[0] - m.x, start[1] - m.y) > 1e-6:
+                way = np.array([[m.x, m.y], start], dtype=float)
+                sweep = {st.id: (0.0, 0.0) for st in heard.values()}
+                others = [RobotView(st.id, (st.x, st.y), st.radius) for st in heard.values()
+                          if math.hypot(st.x - m.x, st.y - m.y) < m.kind.radius * 2 + st.radius + NET_MARGIN_M]
+                blocker = self._closing_in(way, others, sweep)
+                if blocker is not None:
+                    raise ValueError(f"robot {m.id!r}: timed path starts {math.dist(start, (m.x, m.y)):.3f} m "
+                                     f"from the robot, towards robot {blocker.id!r}")
+        self.model.follow(path, t0, path_id, at=at)
         self.stopped = False
 
     def refused(self, path_id: int) -> None:
@@ -287,14 +358,17 @@ class CentralDriver(Driver):
         self.waits_for = None
         if ahead is None or m.busy_until is not None:
             return False
-        step = min(k.max_speed, m.speed + k.max_accel * dt) * dt
+        step = min(k.max_speed * (1 + 1e-9), m.speed + k.max_accel * dt) * dt
         others, sweep = [], {}
         for st in heard.values():
-            if math.hypot(st.x - m.x, st.y - m.y) > k.radius + st.radius + step + 2 * k.max_speed * STALE_S:
+            # swept to the end of the step at its reported velocity, unless it was silent already
+            # when the step began (then it stands: a step longer than STALE_S sweeps it all the same)
+            age = t - st.stamp
+            ahead_s = t + dt - st.stamp if 0.0 <= age <= STALE_S else 0.0
+            dx, dy = st.vx * ahead_s, st.vy * ahead_s
+            if math.hypot(st.x - m.x, st.y - m.y) > k.radius + st.radius + step + math.hypot(dx, dy) + 2 * NET_MARGIN_M:
                 continue
-            ahead_s = t + dt - st.stamp
-            ahead_s = ahead_s if 0.0 <= ahead_s <= STALE_S else 0.0   # a silent robot stands
-            sweep[st.id] = (st.vx * ahead_s, st.vy * ahead_s)
+            sweep[st.id] = (dx, dy)
             others.append(RobotView(st.id, (st.x, st.y), st.radius))
         if self.obstacles is not None:  # people, vehicles, pallets: stopped for like robots
             for oid, (ox, oy), radius, (dx, dy) in self.obstacles.net_discs(t, dt, STALE_S):
@@ -302,32 +376,47 @@ class CentralDriver(Driver):
                     sweep[oid] = (dx, dy)
                     others.append(RobotView(oid, (ox, oy), radius))
         if self.gated:
-            blocker = self._closing_in(ahead, step, others, sweep)
+            blocker = self._closing_in(self._way(step), others, sweep)
         else:
             blocker = safety_stop(RobotView(m.id, (m.x, m.y), k.radius, next_waypoint=ahead), others, step,
                                   NET_MARGIN_M, sweep)
         self.waits_for = blocker.id if blocker is not None else None
         return blocker is not None
 
-    def _closing_in(self, ahead: Point, step: float, others: list[RobotView],
+    def _way(self, step: float) -> np.ndarray:
+        """The polyline the robot may drive along its path in a step of ``step`` m: from where it
+        is through every vertex within ``step`` to the point ``step`` along (however densely the
+        path has vertices: the whole of the step is looked at, not only up to the next vertex)."""
+        m = self.model
+        assert m.path is not None
+        cached = self._arc
+        if cached is None or cached[0] is not m.path:
+            wp = m.path.waypoints[:, :2]
+            cached = self._arc = (m.path, wp, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp, axis=0).T))]))
+        _, wp, arc = cached
+        s0 = m.travelled
+        s1 = min(s0 + step, float(arc[-1]))
+        inner = (arc > s0) & (arc < s1)
+        end = point_at_arc(wp, arc, s1)
+        return np.vstack([[m.x, m.y], wp[inner], [end]])
+
+    def _closing_in(self, way: np.ndarray, others: list[RobotView],
                     sweep: Mapping[str, tuple[float, float]]) -> RobotView | None:
         """The safety net of a gated robot: the closest robot whose disc (swept as above) the step
-        towards ``ahead`` would bring closer than the sum of radii plus :data:`NET_MARGIN_M`. A
-        disc, not the behaviours' rectangle, so that it never stops a robot its gate lets pass
-        (the gate keeps :data:`~.gate.PAD_M` > NET_MARGIN_M between the discs)."""
+        along ``way`` (:meth:`_way`) would bring closer than the sum of radii plus
+        :data:`NET_MARGIN_M`. A disc, not the behaviours' rectangle, so that it never stops a robot
+        its gate lets pass (the gate keeps :data:`~.gate.PAD_M` > NET_MARGIN_M between the discs)."""
         m = self.model
-        here = np.array([m.x, m.y])
-        way = np.asarray(ahead, dtype=float) - here
-        dist = float(np.hypot(*way))
-        if dist <= 0.0:
+        here = way[0]
+        if len(way) < 2 or not np.any(np.hypot(*(way[1:] - here).T) > 0.0):
             return None
-        end = here + way * (min(step, dist) / dist)
+        a, b = way[:-1], way[1:]
         hit = []
         for o in others:
             dx, dy = sweep.get(o.id, (0.0, 0.0))
             n = 1 + math.ceil(math.hypot(dx, dy) / 0.05)
             pts = np.array(o.position) + np.outer(np.linspace(0.0, 1.0, n), [dx, dy])
-            near = float(np.min(segment_point_distance(here, end, pts)))
+            near = float(np.min(segment_point_distance(a[:, None, :], b[:, None, :], pts[None, :, :])))
             now = float(np.min(np.hypot(*(pts - here).T)))
             if near < m.kind.radius + o.radius + NET_MARGIN_M and near < now - 1e-9:
                 hit.append(o)
@@ -394,7 +483,8 @@ class BehaviorDriver(Driver):
         self._inbox: list[WaitMessage] = []
         self._outbox: list[WaitMessageRecord] = []
 
-    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None) -> None:
+    def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None,
+               heard: Mapping[str, RobotStatus] | None = None) -> None:
         """Only the leg's goal counts: ValueError if there is no way there."""
         goal = (float(path.waypoints[-1, 0]), float(path.waypoints[-1, 1]))
         station = station_at(self.warehouse, goal)

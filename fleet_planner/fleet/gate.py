@@ -240,6 +240,10 @@ class GateBook:
         self.records: dict[str, GateRecord] = {}
         #: per robot, the paths it may be driving: its latest leg and the one its status names
         self.paths: dict[str, dict[int, TimedPath]] = {}
+        #: id of a live path -> (the path, its bounding box) (:meth:`_box`)
+        self._boxes: dict[int, tuple[TimedPath, tuple[float, float, float, float]]] = {}
+        #: robot -> the robots whose records (may) have links naming it (a superset: checked on use)
+        self._named_by: dict[str, set[str]] = {}
 
     def _live(self, o: FleetRobot) -> dict[int, TimedPath]:
         paths = self.paths.get(o.id, {})
@@ -266,6 +270,7 @@ class GateBook:
         watch: dict[str, int] = {}
         grown: dict[str, list[Link]] = {}
         self.conflicts: list[str] = []
+        (lx, ly), (hx, hy) = mine.xy.min(axis=0).tolist(), mine.xy.max(axis=0).tolist()
         for o in fleet:
             if o is r or o.immobile:
                 continue
@@ -274,7 +279,13 @@ class GateBook:
                 continue
             latest = max(paths)
             recorded = o.id in self.records and self.records[o.id].path_id == latest
+            # a path whose bounding box keeps farther than the regions' reach from the new leg's
+            # has no region with it (its samples lie in that box): skipped, nothing else changes
+            near = r.radius + o.radius + self.pad_m + self.sample_m + 1e-6
             for pid, p in paths.items():
+                bx0, by0, bx1, by1 = self._box(p)
+                if bx0 > hx + near or by0 > hy + near or bx1 < lx - near or by1 < ly - near:
+                    continue
                 on_it = o.status.path_id == pid
                 done = travelled(o.status) if on_it else None
                 done = 0.0 if done is None else min(done, p.length)
@@ -312,10 +323,16 @@ class GateBook:
         self.paths[r.id][path_id] = path
         out = [self._set(GateRecord(robot_id=r.id, path_id=path_id, seq=0, stamp=float(now),
                                     links=tuple(lk.to_dict() for lk in links), watch=watch))]
-        for oid, rec in list(self.records.items()):
+        # the records of others that grow or name r (in the records' order), not every record
+        named = self._named_by.setdefault(r.id, set())
+        rank = {oid: k for k, oid in enumerate(self.records)}
+        for oid in sorted((set(grown) | named) & rank.keys(), key=rank.__getitem__):
+            rec = self.records[oid]
             if oid == r.id:
                 continue
             names_r = any(d["robot"] == r.id for d in rec.links)
+            if not names_r:
+                named.discard(oid)
             if oid not in grown and not names_r:
                 continue
             watch = {**(rec.watch or {}), r.id: path_id}
@@ -325,6 +342,18 @@ class GateBook:
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
                                             links=kept + added, watch=watch)))
         return out
+
+    def _box(self, p: TimedPath) -> tuple[float, float, float, float]:
+        """The bounding box (x min, y min, x max, y max) of the waypoints of a live path, kept with it."""
+        box = self._boxes.get(id(p))
+        if box is None or box[0] is not p:
+            if len(self._boxes) > 4 * len(self.paths) + 64:  # (only live paths' boxes are kept)
+                live = {id(q) for ps in self.paths.values() for q in ps.values()}
+                self._boxes = {k: v for k, v in self._boxes.items() if k in live}
+            xy = p.waypoints[:, :2]
+            (x0, y0), (x1, y1) = xy.min(axis=0).tolist(), xy.max(axis=0).tolist()
+            box = self._boxes[id(p)] = (p, (x0, y0, x1, y1))
+        return box[1]
 
     def _may_be_in(self, p: TimedPath, done: float, reach: float, path: TimedPath, mine: _Samples,
                    i_mine: np.ndarray, clear: float) -> bool:
@@ -383,4 +412,6 @@ class GateBook:
 
     def _set(self, rec: GateRecord) -> GateRecord:
         self.records[rec.robot_id] = rec
+        for d in rec.links:
+            self._named_by.setdefault(d["robot"], set()).add(rec.robot_id)
         return rec

@@ -393,7 +393,7 @@ class FleetManager:
     def _decide(self, now: float, d: Decisions) -> None:
         self._find_immobile(now, d)
         self._watch_obstacles(now, d)
-        self._find_rejected(d)
+        self._find_rejected(now, d)
         if self.store is not None:
             for r in self.robots.values():
                 self._adopt(r)
@@ -417,14 +417,19 @@ class FleetManager:
             elif r.online and not r.immobile and r.status.mode == "error":
                 self._immobilise(r, now, d, "out of battery")
 
-    def _find_rejected(self, d: Decisions) -> None:
+    def _find_rejected(self, now: float, d: Decisions) -> None:
         """A robot whose status names its latest leg as rejected stands where it is (it stopped):
-        its leg is planned again from there, never assumed driven."""
+        its leg is planned again from there, never assumed driven, and legs of others planned
+        around the leg it never took re-plan if they pass where it stands."""
         for r in self.robots.values():
             if r.leg is not None and r.status.rejected_path_id == r.leg.path_id and not r.immobile:
                 d.notes.append(f"robot {r.id} could not take leg {r.leg.path_id}: planning it again from "
                                f"({r.status.x:.2f}, {r.status.y:.2f})")
                 r.leg, r.replan = None, r.target is not None
+                self._changed(r)
+                for o in self._replan_around(r, r.pos, now):
+                    if self.gates is not None:  # their links keep them off it: an optimisation, not a hold
+                        o.conflict = False
 
     def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
         """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
@@ -686,7 +691,8 @@ class FleetManager:
         lead = self.params.lead_s
         if r.on_leg and math.hypot(r.status.vx, r.status.vy) * lead > r.radius / 2:
             # re-planned while it drives on: a leg starting lead_s ahead would start further along
-            # its way than its radius, and the robot refuses a leg that starts beyond it
+            # its way than its radius, and the robot refuses a leg that starts beyond it (one that
+            # starts behind it on its way, once it drove on, it joins where it is: CentralDriver.follow)
             lead = 0.0
         return max(round((now + lead) * 1e9), r.last_path_id + 1)
 

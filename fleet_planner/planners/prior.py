@@ -237,12 +237,27 @@ class _Space:
             self.buckets[b] = [p for p in self.buckets[b] if p[6] != owner]
         self.parked.pop(owner, None)
 
-    def add_path(self, owner: int, wp: np.ndarray, t_from: float = -_INF) -> None:
+    def add_path(self, owner: int, wp: np.ndarray, t_from: float = -_INF,
+                 reach: Sequence[tuple[float, float, float, float]] = ()) -> None:
         """A trajectory with the contract's meaning, cut into pieces at most one cell long; pieces
-        that end before ``t_from`` are left out."""
+        that end before ``t_from`` are left out, and with ``reach`` ((x, y, speed, keep-out) of each
+        robot to plan, which leaves (x, y) at ``t_from`` at the earliest) so are pieces none of them
+        can come within keep-out distance of before the piece ends (out of reach: they cannot
+        conflict with anything it may do)."""
         for piece in _pieces(wp, owner, self.res):
-            if piece[1] >= t_from:
+            if piece[1] >= t_from and (not reach or _reachable(piece, t_from, reach)):
                 self.add(piece)
+
+
+def _reachable(piece: Piece, t0: float, reach: Sequence[tuple[float, float, float, float]]) -> bool:
+    """Some robot leaving (x, y) at ``t0`` at top speed comes within its keep-out distance of the
+    piece's bounding box before the piece ends."""
+    tb, x0, y0, x1, y1 = piece[1], piece[7], piece[8], piece[9], piece[10]
+    for x, y, speed, keep in reach:
+        d = math.hypot(max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1))
+        if d - keep <= speed * (tb - t0) + 1e-9:
+            return True
+    return False
 
 
 def _pieces(wp: np.ndarray, owner: int, max_len: float) -> list[Piece]:
@@ -401,8 +416,13 @@ class _Session:
         self._check_input()
         rmax = float(self.radii.max()) if len(self.radii) else 0.0
         self.space = _Space(grid, self.radii, rmax + planner.margin + math.sqrt(2) * grid.resolution + 1e-6)
+        # a fixed trajectory's pieces that no robot to plan can reach before they end are left out
+        # (a leg's cost follows its neighbourhood in space-time, not the fleet)
+        rfix = max((f.radius for f in fixed), default=0.0)
+        reach = [(float(r.start[0]), float(r.start[1]), float(r.max_speed), r.radius + rfix + planner.margin + 1e-6)
+                 for r in robots] if fixed else []
         for k, f in enumerate(fixed):
-            self.space.add_path(n + k, f.waypoints, t0)
+            self.space.add_path(n + k, f.waypoints, t0, reach)
         self.garage_until = [_INF] * n
         for i in range(n):
             self._add_garage(i)
