@@ -56,6 +56,7 @@ from ..planners import Planner, get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
+from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, staging_spots
 from .gate import GateBook
 from .intake import Roster
 from .jobstore import DuplicateJob, JobStore
@@ -107,6 +108,12 @@ class FleetManager:
                 raise ValueError(f"parking[{i}]: ({x:g}, {y:g}) has no room for a robot of radius {largest:g} m")
             self.parking[f"parking_{i + 1}"] = (x, y)
         self.chargers = {s.name: s.pose for s in warehouse.stations_of("charger")}
+        #: how jobs are allocated and where idle robots wait (fleet/dispatch.py)
+        self.policy = DispatchPolicy()
+        self.travel = TravelTimes(warehouse)
+        for chute in warehouse.stations_of("chute"):  # (made now, not inside a step's time budget)
+            self.travel.field(chute.name)
+        self.staging = {f"staging_{i + 1}": p for i, p in enumerate(staging_spots(warehouse, largest))}
         self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
@@ -517,6 +524,9 @@ class FleetManager:
                                        j.seq))
         if not queued:
             return
+        if self.policy.batch:
+            self._allocate_batch(queued, now, d)
+            return
         free = [r for r in self.robots.values() if r.free and r.status.battery >= self.params.min_task_battery
                 and now >= r.leg_retry_at]
         for job in queued:
@@ -529,28 +539,68 @@ class FleetManager:
             if not able:
                 continue
             r = min(able, key=lambda r: (math.dist(r.pos, pose), -r.status.battery, r.id))
-            occupant = self._occupant(pose, r.radius, exclude=r)
-            if occupant is not None:
-                if occupant.free:
-                    self._send_away(occupant, now, d)
-                continue
-            if self._plan_leg(r, Target("pick", job.pick.name, pose), now, d) is None:
-                continue
-            r.job = job.task.id
-            job.state, job.robot = "active", r.id
-            self._record(job, "assigned", now)
-            d.events.append(_event(job.task.id, "assigned", now, r.id))
+            self._try_assign(r, job, now, d)
+
+    def _available(self, r: FleetRobot, now: float) -> bool:
+        """``r`` may take a job now: free, or only on its way to wait somewhere (a staging or parking
+        spot, or a charger it does not need), its last leg acknowledged; with battery enough."""
+        if r.status.battery < self.params.min_task_battery or now < r.leg_retry_at:
+            return False
+        if r.free:
+            return True
+        t = r.target
+        return (t is not None and r.job is None and r.online and not r.immobile and not r.paused and not r.manual
+                and not r.replan and r.status.mode not in ("picking", "placing", "error")
+                and (r.leg is None or r.status.path_id == r.leg.path_id)
+                and (t.purpose == "park" or t.purpose == "charge" and r.status.battery >= self.policy.charge_below))
+
+    def _allocate_batch(self, queued: list[Job], now: float, d: Decisions) -> None:
+        """Free robots and the first job of each free chute paired by the smallest sum of estimated
+        arrival times (fleet/dispatch.py)."""
+        free = {r.id: r for r in self.robots.values() if self._available(r, now)}
+        if not free:
+            return
+        cands = [Candidate(r.id, r.pos, r.kind.max_speed * self.params.speed_factor, r.status.battery)
+                 for r in free.values()]
+        pairs = assign(cands, [(j.task.id, j.pick.name) for j in queued],
+                       able=lambda rid, jid: can_do(free[rid].kind, self.jobs[jid].task),
+                       lengths=self.travel.length, busy=lambda chute: self._reserved(self.work_stops[chute]))
+        for rid, jid, _ in pairs:
+            if self._out_of_time():
+                return
+            self._try_assign(free[rid], self.jobs[jid], now, d)
+
+    def _try_assign(self, r: FleetRobot, job: Job, now: float, d: Decisions) -> bool:
+        """Give ``job`` to ``r`` if its leg to the chute can be planned (a free robot standing on the
+        chute is sent off first, and the job waits)."""
+        pose = job.pick.pose
+        occupant = self._occupant(pose, r.radius, exclude=r)
+        if occupant is not None:
+            if occupant.free:
+                self._send_away(occupant, now, d)
+            return False
+        if self._plan_leg(r, Target("pick", job.pick.name, pose), now, d) is None:
+            return False
+        r.job = job.task.id
+        job.state, job.robot = "active", r.id
+        self._record(job, "assigned", now)
+        d.events.append(_event(job.task.id, "assigned", now, r.id))
+        return True
 
     def _housekeeping(self, now: float, d: Decisions) -> None:
+        staging = self.policy.staging and bool(self.staging)
         for r in sorted((r for r in self.robots.values() if r.free and now >= r.retry_at),
                         key=lambda r: r.status.battery):
             if self._out_of_time():
                 return
-            if not r.free or self._at(r.pos, self.chargers):
+            if not r.free:
                 continue
             low = r.status.battery < self.params.low_battery
             idle = now - r.idle_since >= self.params.idle_s
-            if not (low or idle):
+            if staging:
+                self._wait_near_chutes(r, low, idle, now, d)
+                continue
+            if self._at(r.pos, self.chargers) or not (low or idle):
                 continue
             spot = self._free_spot(r, self.chargers)
             if spot is not None:
@@ -559,15 +609,45 @@ class FleetManager:
             elif idle and self._at(r.pos, self.work_stops):
                 self._send_away(r, now, d)
 
+    def _wait_near_chutes(self, r: FleetRobot, low: bool, idle: bool, now: float, d: Decisions) -> None:
+        """Where a free robot waits (fleet/dispatch.py, policy ``staging``): low on battery, or idle
+        and below ``charge_below``, at a charger; otherwise idle at a staging spot near the chutes
+        (a robot at a charger once charged to ``leave_charger_at``); else as before."""
+        battery = r.status.battery
+        if self._at(r.pos, self.chargers):
+            if low or not idle or battery < self.policy.leave_charger_at:
+                return
+            spot = self._free_spot(r, self.staging)
+            if spot is not None and self._plan_leg(r, Target("park", *spot), now, d) is None:
+                r.retry_at = now + SPOT_RETRY_S
+            return
+        if not (low or idle) or (self._at(r.pos, self.staging) and not low):
+            return
+        goals = [(self.chargers, "charge"), (self.staging, "park")]
+        if not (low or battery < self.policy.charge_below):
+            goals.reverse()
+        for spots, purpose in goals:
+            spot = self._free_spot(r, spots)
+            if spot is not None:
+                if self._plan_leg(r, Target(purpose, *spot), now, d) is None:
+                    r.retry_at = now + SPOT_RETRY_S
+                return
+        if idle and self._at(r.pos, self.work_stops):
+            self._send_away(r, now, d)
+
     # -- helpers ---------------------------------------------------------------------------------------
     def _send_away(self, r: FleetRobot, now: float, d: Decisions) -> None:
-        """Move a free robot that is in the way to a free charger, else to a free parking spot."""
+        """Move a free robot that is in the way to a free staging spot (policy ``staging``), else a free
+        charger, else a free parking spot."""
         if now < r.retry_at or now < r.leg_retry_at:
             return   # its last leg off was refused: not planned again at every step
         if self._at(r.pos, self.chargers) or self._at(r.pos, self.parking):
             return
-        spot = self._free_spot(r, self.chargers)
-        purpose = "charge"
+        spot, purpose = None, "park"
+        if self.policy.staging and not self._at(r.pos, self.staging):
+            spot = self._free_spot(r, self.staging)
+        if spot is None:
+            spot, purpose = self._free_spot(r, self.chargers), "charge"
         if spot is None:
             spot, purpose = self._free_spot(r, self.parking), "park"
         if spot is None:
