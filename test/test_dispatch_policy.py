@@ -98,7 +98,7 @@ def test_idle_robots_wait_near_the_chutes_and_charge_only_when_the_battery_asks(
     south = (12.75, 11.75)
     for t in (0.0, 6.0):
         fm.on_status(status("full", "cargo", *south, battery=0.9, stamp=t), t)
-        fm.on_status(status("half", "cargo", 2.75, 11.75, battery=0.4, stamp=t), t)
+        fm.on_status(status("half", "cargo", 1.25, 6.75, battery=0.4, stamp=t), t)
     legs = {leg.robot_id: leg for leg in fm.step(6.0).legs}
     assert legs["full"].purpose == "park" and tuple(legs["full"].path.waypoints[-1, :2]) in fm.staging.values()
     assert legs["half"].purpose == "charge"
