@@ -34,7 +34,7 @@ from fleet_planner.warehouse import load_warehouse  # noqa: E402
 
 POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "batch-only": DispatchPolicy(staging=False, charge_below=1.0,
                                                                                      leave_charger_at=1.0),
-            "staging-only": DispatchPolicy(batch=False)}
+            "staging-only": DispatchPolicy(batch=False, queue=False), "no-queue": DispatchPolicy(queue=False)}
 
 
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,

@@ -126,3 +126,24 @@ def test_a_robot_on_its_way_to_a_staging_spot_takes_a_job():
     d = fm.step(7.5)
     assert [(e.event, e.robot_id) for e in d.events] == [("assigned", "r1")]
     assert d.legs[0].purpose == "pick"
+
+
+def test_the_next_job_at_a_taken_chute_goes_to_a_robot_that_waits_by_it():
+    fm = FleetManager(WH, KINDS, DispatchParams(idle_s=5.0))
+    fm.step_budget_s = 60.0
+    assert set(fm.queue_spot) == {"chute_1", "chute_2"}
+    fm.on_status(status("r1", "cargo", 6.25, 3.75), 0.0)
+    fm.on_status(status("r2", "cargo", 12.75, 11.75), 0.0)
+    fm.submit(Task(id="J1", pick="chute_1", place="B01-01"), 0.0)
+    fm.submit(Task(id="J2", pick="chute_1", place="B02-01"), 0.0)
+    d = fm.step(0.5)
+    assert sorted((e.task_id, e.robot_id) for e in d.events if e.event == "assigned") == [("J1", "r1"), ("J2", "r2")]
+    legs = {leg.robot_id: leg for leg in d.legs}
+    assert (legs["r1"].purpose, legs["r1"].goal) == ("pick", "chute_1")
+    spot = fm.queue_spot["chute_1"]
+    assert (legs["r2"].purpose, legs["r2"].goal) == ("park", spot)
+    assert tuple(legs["r2"].path.waypoints[-1, :2]) == fm.staging[spot]
+    # a third job there waits in the queue: one robot waits per chute
+    fm.on_status(status("r3", "cargo", 1.25, 6.75), 0.5)
+    fm.submit(Task(id="J3", pick="chute_1", place="B03-01"), 0.5)
+    assert not [e for e in fm.step(1.0).events if e.event == "assigned"]

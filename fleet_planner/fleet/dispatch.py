@@ -44,12 +44,16 @@ class DispatchPolicy:
 
     ``batch``: pair free robots and jobs by the smallest sum of estimated arrival times (else each
     job in turn takes the nearest robot, the old rule); ``staging``: idle robots wait at staging
-    spots near the chutes rather than at chargers; ``charge_below``: an idle robot goes to a charger
-    rather than a staging spot only below this battery (1.0: always, the old rule); ``leave_charger_at``:
-    an idle robot at a charger leaves for a staging spot once charged this far."""
+    spots near the chutes rather than at chargers; ``queue`` (with ``batch`` and ``staging``): while
+    a chute is taken, the next job there goes to a robot that waits on the chute's staging spot and
+    drives the last metres the moment the chute is free (one robot waiting per chute);
+    ``charge_below``: an idle robot goes to a charger rather than a staging spot only below this
+    battery (1.0: always, the old rule); ``leave_charger_at``: an idle robot at a charger leaves for
+    a staging spot once charged this far."""
 
     batch: bool = True
     staging: bool = True
+    queue: bool = True
     charge_below: float = 0.6
     leave_charger_at: float = 0.95
 
@@ -61,7 +65,7 @@ class DispatchPolicy:
 
 
 #: the old rules: the nearest robot for each job in turn, idle robots charge
-LEGACY = DispatchPolicy(batch=False, staging=False, charge_below=1.0, leave_charger_at=1.0)
+LEGACY = DispatchPolicy(batch=False, staging=False, queue=False, charge_below=1.0, leave_charger_at=1.0)
 
 
 class TravelTimes:
@@ -173,11 +177,12 @@ def assign(robots: Sequence[Candidate], jobs: Sequence[tuple[str, str]], able: C
     return sorted(out, key=lambda p: p[2])
 
 
-def staging_spots(warehouse: Warehouse, radius: float, spacing: float | None = None) -> list[Point]:
+def staging_spots(warehouse: Warehouse, radius: float, spacing: float | None = None, per_chute: int = 1) -> list[Point]:
     """Spots where idle robots of up to ``radius`` wait near the chutes: between the chutes' line and
     the wall they stand on (within :data:`STAGING_BAND_M` of it), at least :data:`STAGING_CLEARANCE_M`
     beyond two radii from every station's pose, ``spacing`` (default two radii + 0.25 m) apart, the
-    nearest to a chute first. Empty for a warehouse without chutes."""
+    nearest to a chute first, at most ``per_chute`` for each chute (its nearest: a crowd waiting by
+    the chutes jams the aisle in front of them). Empty for a warehouse without chutes."""
     chutes = np.array([s.pose for s in warehouse.stations_of("chute")], dtype=float).reshape(-1, 2)
     if not len(chutes):
         return []
@@ -200,13 +205,30 @@ def staging_spots(warehouse: Warehouse, radius: float, spacing: float | None = N
     depth = wall[keep][d_st >= 2 * radius + STAGING_CLEARANCE_M]
     order = np.lexsort((xy[:, 0], np.round(d_ch, 1), np.round(depth / 0.25)))  # deepest in the recess first
     chosen: list[Point] = []
+    count = np.zeros(len(chutes), dtype=int)
     for x, y in xy[order]:
-        if not g.disc_is_free(float(x), float(y), radius + 0.02):
+        near = int(np.argmin(np.hypot(chutes[:, 0] - x, chutes[:, 1] - y)))
+        if count[near] >= per_chute or not g.disc_is_free(float(x), float(y), radius + 0.02):
             continue
         if any(math.hypot(x - cx, y - cy) < spacing for cx, cy in chosen):
             continue
         chosen.append((float(x), float(y)))
+        count[near] += 1
     return chosen
+
+
+def queue_spots(chutes: Mapping[str, Point], spots: Mapping[str, Point], within: float = 4.0) -> dict[str, str]:
+    """Each chute's waiting spot: the nearest of ``spots`` within ``within`` m that no other chute has
+    nearer (by name)."""
+    out: dict[str, str] = {}
+    for chute, (cx, cy) in chutes.items():
+        best = min(spots.items(), key=lambda item: math.hypot(item[1][0] - cx, item[1][1] - cy), default=None)
+        if best is None or math.hypot(best[1][0] - cx, best[1][1] - cy) > within:
+            continue
+        owner = min(chutes, key=lambda c: math.dist(chutes[c], best[1]))
+        if owner == chute:
+            out[chute] = best[0]
+    return out
 
 
 def nearest_free(spots: Mapping[str, Point], taken: Callable[[Point], bool], origin: Point,
@@ -220,4 +242,5 @@ def nearest_free(spots: Mapping[str, Point], taken: Callable[[Point], bool], ori
     return best
 
 
-__all__ = ["LEGACY", "Candidate", "DispatchPolicy", "TravelTimes", "assign", "nearest_free", "staging_spots"]
+__all__ = ["LEGACY", "Candidate", "DispatchPolicy", "TravelTimes", "assign", "nearest_free", "queue_spots",
+           "staging_spots"]

@@ -56,7 +56,7 @@ from ..planners import Planner, get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
-from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, staging_spots
+from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, queue_spots, staging_spots
 from .gate import GateBook
 from .intake import Roster
 from .jobstore import DuplicateJob, JobStore
@@ -114,6 +114,8 @@ class FleetManager:
         for chute in warehouse.stations_of("chute"):  # (made now, not inside a step's time budget)
             self.travel.field(chute.name)
         self.staging = {f"staging_{i + 1}": p for i, p in enumerate(staging_spots(warehouse, largest))}
+        #: chute -> the staging spot where the robot with its next job waits (policy ``queue``)
+        self.queue_spot = queue_spots({s.name: s.pose for s in warehouse.stations_of("chute")}, self.staging)
         self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
@@ -522,10 +524,10 @@ class FleetManager:
         queued = sorted((j for j in self.jobs.values() if j.state == "queued"),  # earliest deadline among equals
                         key=lambda j: (-j.task.priority, math.inf if j.task.deadline is None else j.task.deadline,
                                        j.seq))
-        if not queued:
-            return
-        if self.policy.batch:
+        if self.policy.batch:  # (also with nothing queued: robots waiting by a chute go on when it is free)
             self._allocate_batch(queued, now, d)
+            return
+        if not queued:
             return
         free = [r for r in self.robots.values() if r.free and r.status.battery >= self.params.min_task_battery
                 and now >= r.leg_retry_at]
@@ -556,19 +558,79 @@ class FleetManager:
 
     def _allocate_batch(self, queued: list[Job], now: float, d: Decisions) -> None:
         """Free robots and the first job of each free chute paired by the smallest sum of estimated
-        arrival times (fleet/dispatch.py)."""
-        free = {r.id: r for r in self.robots.values() if self._available(r, now)}
+        arrival times (fleet/dispatch.py); with policy ``queue`` the robots waiting for a chute go
+        on when it is free, and the next job of a taken chute goes to a robot that waits by it."""
+        waiting = self._waiting_for_chutes() if self.policy.queue else {}
+        for chute, r in waiting.items():
+            if self._out_of_time():
+                return
+            if not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
+                job = self.jobs[r.job] if r.job is not None else None
+                if job is not None and self._occupant(job.pick.pose, r.radius, exclude=r) is None:
+                    self._plan_leg(r, Target("pick", job.pick.name, job.pick.pose), now, d)
+        free = {r.id: r for r in self.robots.values() if self._available(r, now)} if queued else {}
         if not free:
             return
-        cands = [Candidate(r.id, r.pos, r.kind.max_speed * self.params.speed_factor, r.status.battery)
-                 for r in free.values()]
-        pairs = assign(cands, [(j.task.id, j.pick.name) for j in queued],
-                       able=lambda rid, jid: can_do(free[rid].kind, self.jobs[jid].task),
-                       lengths=self.travel.length, busy=lambda chute: self._reserved(self.work_stops[chute]))
+        jobs = [(j.task.id, j.pick.name) for j in queued]
+
+        def able(rid: str, jid: str) -> bool:
+            return can_do(free[rid].kind, self.jobs[jid].task)
+
+        def cands() -> list[Candidate]:
+            return [Candidate(r.id, r.pos, r.kind.max_speed * self.params.speed_factor, r.status.battery)
+                    for r in free.values()]
+
+        pairs = assign(cands(), jobs, able, self.travel.length,
+                       busy=lambda chute: chute in waiting or self._reserved(self.work_stops[chute]))
         for rid, jid, _ in pairs:
             if self._out_of_time():
                 return
-            self._try_assign(free[rid], self.jobs[jid], now, d)
+            if self._try_assign(free[rid], self.jobs[jid], now, d):
+                del free[rid]
+        if not (self.policy.queue and self.policy.staging and free):
+            return
+        # taken chutes with nobody waiting for them yet: the next job's robot waits on the chute's spot
+        open_spot = {}
+        for chute, spot in self.queue_spot.items():
+            if chute in waiting or not self._reserved(self.work_stops[chute]):
+                continue
+            occupant = self._occupant(self.staging[spot], max(r.radius for r in free.values()))
+            if occupant is None or occupant.id in free:
+                open_spot[chute] = spot
+        if not open_spot:
+            return
+        pairs = assign(cands(), [(j, c) for j, c in jobs if c in open_spot and self.jobs[j].state == "queued"],
+                       able, self.travel.length)
+        for rid, jid, _ in pairs:
+            if self._out_of_time():
+                return
+            r, job = free[rid], self.jobs[jid]
+            spot = open_spot[job.pick.name]
+            occupant = self._occupant(self.staging[spot], r.radius, exclude=r)
+            if occupant is not None:
+                continue   # another free robot stands there (it could not do this job)
+            if self._plan_leg(r, Target("park", spot, self.staging[spot]), now, d) is None:
+                continue
+            r.job = job.task.id
+            job.state, job.robot = "active", r.id
+            self._record(job, "assigned", now)
+            d.events.append(_event(job.task.id, "assigned", now, r.id))
+            d.notes.append(f"robot {r.id} waits at {spot} for {job.pick.name} (job {job.task.id})")
+
+    def _waiting_for_chutes(self) -> dict[str, FleetRobot]:
+        """Chute -> the robot whose job is there but that is not yet bound for it (it waits by it)."""
+        out = {}
+        for r in self.robots.values():
+            job = self.jobs.get(r.job) if r.job is not None else None
+            if (job is not None and job.state == "active" and not job.picked and not r.immobile
+                    and (r.target is None or r.target.purpose != "pick")):
+                out[job.pick.name] = r
+        return out
+
+    def _may_plan(self, r: FleetRobot, now: float) -> bool:
+        """``r`` may get a new leg now: online, not paused or driven by hand, its last leg acknowledged."""
+        return (r.online and not r.immobile and not r.paused and not r.manual and now >= r.leg_retry_at
+                and (r.leg is None or r.status.path_id == r.leg.path_id))
 
     def _try_assign(self, r: FleetRobot, job: Job, now: float, d: Decisions) -> bool:
         """Give ``job`` to ``r`` if its leg to the chute can be planned (a free robot standing on the
