@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from fleet_planner.fleet import DispatchParams, FleetManager  # noqa: E402
-from fleet_planner.fleet.dispatch import LEGACY, DispatchPolicy  # noqa: E402
+from fleet_planner.fleet.dispatch import LEGACY, STAGED, DispatchPolicy  # noqa: E402
 from fleet_planner.fleet.placement import parking_spots, place_robots  # noqa: E402
 from fleet_planner.fleet.sim import SimFleet  # noqa: E402
 from fleet_planner.robots import load_kinds  # noqa: E402
@@ -32,13 +32,12 @@ from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
 from fleet_planner.ros.demo.timeuse import time_use  # noqa: E402
 from fleet_planner.warehouse import load_warehouse  # noqa: E402
 
-POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "batch-only": DispatchPolicy(staging=False, charge_below=1.0,
-                                                                                     leave_charger_at=1.0),
-            "staging-only": DispatchPolicy(batch=False, queue=False), "no-queue": DispatchPolicy(queue=False)}
+POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "staged": STAGED,
+            "staged-no-queue": DispatchPolicy(staging=True, charge_below=0.6, leave_charger_at=0.95)}
 
 
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
-        period: float = 0.5) -> dict:
+        period: float = 0.5, progress: bool = False) -> dict:
     kinds = load_kinds()
     wh = load_warehouse()
     members = place_robots(wh, kinds, n)
@@ -78,6 +77,9 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
                 log.append(entry)
         if k % round(period / dt):
             continue
+        if progress and k % round(100.0 / dt) == 0:
+            print(f"  t = {t:.0f} s: {sum(e == 'done' for e in last_event.values())} done, {submitted} submitted, "
+                  f"CPU {time.process_time() - cpu0:.0f} s", file=sys.stderr, flush=True)
         pos = np.array([(st.x, st.y) for st in statuses])
         for st in statuses:
             tracks[st.id].append((st.x, st.y, t))
@@ -115,11 +117,12 @@ def main() -> None:
     p.add_argument("--interval", type=float, help="simulated s between jobs (default: the demo's, 36/N)")
     p.add_argument("--limit", type=float, default=4000.0, help="simulated s at most (default 4000)")
     p.add_argument("--time-use", action="store_true", help="print where the robots' time went")
+    p.add_argument("--progress", action="store_true", help="jobs done every 100 simulated s (on stderr)")
     opts = p.parse_args()
     print(f"{'N':>4} {'policy':>12} {'done':>9} {'span s':>7} {'jobs/h':>7} {'closest':>8} {'CPU s':>6}")
     for n in opts.robots:
         for name in opts.policies:
-            r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit)
+            r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit, progress=opts.progress)
             span = f"{r['span']:.0f}" if r["span"] else "-"
             print(f"{n:>4} {name:>12} {r['done']:>4}/{r['jobs']:<4} {span:>7} {r['per_h']:>7.0f} {r['gap']:>+8.3f} "
                   f"{r['cpu']:>6.0f}", flush=True)

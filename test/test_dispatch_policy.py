@@ -8,6 +8,7 @@ import pytest
 
 from fleet_planner.fleet import DispatchParams, FleetManager
 from fleet_planner.fleet.dispatch import (
+    STAGED,
     STAGING_CLEARANCE_M,
     Candidate,
     DispatchPolicy,
@@ -95,6 +96,7 @@ def test_idle_robots_wait_near_the_chutes_and_charge_only_when_the_battery_asks(
     fm = FleetManager(WH, KINDS, DispatchParams(idle_s=5.0))
     fm.step_budget_s = 60.0  # (a first leg loads the compiled kernels: not this test's concern)
     assert fm.policy == DispatchPolicy() and fm.staging
+    fm.policy = STAGED
     south = (12.75, 11.75)
     for t in (0.0, 6.0):
         fm.on_status(status("full", "cargo", *south, battery=0.9, stamp=t), t)
@@ -115,6 +117,7 @@ def test_idle_robots_wait_near_the_chutes_and_charge_only_when_the_battery_asks(
 def test_a_robot_on_its_way_to_a_staging_spot_takes_a_job():
     fm = FleetManager(WH, KINDS, DispatchParams(idle_s=5.0))
     fm.step_budget_s = 60.0  # (a first leg loads the compiled kernels: not this test's concern)
+    fm.policy = STAGED
     for t in (0.0, 6.0):
         fm.on_status(status("r1", "cargo", 12.75, 11.75, stamp=t), t)
     [leg] = fm.step(6.0).legs
@@ -131,6 +134,7 @@ def test_a_robot_on_its_way_to_a_staging_spot_takes_a_job():
 def test_the_next_job_at_a_taken_chute_goes_to_a_robot_that_waits_by_it():
     fm = FleetManager(WH, KINDS, DispatchParams(idle_s=5.0))
     fm.step_budget_s = 60.0
+    fm.policy = STAGED
     assert set(fm.queue_spot) == {"chute_1", "chute_2"}
     fm.on_status(status("r1", "cargo", 6.25, 3.75), 0.0)
     fm.on_status(status("r2", "cargo", 12.75, 11.75), 0.0)
