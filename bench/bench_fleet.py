@@ -12,7 +12,10 @@ beyond the sum of their radii (from the robots' status stream, as the demo measu
 Timings on a loaded machine are noisy; CPU time is the better figure.
 
     nice .venv/bin/python bench/bench_fleet.py [--default 9 15 22 30] [--large 50 100] [--rate 10]
-        [--jobs-per-robot 1] [--jobs 60 --interval 2] [--timeout 600]
+        [--jobs-per-robot 1] [--jobs 60 --interval 2] [--timeout 600] [--same-stream] [--sim on] [--time-use]
+
+Issue 8's series (throughput grows with the fleet, one job stream):
+``bench/bench_fleet.py --default 9 15 22 30 --large --same-stream --sim on --rate 5``
 """
 from __future__ import annotations
 
@@ -86,6 +89,10 @@ def run(n: int, large: bool, opts: argparse.Namespace) -> dict:
         cmd += ["--interval", str(opts.interval)]
     if large:
         cmd += ["--warehouse", "large"]
+    if opts.sim != "auto":
+        cmd += ["--sim", opts.sim]
+    if opts.time_use:
+        cmd += ["--time-use"]
     env = {**os.environ, "PYTHONPATH": str(REPO), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
            "ROS_DOMAIN_ID": os.environ.get("ROS_DOMAIN_ID", str(random.randint(1, 100)))}
     t0 = time.monotonic()
@@ -114,7 +121,9 @@ def run(n: int, large: bool, opts: argparse.Namespace) -> dict:
     return {"n": n, "where": "large" if large else "default", "wall": wall, "jobs": jobs,
             "done": find(r"jobs: (\d+) done"), "rate": find(r"simulated time ran at ([\d.]+)x"),
             "per_h": find(r"throughput: (\d+) jobs"), "gap": find(r"clearance ([+-][\d.]+) m\)"),
-            "roles": per_role, "tail": text[-600:]}
+            "roles": per_role, "tail": text[-600:],
+            "use": text[text.index("time use of"):text.index("robots:", text.index("time use of"))].rstrip()
+            if "time use of" in text else ""}
 
 
 def main() -> None:
@@ -128,7 +137,17 @@ def main() -> None:
     p.add_argument("--interval", type=float, help="simulated s between jobs on the default warehouse (default: "
                                                   "the demo's, scaled with the fleet)")
     p.add_argument("--timeout", type=float, default=600.0, help="wall seconds per run at most (default 600)")
+    p.add_argument("--same-stream", action="store_true",
+                   help="one job stream for every fleet on the default warehouse: issue 10's 100 jobs every 1.2 s "
+                        "(what --jobs 100 --interval 1.2 gives; the jobs depend only on the fleet's kinds, so every "
+                        "size gets the same jobs: issue 8's 'throughput grows with the fleet' series)")
+    p.add_argument("--sim", choices=("auto", "on", "off"), default="auto",
+                   help="fleet-demo --sim: on drives every size by fleet-sim (same robot simulation at every size)")
+    p.add_argument("--time-use", action="store_true", help="print each run's time use table (fleet-demo --time-use)")
     opts = p.parse_args()
+    if opts.same_stream:
+        opts.jobs = 100 if opts.jobs is None else opts.jobs
+        opts.interval = 1.2 if opts.interval is None else opts.interval
     stream = (f"{opts.jobs} jobs" if opts.jobs is not None else f"{opts.jobs_per_robot:g} jobs per robot") + (
         f" every {opts.interval:g} s" if opts.interval is not None else "")
     print(f"fleet-demo --mode procs at {opts.rate:g}x asked, {stream} (large: {opts.jobs_per_robot:g} per robot)")
@@ -141,6 +160,8 @@ def main() -> None:
                           for role, (c, m, k) in sorted(r["roles"].items()))
         print(f"{r['n']:>4} {r['where']:>9} {r['wall']:>7.0f} {r['rate']:>8} {r['done']:>4}/{r['jobs']:<4} "
               f"{r['per_h']:>7} {r['gap']:>8}  {procs}", flush=True)
+        if r["use"]:
+            print("     " + r["use"].replace("\n", "\n     "), flush=True)
         if r["done"] == "?":
             print("     " + r["tail"].replace("\n", "\n     "))
 

@@ -18,6 +18,7 @@ from fleet_planner.fleet import (
     load_fleet,
     samples_to_path,
 )
+from fleet_planner.fleet.dispatch import LEGACY
 from fleet_planner.fleet.jobstore import RESENT
 from fleet_planner.grid import GridMap
 from fleet_planner.model import TimedPath
@@ -220,6 +221,7 @@ def test_a_robot_low_on_battery_goes_to_the_nearest_free_charger():
 
 def test_an_idle_robot_goes_charging_and_one_at_a_station_parks_when_no_charger_is_free():
     fm = manager(idle_s=5.0)
+    fm.policy = LEGACY  # the old rule: idle robots charge (staging near the chutes: test_dispatch_policy.py)
 
     def report(t):
         for i, pose in enumerate(CHARGERS):

@@ -56,6 +56,7 @@ from ..planners import Planner, get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination
+from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, queue_spots, staging_spots
 from .gate import GateBook
 from .intake import Roster
 from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
@@ -110,6 +111,14 @@ class FleetManager:
                 raise ValueError(f"parking[{i}]: ({x:g}, {y:g}) has no room for a robot of radius {largest:g} m")
             self.parking[f"parking_{i + 1}"] = (x, y)
         self.chargers = {s.name: s.pose for s in warehouse.stations_of("charger")}
+        #: how jobs are allocated and where idle robots wait (fleet/dispatch.py)
+        self.policy = DispatchPolicy()
+        self.travel = TravelTimes(warehouse)
+        for chute in warehouse.stations_of("chute"):  # (made now, not inside a step's time budget)
+            self.travel.field(chute.name)
+        self.staging = {f"staging_{i + 1}": p for i, p in enumerate(staging_spots(warehouse, largest))}
+        #: chute -> the staging spot where the robot with its next job waits (policy ``queue``)
+        self.queue_spot = queue_spots({s.name: s.pose for s in warehouse.stations_of("chute")}, self.staging)
         self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
@@ -550,6 +559,9 @@ class FleetManager:
         queued = sorted((j for j in self.jobs.values() if j.state == "queued"),  # earliest deadline among equals
                         key=lambda j: (-j.task.priority, math.inf if j.task.deadline is None else j.task.deadline,
                                        j.seq))
+        if self.policy.batch:  # (also with nothing queued: robots waiting by a chute go on when it is free)
+            self._allocate_batch(queued, now, d)
+            return
         if not queued:
             return
         free = [r for r in self.robots.values() if r.free and r.status.battery >= self.params.min_task_battery
@@ -564,32 +576,132 @@ class FleetManager:
             if not able:
                 continue
             r = min(able, key=lambda r: (math.dist(r.pos, pose), -r.status.battery, r.id))
-            occupant = self._occupant(pose, r.radius, exclude=r)
-            if occupant is not None:
-                if occupant.free:
-                    self._send_away(occupant, now, d)
+            self._try_assign(r, job, now, d)
+
+    def _available(self, r: FleetRobot, now: float) -> bool:
+        """``r`` may take a job now: free, or only on its way to wait somewhere (a staging or parking
+        spot, or a charger it does not need), its last leg acknowledged; with battery enough."""
+        if r.status.battery < self.params.min_task_battery or now < r.leg_retry_at:
+            return False
+        if r.free:
+            return True
+        t = r.target
+        return (t is not None and r.job is None and r.online and not r.immobile and not r.paused and not r.manual
+                and not r.replan and r.status.mode not in ("picking", "placing", "error")
+                and (r.leg is None or r.status.path_id == r.leg.path_id)
+                and (t.purpose == "park" or t.purpose == "charge" and r.status.battery >= self.policy.charge_below))
+
+    def _allocate_batch(self, queued: list[Job], now: float, d: Decisions) -> None:
+        """Free robots and the first job of each free chute paired by the smallest sum of estimated
+        arrival times (fleet/dispatch.py); with policy ``queue`` the robots waiting for a chute go
+        on when it is free, and the next job of a taken chute goes to a robot that waits by it."""
+        waiting = self._waiting_for_chutes() if self.policy.queue else {}
+        for chute, r in waiting.items():
+            if self._out_of_time():
+                return
+            if not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
+                job = self.jobs[r.job] if r.job is not None else None
+                if job is not None and self._occupant(job.pick.pose, r.radius, exclude=r) is None:
+                    self._plan_leg(r, Target("pick", job.pick.name, job.pick.pose), now, d)
+        free = {r.id: r for r in self.robots.values() if self._available(r, now)} if queued else {}
+        if not free:
+            return
+        jobs = [(j.task.id, j.pick.name) for j in queued]
+
+        def able(rid: str, jid: str) -> bool:
+            return can_do(free[rid].kind, self.jobs[jid].task)
+
+        def cands() -> list[Candidate]:
+            return [Candidate(r.id, r.pos, r.kind.max_speed * self.params.speed_factor, r.status.battery)
+                    for r in free.values()]
+
+        pairs = assign(cands(), jobs, able, self.travel.length,
+                       busy=lambda chute: chute in waiting or self._reserved(self.work_stops[chute]))
+        for rid, jid, _ in pairs:
+            if self._out_of_time():
+                return
+            if self._try_assign(free[rid], self.jobs[jid], now, d):
+                del free[rid]
+        if not (self.policy.queue and self.policy.staging and free):
+            return
+        # taken chutes with nobody waiting for them yet: the next job's robot waits on the chute's spot
+        open_spot = {}
+        for chute, spot in self.queue_spot.items():
+            if chute in waiting or not self._reserved(self.work_stops[chute]):
                 continue
-            if self._plan_leg(r, Target("pick", job.pick.name, pose), now, d) is None:
+            occupant = self._occupant(self.staging[spot], max(r.radius for r in free.values()))
+            if occupant is None or occupant.id in free:
+                open_spot[chute] = spot
+        if not open_spot:
+            return
+        pairs = assign(cands(), [(j, c) for j, c in jobs if c in open_spot and self.jobs[j].state == "queued"],
+                       able, self.travel.length)
+        for rid, jid, _ in pairs:
+            if self._out_of_time():
+                return
+            r, job = free[rid], self.jobs[jid]
+            spot = open_spot[job.pick.name]
+            occupant = self._occupant(self.staging[spot], r.radius, exclude=r)
+            if occupant is not None:
+                continue   # another free robot stands there (it could not do this job)
+            if self._plan_leg(r, Target("park", spot, self.staging[spot]), now, d) is None:
                 continue
             r.job = job.task.id
             job.state, job.robot = "active", r.id
             self._record(job, "assigned", now)
             d.events.append(_event(job.task.id, "assigned", now, r.id))
+            d.notes.append(f"robot {r.id} waits at {spot} for {job.pick.name} (job {job.task.id})")
+
+    def _waiting_for_chutes(self) -> dict[str, FleetRobot]:
+        """Chute -> the robot whose job is there but that is not yet bound for it (it waits by it)."""
+        out = {}
+        for r in self.robots.values():
+            job = self.jobs.get(r.job) if r.job is not None else None
+            if (job is not None and job.state == "active" and not job.picked and not r.immobile
+                    and (r.target is None or r.target.purpose != "pick")):
+                out[job.pick.name] = r
+        return out
+
+    def _may_plan(self, r: FleetRobot, now: float) -> bool:
+        """``r`` may get a new leg now: online, not paused or driven by hand, its last leg acknowledged."""
+        return (r.online and not r.immobile and not r.paused and not r.manual and now >= r.leg_retry_at
+                and (r.leg is None or r.status.path_id == r.leg.path_id))
+
+    def _try_assign(self, r: FleetRobot, job: Job, now: float, d: Decisions) -> bool:
+        """Give ``job`` to ``r`` if its leg to the chute can be planned (a free robot standing on the
+        chute is sent off first, and the job waits)."""
+        pose = job.pick.pose
+        occupant = self._occupant(pose, r.radius, exclude=r)
+        if occupant is not None:
+            if occupant.free:
+                self._send_away(occupant, now, d)
+            return False
+        if self._plan_leg(r, Target("pick", job.pick.name, pose), now, d) is None:
+            return False
+        r.job = job.task.id
+        job.state, job.robot = "active", r.id
+        self._record(job, "assigned", now)
+        d.events.append(_event(job.task.id, "assigned", now, r.id))
+        return True
 
     def _housekeeping(self, now: float, d: Decisions) -> None:
         due = sorted((r for r in self.robots.values() if r.free and now >= r.retry_at), key=lambda r: r.status.battery)
         if not due:
             return
+        staging = self.policy.staging and bool(self.staging)
         where = np.array([r.pos for r in due], dtype=float)   # (one test for all: idle robots cost little)
         at_charger, at_stop = self._at_all(where, self.chargers), self._at_all(where, self.work_stops)
         for r, charging, stopped in zip(due, at_charger, at_stop):
             if self._out_of_time():
                 return
-            if not r.free or charging:
+            if not r.free:
                 continue
             low = r.status.battery < self.params.low_battery
             idle = now - r.idle_since >= self.params.idle_s
-            if not (low or idle):
+            if staging:
+                self._wait_near_chutes(r, low, idle, now, d)
+                continue
+            if charging or not (low or idle):
                 continue
             spot = self._free_spot(r, self.chargers)
             if spot is not None:
@@ -598,15 +710,45 @@ class FleetManager:
             elif idle and stopped:
                 self._send_away(r, now, d)
 
+    def _wait_near_chutes(self, r: FleetRobot, low: bool, idle: bool, now: float, d: Decisions) -> None:
+        """Where a free robot waits (fleet/dispatch.py, policy ``staging``): low on battery, or idle
+        and below ``charge_below``, at a charger; otherwise idle at a staging spot near the chutes
+        (a robot at a charger once charged to ``leave_charger_at``); else as before."""
+        battery = r.status.battery
+        if self._at(r.pos, self.chargers):
+            if low or not idle or battery < self.policy.leave_charger_at:
+                return
+            spot = self._free_spot(r, self.staging)
+            if spot is not None and self._plan_leg(r, Target("park", *spot), now, d) is None:
+                r.retry_at = now + SPOT_RETRY_S
+            return
+        if not (low or idle) or (self._at(r.pos, self.staging) and not low):
+            return
+        goals = [(self.chargers, "charge"), (self.staging, "park")]
+        if not (low or battery < self.policy.charge_below):
+            goals.reverse()
+        for spots, purpose in goals:
+            spot = self._free_spot(r, spots)
+            if spot is not None:
+                if self._plan_leg(r, Target(purpose, *spot), now, d) is None:
+                    r.retry_at = now + SPOT_RETRY_S
+                return
+        if idle and self._at(r.pos, self.work_stops):
+            self._send_away(r, now, d)
+
     # -- helpers ---------------------------------------------------------------------------------------
     def _send_away(self, r: FleetRobot, now: float, d: Decisions) -> None:
-        """Move a free robot that is in the way to a free charger, else to a free parking spot."""
+        """Move a free robot that is in the way to a free staging spot (policy ``staging``), else a free
+        charger, else a free parking spot."""
         if now < r.retry_at or now < r.leg_retry_at:
             return   # its last leg off was refused: not planned again at every step
         if self._at(r.pos, self.chargers) or self._at(r.pos, self.parking):
             return
-        spot = self._free_spot(r, self.chargers)
-        purpose = "charge"
+        spot, purpose = None, "park"
+        if self.policy.staging and not self._at(r.pos, self.staging):
+            spot = self._free_spot(r, self.staging)
+        if spot is None:
+            spot, purpose = self._free_spot(r, self.chargers), "charge"
         if spot is None:
             spot, purpose = self._free_spot(r, self.parking), "park"
         if spot is None:

@@ -88,6 +88,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1, help="seed of the random jobs (default 1)")
     p.add_argument("--out", type=Path, default=Path("out"), help="where the picture goes (default out/)")
     p.add_argument("--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)")
+    p.add_argument("--time-use", action="store_true",
+                   help="print where the robots' time went (driving, held, picking, idle with jobs queued, ...)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", action="store_true", help="show the nodes' info messages (in-process mode)")
     p.add_argument("--console", type=int, metavar="PORT", help="serve the web operator console on localhost:PORT "
@@ -180,6 +182,11 @@ def main(args: list[str] | None = None) -> None:
                 executor.spin_once(timeout_sec=0.02)
             plot_run(warehouse, monitor.trajectories(), png, title, parking, monitor.obstacle_trajectories())
             lines = summary.lines(monitor.radius, opts.rate)
+            if opts.time_use and summary.completion_s:
+                from fleet_planner.ros.demo.timeuse import time_use
+                chutes = {s.name: s.pose for s in warehouse.stations_of("chute")}
+                lines += time_use(monitor.modes, monitor.events, jobs, kinds, monitor.tracks, chutes, summary.start,
+                                  summary.start + summary.completion_s).lines()
             gap, robot, person, t = monitor.obstacle_separation()
             if robot is not None and t is not None:
                 lines.append(f"closest approach to an obstacle: {gap:+.3f} m beyond the sum of radii ({robot} and "

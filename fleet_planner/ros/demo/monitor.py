@@ -20,6 +20,9 @@ from msg_schemas import topics
 from msg_schemas.convert import string_to_record
 from msg_schemas.records import ObstacleRecord, RecordError, RobotStatus, Task, TaskEvent
 
+#: a robot this far (s) behind its schedule counts as held back (by its gate or its safety net)
+LATE_S = 0.5
+
 
 class FleetMonitor(Node):
     """Submits tasks and records what the fleet reports: every task event, and every robot's
@@ -32,6 +35,9 @@ class FleetMonitor(Node):
         self.tracks: dict[str, list[tuple[float, float, float]]] = {}
         self.radius: dict[str, float] = {}
         self.status: dict[str, RobotStatus] = {}
+        #: per robot, its status whenever the mode, lateness (late or not), job or load changed:
+        #: (stamp, mode, late, task_id, loaded, kind) - what :mod:`.timeuse` reads
+        self.modes: dict[str, list[tuple[float, str, bool, str | None, bool, str]]] = {}
         self._tasks = self.create_publisher(String, topics.TASKS, topics.TASKS_QOS)
         # every waiting message at each wake-up, as the planner and the agents (see drain.py)
         self._events = create_draining_subscription(self, String, topics.TASK_EVENTS, self._on_event,
@@ -69,6 +75,10 @@ class FleetMonitor(Node):
         self.status[st.id] = st
         self.radius[st.id] = st.radius
         self.tracks.setdefault(st.id, []).append((st.x, st.y, st.stamp))
+        entry = (st.stamp, st.mode, st.lateness_s > LATE_S, st.task_id, bool(st.loaded), st.kind)
+        log = self.modes.setdefault(st.id, [])
+        if not log or log[-1][1:] != entry[1:]:
+            log.append(entry)
 
     def _on_obstacle(self, msg: String) -> None:
         try:

@@ -28,6 +28,7 @@ class Summary:
     min_gap: float                  # smallest distance minus the sum of radii
     closest: tuple[str | None, str | None, float | None]
     wall_s: float
+    start: float = 0.0              # the first submission (simulated s)
 
     @property
     def jobs_per_hour(self) -> float:
@@ -73,7 +74,7 @@ def summarise(monitor: FleetMonitor, jobs: Sequence[Task], first_submit: float, 
     return Summary(len(jobs), len(done_times), sum(e is not None and e.event == "failed" for e in states),
                    sum(e is not None and e.event == "rejected" for e in states), span, distance,
                    distance / (robots * span) if span else 0.0, distance / moving_time if moving_time else 0.0,
-                   gap, (a, b, t), wall_s)
+                   gap, (a, b, t), wall_s, first_submit)
 
 
 def plot_run(warehouse: Warehouse, trajectories: Sequence[TimedPath], path_png: str | Path, title: str,

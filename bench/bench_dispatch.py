@@ -1,0 +1,134 @@
+#!/usr/bin/env python3
+"""The dispatcher on its own: the fleet manager and ``fleet-sim``'s robots (``fleet.sim.SimFleet``,
+gated, as in the demo) on one simulated clock in one process, no ROS, so the planner is never short
+of wall time and the figures do not depend on the machine's load. The demo's job stream
+(``random_jobs``, seed 1; ``--jobs`` jobs every ``--interval`` s, by default the demo's 20/9 per
+robot every 36/N s), robots placed as ``fleet-demo --robots N`` places them. Per policy and fleet
+size: jobs done, throughput (jobs per simulated hour from the first submission to the last job done,
+as the demo's summary), closest approach (from the robots' own positions every 0.5 s) and, with
+``--time-use``, where the robots' time went (fleet_planner/ros/demo/timeuse.py).
+
+    nice .venv/bin/python bench/bench_dispatch.py --robots 9 30 --policies legacy new [--jobs 100 --interval 1.2]
+        [--limit 4000] [--time-use]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from fleet_planner.fleet import DispatchParams, FleetManager  # noqa: E402
+from fleet_planner.fleet.dispatch import LEGACY, STAGED, DispatchPolicy  # noqa: E402
+from fleet_planner.fleet.placement import parking_spots, place_robots  # noqa: E402
+from fleet_planner.fleet.sim import SimFleet  # noqa: E402
+from fleet_planner.robots import load_kinds  # noqa: E402
+from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
+from fleet_planner.ros.demo.timeuse import time_use  # noqa: E402
+from fleet_planner.warehouse import load_warehouse  # noqa: E402
+
+POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "staged": STAGED,
+            "staged-no-queue": DispatchPolicy(staging=True, charge_below=0.6, leave_charger_at=0.95)}
+
+
+def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
+        period: float = 0.5, progress: bool = False) -> dict:
+    kinds = load_kinds()
+    wh = load_warehouse()
+    members = place_robots(wh, kinds, n)
+    fm = FleetManager(wh, kinds, DispatchParams(), parking_spots(wh, members))
+    fm.policy = policy
+    fm.step_budget_s = 1e9   # no wall-clock budget: the planner keeps up whatever the load
+    sim = SimFleet(members, kinds, wh, gated=True)
+    jobs = random_jobs(wh, kinds, members, jobs_n if jobs_n is not None else max(1, round(20 / 9 * n)), seed=1)
+    interval = interval if interval is not None else 36.0 / n
+    radius = {m.id: kinds[m.kind].radius for m in members}
+    ids = list(radius)
+    rad = np.array([radius[i] for i in ids])
+    reach = rad[:, None] + rad[None, :]
+    np.fill_diagonal(reach, -np.inf)
+    modes: dict[str, list] = {}
+    tracks: dict[str, list] = {i: [] for i in ids}
+    events = []
+    last_event: dict[str, str] = {}
+    gap = math.inf
+    first = 1.0
+    submitted = 0
+    cpu0 = time.process_time()
+    t, k = 0.0, 0
+    while t < limit:
+        k += 1
+        t = round(k * dt, 9)
+        while submitted < len(jobs) and t >= first + submitted * interval:
+            sim.on_task(jobs[submitted])
+            events += fm.submit(jobs[submitted], t)
+            submitted += 1
+        statuses = sim.step(t)
+        for st in statuses:
+            fm.on_status(st, t)
+            entry = (st.stamp, st.mode, st.lateness_s > 0.5, st.task_id, bool(st.loaded), st.kind)
+            log = modes.setdefault(st.id, [])
+            if not log or log[-1][1:] != entry[1:]:
+                log.append(entry)
+        if k % round(period / dt):
+            continue
+        if progress and k % round(100.0 / dt) == 0:
+            print(f"  t = {t:.0f} s: {sum(e == 'done' for e in last_event.values())} done, {submitted} submitted, "
+                  f"CPU {time.process_time() - cpu0:.0f} s", file=sys.stderr, flush=True)
+        pos = np.array([(st.x, st.y) for st in statuses])
+        for st in statuses:
+            tracks[st.id].append((st.x, st.y, t))
+        dist = np.hypot(pos[:, None, 0] - pos[None, :, 0], pos[:, None, 1] - pos[None, :, 1])
+        gap = min(gap, float(np.min(dist - reach)))
+        d = fm.step(t)
+        for leg in d.legs:
+            try:
+                sim.on_path(leg.robot_id, leg.relative(), leg.t0, leg.path_id)
+            except ValueError:
+                pass   # (the robot reports it rejected; the manager plans it again)
+        for rec in d.gates:
+            sim.on_gate(rec)
+        for ev in d.events:
+            sim.on_event(ev)
+            events.append(ev)
+            last_event[ev.task_id] = ev.event
+        if submitted == len(jobs) and all(last_event.get(j.id) in ("done", "failed", "cancelled") for j in jobs):
+            break
+    done_t = [e.stamp for e in events if e.event == "done"]
+    span = (max(done_t) - first) if done_t else None
+    out = {"n": n, "jobs": len(jobs), "done": len(done_t), "span": span,
+           "per_h": 3600.0 * len(done_t) / span if span else 0.0, "gap": gap, "cpu": time.process_time() - cpu0}
+    if span:
+        chutes = {s.name: s.pose for s in wh.stations_of("chute")}
+        out["use"] = time_use(modes, events, jobs, kinds, tracks, chutes, first, first + span)
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    p.add_argument("--robots", type=int, nargs="+", default=[9, 30])
+    p.add_argument("--policies", nargs="+", default=["legacy", "new"], choices=sorted(POLICIES))
+    p.add_argument("--jobs", type=int, help="jobs (default: the demo's, 20/9 per robot)")
+    p.add_argument("--interval", type=float, help="simulated s between jobs (default: the demo's, 36/N)")
+    p.add_argument("--limit", type=float, default=4000.0, help="simulated s at most (default 4000)")
+    p.add_argument("--time-use", action="store_true", help="print where the robots' time went")
+    p.add_argument("--progress", action="store_true", help="jobs done every 100 simulated s (on stderr)")
+    opts = p.parse_args()
+    print(f"{'N':>4} {'policy':>12} {'done':>9} {'span s':>7} {'jobs/h':>7} {'closest':>8} {'CPU s':>6}")
+    for n in opts.robots:
+        for name in opts.policies:
+            r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit, progress=opts.progress)
+            span = f"{r['span']:.0f}" if r["span"] else "-"
+            print(f"{n:>4} {name:>12} {r['done']:>4}/{r['jobs']:<4} {span:>7} {r['per_h']:>7.0f} {r['gap']:>+8.3f} "
+                  f"{r['cpu']:>6.0f}", flush=True)
+            if opts.time_use and "use" in r:
+                print("     " + "\n     ".join(r["use"].lines()), flush=True)
+
+
+if __name__ == "__main__":
+    main()
