@@ -145,23 +145,27 @@ def set_bool(node: OperatorClient, executor: Executor, service: str, value: bool
 
 def command(node: OperatorClient, executor: Executor, cmd: Command, timeout: float) -> tuple[bool, str]:
     """Publish a command once the planner hears us and wait for its reply: (ok, message)."""
-    if not wait(executor, node.commands_heard, timeout):
-        return False, f"no planner on {topics.COMMANDS} within {timeout:g} s"
-    node.send_command(cmd)
-    if not wait(executor, lambda: cmd.id in node.replies, timeout):
-        return False, f"no reply to {cmd.command} within {timeout:g} s"
-    reply = node.replies[cmd.id]
-    return reply.ok, reply.message
+    return _send_and_wait(node, executor, cmd.id, node.commands_heard, lambda: node.send_command(cmd),
+                          f"no planner on {topics.COMMANDS}", f"no reply to {cmd.command}", timeout)
 
 
 def robot_command(node: OperatorClient, executor: Executor, cmd: RobotCommand, timeout: float) -> tuple[bool, str]:
     """Publish a manual drive switch once the robot's agent hears us and wait for its reply."""
-    if not wait(executor, lambda: node.robot_heard(cmd.robot_id), timeout):
-        return False, f"no agent on {topics.robot_topic(cmd.robot_id, 'command')} within {timeout:g} s"
-    node.send_robot_command(cmd)
-    if not wait(executor, lambda: cmd.id in node.replies, timeout):
-        return False, f"no reply from robot {cmd.robot_id} within {timeout:g} s"
-    reply = node.replies[cmd.id]
+    return _send_and_wait(node, executor, cmd.id, lambda: node.robot_heard(cmd.robot_id),
+                          lambda: node.send_robot_command(cmd),
+                          f"no agent on {topics.robot_topic(cmd.robot_id, 'command')}",
+                          f"no reply from robot {cmd.robot_id}", timeout)
+
+
+def _send_and_wait(node: OperatorClient, executor: Executor, cmd_id: str, heard: Any, send: Any,
+                   not_heard: str, no_reply: str, timeout: float) -> tuple[bool, str]:
+    """Send once ``heard()`` holds, then wait for the reply to ``cmd_id``; each wait bounded by ``timeout``."""
+    if not wait(executor, heard, timeout):
+        return False, f"{not_heard} within {timeout:g} s"
+    send()
+    if not wait(executor, lambda: cmd_id in node.replies, timeout):
+        return False, f"{no_reply} within {timeout:g} s"
+    reply = node.replies[cmd_id]
     return reply.ok, reply.message
 
 
