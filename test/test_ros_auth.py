@@ -7,7 +7,6 @@ and e-stop services but for engaging the e-stop; manual drive by service, Twist 
 command), which are obeyed only when signed by an operator key."""
 import math
 import os
-import subprocess
 from dataclasses import replace
 
 import pytest
@@ -16,10 +15,10 @@ from geometry_msgs.msg import Twist
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
-from test_ros_system import KINDS, MEMBERS, PARKING, RATE, WAIT, WH, ended, no_contact, wait_for
+from test_ros_system import KINDS, MEMBERS, PARKING, RATE, WH, ended, no_contact, run_fleet_op, wait_for
 
 from fleet_planner.auth import new_key_line
-from fleet_planner.ros.demo.bringup import Fleet, agent_params, node_command
+from fleet_planner.ros.demo.bringup import Fleet, agent_params
 from fleet_planner.ros.demo.monitor import FleetMonitor, spin_until
 from fleet_planner.ros.operate import OperatorClient
 from fleet_planner.ros.operator_services import SIGN_IT, SIGN_IT_ROBOT
@@ -130,18 +129,12 @@ def test_with_operator_keys_only_signed_commands_are_obeyed_and_the_e_stop_stays
         fleet.executor.remove_node(op)
         op.destroy_node()
     # fleet-op signs with --key; without it the planner refuses the same command
-    def fleet_op(*args):
-        proc = subprocess.Popen(node_command("fleet-op", "fleet_planner.ros.operate") + ["--timeout", "20", *args],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert wait_for(fleet, lambda: proc.poll() is not None), f"fleet-op {args} did not end"
-        out, err = proc.communicate(timeout=WAIT)
-        return proc.returncode, out + err
 
-    code, text = fleet_op("pause", MEMBERS[0].id)
+    code, text = run_fleet_op(fleet, "pause", MEMBERS[0].id)
     assert code == 1 and "command.auth: unsigned" in text and not planner.fleet.robots[MEMBERS[0].id].paused
-    code, text = fleet_op("--key", files["operator"], "pause", MEMBERS[0].id)
+    code, text = run_fleet_op(fleet, "--key", files["operator"], "pause", MEMBERS[0].id)
     assert code == 0 and "paused" in text and planner.fleet.robots[MEMBERS[0].id].paused, text
-    code, text = fleet_op("--key", files["operator"], "resume", MEMBERS[0].id)
+    code, text = run_fleet_op(fleet, "--key", files["operator"], "resume", MEMBERS[0].id)
     assert code == 0 and not planner.fleet.robots[MEMBERS[0].id].paused, text
 
 

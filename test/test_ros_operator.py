@@ -3,14 +3,12 @@ services, the fleet/command@1 topic and its replies, Twist on cmd_vel, on the in
 fleet of test_ros_system (real rclpy nodes, real DDS), and ``fleet-op`` as a process. Each wait
 is bounded; the robots' own status reports are checked for contact."""
 import math
-import subprocess
 
 import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
-from test_ros_system import MEMBERS, WAIT, ended, no_contact, running_fleet, wait_for
+from test_ros_system import MEMBERS, ended, no_contact, run_fleet_op, running_fleet, wait_for
 
-from fleet_planner.ros.demo.bringup import node_command
 from fleet_planner.ros.operate import OperatorClient
 from msg_schemas import topics
 from msg_schemas.records import Command, Task
@@ -170,16 +168,10 @@ def test_manual_drive_over_its_service_and_cmd_vel_then_the_robot_re_joins_the_p
 
 
 def test_fleet_op_on_the_command_line(fleet):
-    def fleet_op(*args):
-        proc = subprocess.Popen(node_command("fleet-op", "fleet_planner.ros.operate") + ["--timeout", "20", *args],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert wait_for(fleet, lambda: proc.poll() is not None), f"fleet-op {args} did not end"
-        out, err = proc.communicate(timeout=WAIT)
-        return proc.returncode, out + err
 
-    code, text = fleet_op("pause", MEMBERS[0].id)
+    code, text = run_fleet_op(fleet, "pause", MEMBERS[0].id)
     assert code == 0 and "paused" in text, text
-    code, text = fleet_op("resume", MEMBERS[0].id)
+    code, text = run_fleet_op(fleet, "resume", MEMBERS[0].id)
     assert code == 0 and "resumed" in text, text
-    code, text = fleet_op("cancel", "no_such_job")
+    code, text = run_fleet_op(fleet, "cancel", "no_such_job")
     assert code == 1 and "task_id: unknown job 'no_such_job'" in text, text

@@ -1,6 +1,7 @@
 """The whole fleet on ROS in one process: a simulated clock, the planner, one agent of each kind and
 a monitor on one executor. Jobs go in on /fleet/tasks, the test watches /fleet/task_events and
 checks the robots' own status reports for contact (the planner is not asked)."""
+import subprocess
 from dataclasses import replace
 
 import pytest
@@ -10,7 +11,7 @@ from std_msgs.msg import String
 from fleet_planner.fleet import FleetMember
 from fleet_planner.fleet.jobstore import RESENT
 from fleet_planner.robots import load_kinds
-from fleet_planner.ros.demo.bringup import bring_up
+from fleet_planner.ros.demo.bringup import bring_up, node_command
 from fleet_planner.ros.demo.monitor import spin_until
 from fleet_planner.warehouse import generate_warehouse
 from msg_schemas import topics
@@ -46,6 +47,15 @@ def fleet(ros_context):
 
 def wait_for(fleet, condition) -> bool:
     return spin_until(fleet.executor, condition, WAIT)
+
+
+def run_fleet_op(fleet, *args) -> tuple[int, str]:
+    """Run ``fleet-op`` as its own process while the fleet spins: (exit code, stdout + stderr)."""
+    proc = subprocess.Popen(node_command("fleet-op", "fleet_planner.ros.operate") + ["--timeout", "20", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert wait_for(fleet, lambda: proc.poll() is not None), f"fleet-op {args} did not end"
+    out, err = proc.communicate(timeout=WAIT)
+    return proc.returncode, out + err
 
 
 def ended(fleet, task_id, event="done") -> bool:
