@@ -240,3 +240,31 @@ def test_a_status_of_a_robot_near_an_obstacle_still_counts_and_bad_stamps_are_re
     fm.on_obstacle(person(stamp=0.0), 0.0)
     d = fm.step(0.5)
     assert any("obstacle p1 (person" in n for n in d.notes)
+
+
+@pytest.mark.parametrize("at", [(2.0, 3.5), (4.0, 4.0), (8.0, 3.0), (10.0, 4.0)])
+def test_a_standing_robot_steps_aside_from_a_blind_person_walking_at_it(at, monkeypatch):
+    """A robot standing (idle, no job) on a person's way: the person, blind to robots that move and
+    stopping only for one that stands, would stop in front of it for good; the robot steps aside to
+    a refuge off the person's way (not across it) and the person walks the whole width. Control:
+    without the step aside the person is stopped."""
+    def run():
+        walker = Walker("p2", np.array([(15.25, 3.75), (0.75, 3.75)]), speed=1.0, yields=False, once=True,
+                        start_s=1.0)
+        sim = PeopleSim([("r2", "manipulator", *at, 0.9)], [walker], idle_s=3600.0)
+        assert sim.run_until(lambda: walker.gone, limit=60)
+        robots, people = sim.tracks()
+        xs = [x for x, _, _ in sim.people_track["p2"]]
+        return sim, min_separation([robots[0], people[0]])[0], max(xs) - min(xs)
+
+    sim, gap, walked = run()
+    assert gap >= 0.0 and walked > 14.0, (gap, walked)
+    steps = [n for n in sim.notes if "r2 steps aside from obstacle p2" in n]
+    assert len(steps) == 1, sim.notes
+    x, y = (float(v) for v in steps[0].split(" to (")[1].rstrip(")").split(", "))
+    assert (y - 3.75) * (at[1] - 3.75) > 0.0       # on its own side of the person's way
+    assert abs(y - 3.75) >= 0.3 + 0.3 + 0.4         # the person's grown disc plus its own radius
+    from fleet_planner.fleet.manager import FleetManager
+    monkeypatch.setattr(FleetManager, "_evade", lambda *args: False)
+    _, gap, walked = run()
+    assert gap >= 0.0 and walked < 14.0, (gap, walked)   # stopped in front of the robot

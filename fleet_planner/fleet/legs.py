@@ -16,6 +16,8 @@ from ..warehouse import Station, Warehouse
 
 #: why a robot drives a leg
 PURPOSES = ("pick", "place", "charge", "park", "hold")
+#: the goal of a "hold" leg that steps a standing robot aside from a moving obstacle (FleetManager._evade)
+EVADE = "evade"
 #: the status mode of a robot doing what a leg of this purpose ends with
 ACTING = {"pick": "picking", "place": "placing"}
 

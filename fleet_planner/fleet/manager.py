@@ -60,8 +60,8 @@ from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, queue_spot
 from .gate import GateBook
 from .intake import Roster
 from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
-from .legs import ACTING, AT_STATION_M, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
-from .obstacles import ObstacleMap, ObstacleParams
+from .legs import ACTING, AT_STATION_M, EVADE, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
+from .obstacles import REFUGE_LOOKAHEAD, ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Occupancy, Target, can_do
 
 #: a free robot that could not get a leg to a charger or parking spot tries again this much (s) later
@@ -70,6 +70,12 @@ SPOT_RETRY_S = 2.0
 #: in a row up to LEG_RETRY_MAX_S (a refused leg costs the planner its whole time budget: tried at
 #: every step, a few of them stall the step, and the fleet's statuses wait meanwhile)
 LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
+#: a robot stepping aside from a moving obstacle tries this many refuges, nearest first; when none
+#: can be reached it holds and tries again this much later (s)
+EVADE_TRIES, EVADE_RETRY_S = 8, 0.5
+#: a standing robot watches a moving obstacle's way this many prediction horizons ahead (it needs
+#: longer to get going than a driving one needs to turn)
+STANDING_LOOKAHEAD = 2.0
 #: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
 #: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
 STEP_BUDGET_S = 0.5
@@ -344,6 +350,27 @@ class FleetManager:
             r = self.robots[rid]
             r.replan = r.conflict = True   # a robot with no leg now holds (_replan)
             d.notes.append(f"robot {rid} re-plans around obstacle {oid}")
+        if self.halted:
+            return   # (an e-stop holds everyone where they are)
+        # a robot standing (held, idle, waiting) where a moving obstacle is about to walk steps aside:
+        # a blind person does not stop for it, and standing still is then no safe place (ours: the
+        # paper's intelligent space only says the planner knows the moving obstacles)
+        acting = set(ACTING.values())
+        standing = [r for r in self.robots.values()
+                    if r.online and not r.immobile and not r.manual and not r.paused and not r.on_leg
+                    and r.status.mode not in acting and now >= r.evade_retry_at
+                    and (r.leg is None or r.status.path_id == r.leg.path_id)]
+        for r in standing:
+            oid = self._walks_into(r, now)
+            if oid is not None:
+                self._evade(r, oid, now, d)
+
+    def _walks_into(self, r: FleetRobot, now: float) -> str | None:
+        """The moving obstacle that would walk into ``r`` if it stood where it is (or stops), if any."""
+        if not self.strategy.plans_around_obstacles or not len(self.obstacles):
+            return None
+        here = [(r.id, TimedPath(r.id, r.radius, np.array([[*r.pos, now]])), r.radius)]
+        return self.obstacles.threats(here, now, self.margin, STANDING_LOOKAHEAD).get(r.id)
 
     def _adopt(self, r: FleetRobot) -> None:
         """After a restart: a robot whose status names a reloaded job it picked the goods of takes
@@ -526,8 +553,11 @@ class FleetManager:
                 return   # the rest next step (a robot on its leg drives on meanwhile; it re-plans then)
             if self._plan_leg(r, target, now, d) is not None:
                 r.replan = r.conflict = False
-            elif r.on_leg and (self.gates is None or r.conflict):  # late or in conflict and no new leg yet:
-                self._hold(r, now, d)  # stand still, so the others plan around where it is, not around a leg
+            elif r.on_leg and (r.conflict or self.gates is None and r.leg.goal != EVADE):  # late or in conflict
+                # and no new leg yet (a robot stepping aside from an obstacle drives on to its refuge):
+                oid = self._walks_into(r, now)
+                if oid is None or not self._evade(r, oid, now, d):
+                    self._hold(r, now, d)  # stand still, so the others plan around where it is, not around a leg
                 # it no longer keeps (gated and only late: it keeps its leg, the gates keep the others clear)
 
     def _hold(self, r: FleetRobot, now: float, d: Decisions) -> None:
@@ -542,6 +572,40 @@ class FleetManager:
         r.conflict = False
         d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
         self._replan_around(r, (x, y), now)
+
+    def _evade(self, r: FleetRobot, oid: str, now: float, d: Decisions) -> bool:
+        """``r`` stands where the moving obstacle ``oid`` is about to walk: it gets a leg to the nearest
+        refuge (:meth:`.obstacles.ObstacleMap.refuges`) that the planner can time round everyone,
+        obstacles included; it keeps its target and plans its way there again from the refuge."""
+        grid = self.warehouse.grid
+
+        def free(x: float, y: float) -> bool:
+            return grid.disc_is_free(x, y, r.radius) and self._occupant((x, y), r.radius, exclude=r) is None
+
+        path_id = self._next_path_id(r, now)
+        t0 = path_id / 1e9
+        start = self.strategy.start_of(r, t0, self._gate_limit(r))
+        for spot in self.obstacles.refuges(start, r.radius, self.margin, now, free, most=EVADE_TRIES):
+            if self._out_of_time():
+                return False   # tried again next step
+            try:
+                path = self.strategy.plan_leg(r, start, Target("hold", EVADE, spot), t0, grid=grid,
+                                              planner=self.planner, speed=r.kind.max_speed * self.params.speed_factor,
+                                              fleet=self.robots.values(),
+                                              obstacles=self.obstacles.trajectories(now, REFUGE_LOOKAHEAD))
+            except LegNotPlanned:
+                continue
+            if not self._give(r, Leg(r.id, path, path_id, "hold", EVADE), d, now):
+                break
+            r.replan, r.conflict = r.target is not None, False
+            d.notes.append(f"robot {r.id} steps aside from obstacle {oid} to ({spot[0]:.2f}, {spot[1]:.2f})")
+            return True
+        r.evade_retry_at = now + EVADE_RETRY_S
+        why = f"no refuge from obstacle {oid} within reach: it holds"
+        if why != r.trouble:
+            d.notes.append(f"robot {r.id}: {why}")
+        r.trouble = why
+        return False
 
     def _replan_around(self, r: FleetRobot, point: Point, now: float) -> list[FleetRobot]:
         """Mark the robots whose legs must now keep clear of ``r`` standing at ``point`` to re-plan

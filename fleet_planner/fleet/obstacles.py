@@ -51,6 +51,10 @@ STILL_MPS = 0.05
 SAMPLE_S = 0.05
 #: at most this many obstacles are kept (the oldest record goes first)
 MAX_OBSTACLES = 1000
+#: a robot a moving obstacle would walk into steps aside to a refuge at most this far (m) ...
+REFUGE_WITHIN_M = 3.0
+#: ... clear of the obstacle's way followed on for this many prediction horizons
+REFUGE_LOOKAHEAD = 3.0
 #: the prefix of an obstacle's id in the planner's fixed trajectories and the robots' safety net
 PREFIX = "obstacle:"
 
@@ -138,17 +142,17 @@ class ObstacleMap:
         ahead = max(0.0, t - ob.stamp)
         return ob.x + ob.vx * ahead, ob.y + ob.vy * ahead
 
-    def trajectories(self, now: float) -> list[TimedPath]:
-        """Every obstacle as a fixed trajectory for the planner, from ``now`` (see the module docstring)."""
+    def trajectories(self, now: float, lookahead: float = 1.0) -> list[TimedPath]:
+        """Every obstacle as a fixed trajectory for the planner, from ``now`` (see the module docstring);
+        a moving one followed for ``lookahead`` horizons (its disc grows only over the first)."""
         out = []
         for ob in self.obstacles.values():
             name = PREFIX + ob.id
             if is_static(ob):
                 out.append(TimedPath(name, ob.radius, np.array([[ob.x, ob.y, now]])))
                 continue
-            end = now + self.params.horizon_s
-            ahead = max(0.0, end - ob.stamp)
-            radius = ob.radius + self.params.growth * ahead
+            end = now + self.params.horizon_s * lookahead
+            radius = ob.radius + self.params.growth * max(0.0, now + self.params.horizon_s - ob.stamp)
             (x0, y0), (x1, y1) = self.position(ob, now), self.position(ob, end)
             if end <= now or math.hypot(x1 - x0, y1 - y0) < 1e-9:
                 out.append(TimedPath(name, radius, np.array([[x1, y1, now]])))
@@ -156,22 +160,25 @@ class ObstacleMap:
                 out.append(TimedPath(name, radius, np.array([[x0, y0, now], [x1, y1, end]])))
         return out
 
-    def threats(self, legs: Iterable[tuple[str, TimedPath, float]], now: float, margin: float) -> dict[str, str]:
+    def threats(self, legs: Iterable[tuple[str, TimedPath, float]], now: float, margin: float,
+                lookahead: float = 1.0) -> dict[str, str]:
         """For legs ``(robot id, timed path in absolute time, radius)``, those an obstacle threatens
-        from ``now`` on: robot id -> obstacle id (the first found). The robot is noted as affected
-        by that obstacle (:meth:`take_affected`)."""
+        from ``now`` on, a moving one followed for ``lookahead`` horizons (its disc grows only over
+        the first): robot id -> obstacle id (the first found). The robot is noted as affected by
+        that obstacle (:meth:`take_affected`)."""
         if not self.obstacles:
             return {}
         moving = [o for o in self.obstacles.values() if not is_static(o)]
         static = [o for o in self.obstacles.values() if is_static(o)]
         h = self.params.horizon_s
-        ts = np.append(np.arange(now, now + h, SAMPLE_S), now + h)
+        ts = np.append(np.arange(now, now + h * lookahead, SAMPLE_S), now + h * lookahead)
         if moving:
             stamps = np.array([o.stamp for o in moving])
             ahead = np.clip(ts[None, :] - stamps[:, None], 0.0, None)   # (K, T): prediction time
             ox = np.array([o.x for o in moving])[:, None] + np.array([o.vx for o in moving])[:, None] * ahead
             oy = np.array([o.y for o in moving])[:, None] + np.array([o.vy for o in moving])[:, None] * ahead
-            reach = np.array([o.radius for o in moving])[:, None] + self.params.growth * ahead
+            reach = np.array([o.radius for o in moving])[:, None] + self.params.growth * np.minimum(
+                ahead, np.clip(now + h - stamps[:, None], 0.0, None))   # (growing over the first horizon only)
         out: dict[str, str] = {}
         for rid, path, radius in legs:
             wp = path.waypoints
@@ -194,6 +201,44 @@ class ObstacleMap:
             if hit is not None:
                 out[rid] = hit
                 self.affected.setdefault(hit, set()).add(rid)
+        return out
+
+    def refuges(self, pos: Point, radius: float, margin: float, now: float, is_free,
+                within: float = REFUGE_WITHIN_M, step: float = 0.5, most: int = 8) -> list[Point]:
+        """Where a robot of ``radius`` standing at ``pos`` may step aside from the moving obstacles:
+        points of a ``step`` lattice round ``pos`` (at most ``within`` m away) where ``is_free(x, y)``
+        holds and that every moving obstacle's way, followed on at its velocity for
+        :data:`REFUGE_LOOKAHEAD` horizons (a person does not stop at the horizon) with its disc grown
+        as the prediction grows it up to the horizon, passes no closer than the sum of radii plus
+        ``margin``; the ``most`` nearest, those on the robot's side of every obstacle's way first
+        (stepping aside does not cross in front of it), nearest first. Empty when no obstacle moves."""
+        moving = [o for o in self.obstacles.values() if not is_static(o)]
+        if not moving:
+            return []
+        k = int(within / step)
+        offs = np.arange(-k, k + 1) * step
+        gx, gy = np.meshgrid(pos[0] + offs, pos[1] + offs)
+        cand = np.column_stack([gx.ravel(), gy.ravel()])
+        far = np.hypot(cand[:, 0] - pos[0], cand[:, 1] - pos[1])
+        cand, far = cand[far <= within + 1e-9], far[far <= within + 1e-9]
+        h = self.params.horizon_s
+        ts = np.append(np.arange(now, now + REFUGE_LOOKAHEAD * h, SAMPLE_S), now + REFUGE_LOOKAHEAD * h)
+        ok = np.ones(len(cand), dtype=bool)
+        across = np.zeros(len(cand), dtype=bool)
+        for o in moving:
+            side = o.vx * (pos[1] - o.y) - o.vy * (pos[0] - o.x)
+            across |= (o.vx * (cand[:, 1] - o.y) - o.vy * (cand[:, 0] - o.x)) * side < 0.0
+            ahead = np.clip(ts - o.stamp, 0.0, None)
+            ox, oy = o.x + o.vx * ahead, o.y + o.vy * ahead
+            reach = o.radius + self.params.growth * np.minimum(ahead, max(0.0, now + h - o.stamp)) + radius + margin
+            gap = np.hypot(cand[:, None, 0] - ox[None, :], cand[:, None, 1] - oy[None, :]) - reach[None, :]
+            ok &= gap.min(axis=1) > 0.0
+        out: list[Point] = []
+        for x, y in cand[ok][np.lexsort((far[ok], across[ok]))]:
+            if len(out) >= most:
+                break
+            if is_free(float(x), float(y)):
+                out.append((float(x), float(y)))
         return out
 
     # -- the robots' safety net ---------------------------------------------------------------------

@@ -71,6 +71,7 @@ class FleetRobot:
     manual: bool = False              # driven by the operator's cmd_vel: a moving obstacle (.operator)
     retry_at: float = -math.inf       # a spot it could not get a leg to is tried again from then on
     leg_retry_at: float = -math.inf   # a leg that could not be planned is tried again from then on
+    evade_retry_at: float = -math.inf  # no refuge from a moving obstacle could be reached: tried again from then on
     leg_failures: int = 0             # legs refused in a row (the wait before the next try doubles)
 
     @property
