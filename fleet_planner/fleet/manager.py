@@ -61,7 +61,7 @@ from .gate import GateBook
 from .intake import Roster
 from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
 from .legs import ACTING, AT_STATION_M, EVADE, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
-from .obstacles import REFUGE_LOOKAHEAD, ObstacleMap, ObstacleParams
+from .obstacles import OBSTACLE_LOOKAHEAD, ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Occupancy, Target, can_do
 
 #: a free robot that could not get a leg to a charger or parking spot tries again this much (s) later
@@ -75,7 +75,7 @@ LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
 EVADE_TRIES, EVADE_RETRY_S = 8, 0.5
 #: a standing robot watches a moving obstacle's way this many prediction horizons ahead (it needs
 #: longer to get going than a driving one needs to turn)
-STANDING_LOOKAHEAD = 2.0
+STANDING_LOOKAHEAD = 1.5
 #: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
 #: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
 STEP_BUDGET_S = 0.5
@@ -592,7 +592,7 @@ class FleetManager:
                 path = self.strategy.plan_leg(r, start, Target("hold", EVADE, spot), t0, grid=grid,
                                               planner=self.planner, speed=r.kind.max_speed * self.params.speed_factor,
                                               fleet=self.robots.values(),
-                                              obstacles=self.obstacles.trajectories(now, REFUGE_LOOKAHEAD))
+                                              obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD))
             except LegNotPlanned:
                 continue
             if not self._give(r, Leg(r.id, path, path_id, "hold", EVADE), d, now):
@@ -839,7 +839,8 @@ class FleetManager:
             try:
                 path = self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
                                               speed=r.kind.max_speed * self.params.speed_factor,
-                                              fleet=self.robots.values(), obstacles=self.obstacles.trajectories(now))
+                                              fleet=self.robots.values(),
+                                              obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD))
             except LegNotPlanned as exc:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")

@@ -15,7 +15,10 @@ record), and turns them into what the planner and the robots need:
   interface takes one radius per trajectory and parks every fixed trajectory on its last waypoint
   for ever, so the prediction goes in as one straight trajectory from where the obstacle is now to
   where it will be at the horizon, with the disc it has at the horizon (the grown disc's upper
-  bound over the whole horizon: conservative), parked there. A static obstacle (slower than
+  bound over the whole horizon: conservative), parked there. The fleet manager asks for the way
+  followed on for :data:`OBSTACLE_LOOKAHEAD` horizons (the disc grown over the first only), so that
+  no leg waits where the obstacle walks a little later; a robot standing where a moving obstacle is
+  about to walk steps aside to one of :meth:`ObstacleMap.refuges`. A static obstacle (slower than
   :data:`STILL_MPS`) stands where it is for ever: its cells are blocked until it is cleared.
 * **which legs an obstacle now threatens** (:meth:`ObstacleMap.threats`): a leg whose disc comes
   closer than the sum of radii plus the margin to the obstacle's predicted disc (grown exactly
@@ -53,8 +56,10 @@ SAMPLE_S = 0.05
 MAX_OBSTACLES = 1000
 #: a robot a moving obstacle would walk into steps aside to a refuge at most this far (m) ...
 REFUGE_WITHIN_M = 3.0
-#: ... clear of the obstacle's way followed on for this many prediction horizons
-REFUGE_LOOKAHEAD = 3.0
+#: ... clear of the obstacle's way followed on for this many prediction horizons; legs are planned
+#: against the same longer prediction (the planner parks a fixed trajectory on its end for ever: with
+#: one horizon a leg could wait on the obstacle's way just beyond it, where it walks a moment later)
+OBSTACLE_LOOKAHEAD = 3.0
 #: the prefix of an obstacle's id in the planner's fixed trajectories and the robots' safety net
 PREFIX = "obstacle:"
 
@@ -208,7 +213,7 @@ class ObstacleMap:
         """Where a robot of ``radius`` standing at ``pos`` may step aside from the moving obstacles:
         points of a ``step`` lattice round ``pos`` (at most ``within`` m away) where ``is_free(x, y)``
         holds and that every moving obstacle's way, followed on at its velocity for
-        :data:`REFUGE_LOOKAHEAD` horizons (a person does not stop at the horizon) with its disc grown
+        :data:`OBSTACLE_LOOKAHEAD` horizons (a person does not stop at the horizon) with its disc grown
         as the prediction grows it up to the horizon, passes no closer than the sum of radii plus
         ``margin``; the ``most`` nearest, those on the robot's side of every obstacle's way first
         (stepping aside does not cross in front of it), nearest first. Empty when no obstacle moves."""
@@ -222,7 +227,7 @@ class ObstacleMap:
         far = np.hypot(cand[:, 0] - pos[0], cand[:, 1] - pos[1])
         cand, far = cand[far <= within + 1e-9], far[far <= within + 1e-9]
         h = self.params.horizon_s
-        ts = np.append(np.arange(now, now + REFUGE_LOOKAHEAD * h, SAMPLE_S), now + REFUGE_LOOKAHEAD * h)
+        ts = np.append(np.arange(now, now + OBSTACLE_LOOKAHEAD * h, SAMPLE_S), now + OBSTACLE_LOOKAHEAD * h)
         ok = np.ones(len(cand), dtype=bool)
         across = np.zeros(len(cand), dtype=bool)
         for o in moving:
