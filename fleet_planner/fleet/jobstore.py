@@ -14,7 +14,9 @@ returned: an event seen on the wire is in the store. Tables:
 """
 from __future__ import annotations
 
+import os
 import sqlite3
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -26,6 +28,42 @@ CLOSED = ("done", "failed", "cancelled")
 #: how the answer to a task whose id is known already begins its reason: the event is the job's
 #: current state (:func:`current_event`), not news (``fleet-submit`` reads it so)
 RESENT = "re-sent task id: the job's state now"
+
+
+#: the planner's ``job_store`` setting that keeps jobs in memory only (nothing survives a restart)
+MEMORY = ":memory:"
+#: where the planner keeps its jobs by default: this file under the ROS home
+DEFAULT_FILE = ("fleet_planner", "jobs.sqlite")
+
+
+def default_path(env: Mapping[str, str] | None = None) -> Path:
+    """The default job store: ``$ROS_HOME/fleet_planner/jobs.sqlite`` (ROS_HOME unset or empty:
+    ``~/.ros``, as ROS 2 itself reads it)."""
+    env = os.environ if env is None else env
+    home = env.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros")
+    return Path(home).joinpath(*DEFAULT_FILE)
+
+
+def open_store(setting: str, env: Mapping[str, str] | None = None) -> JobStore | None:
+    """The job store a ``job_store`` setting names: empty, the default file (:func:`default_path`);
+    :data:`MEMORY`, none (jobs in memory only); else that file. Created, with its folders, if
+    missing; ValueError naming the setting if it cannot be opened."""
+    if setting == MEMORY:
+        return None
+    path = Path(os.path.expanduser(setting)) if setting else default_path(env)
+    try:
+        return JobStore(path)
+    except (OSError, sqlite3.Error) as exc:
+        raise ValueError(f"job_store: cannot open {str(path)!r} ({exc})") from None
+
+
+def emptied(path: str | Path) -> Path:
+    """``path`` with no job store left there (the SQLite file and its write-ahead log removed): a
+    run whose job ids repeat those of the last run starts from nothing."""
+    path = Path(path)
+    for old in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+        old.unlink(missing_ok=True)
+    return path
 
 
 def current_event(state: str, picked: bool) -> str:
@@ -199,4 +237,5 @@ def _job(row: tuple[str, int, str, str | None, int]) -> StoredJob:
     return StoredJob(cast(Task, Task.from_json(text)), int(seq), state, robot, bool(picked))
 
 
-__all__ = ["CLOSED", "RESENT", "DuplicateJob", "JobStore", "StoredJob", "Transition", "current_event"]
+__all__ = ["CLOSED", "DEFAULT_FILE", "MEMORY", "RESENT", "DuplicateJob", "JobStore", "StoredJob", "Transition",
+           "current_event", "default_path", "emptied", "open_store"]
