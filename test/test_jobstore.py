@@ -9,11 +9,12 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 from test_dispatch import FAST, PARKING, WH, Sim, manager, status, task
 
 from fleet_planner.fleet import Decisions, DispatchParams, FleetManager, JobStore
 from fleet_planner.fleet import manager as manager_module
-from fleet_planner.fleet.jobstore import RESENT
+from fleet_planner.fleet.jobstore import MEMORY, RESENT, StoreInUse, default_path, emptied, open_store
 
 FLEET = [("r1", "cargo", 2.25, 10.75, 1.0), ("r2", "cargo", 4.25, 10.75, 1.0), ("r3", "cargo", 6.25, 10.75, 1.0)]
 TASKS = [task(f"J{i}", pick=f"chute_{1 + i % 2}", place=f"B0{1 + i % 4}-01") for i in range(10)]
@@ -267,3 +268,42 @@ def test_a_job_whose_robot_never_reports_after_the_restart_is_queued_again_if_no
     fm.step(13.5)
     assert fm.jobs["J0"].state == "queued" and fm.jobs["J0"].robot is None
     assert [t.event for t in JobStore(path).history("J0")][-1] == "requeued"
+
+
+def test_the_default_store_is_under_the_ros_home_per_fleet_and_memory_is_asked_for_by_name(tmp_path, monkeypatch):
+    fleet_dir = tmp_path / "fleet_planner"
+    assert default_path({"ROS_HOME": str(tmp_path)}) == fleet_dir / "domain_0" / "jobs.sqlite"
+    assert default_path({"ROS_HOME": str(tmp_path), "ROS_DOMAIN_ID": "31"}, "/site_a/hall_2") == \
+        fleet_dir / "domain_31" / "site_a" / "hall_2" / "jobs.sqlite"
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert default_path({}) == tmp_path / "home" / ".ros" / "fleet_planner" / "domain_0" / "jobs.sqlite"
+    assert default_path({"ROS_HOME": ""}) == default_path({})
+    store = open_store("", {"ROS_HOME": str(tmp_path / "ros")})  # created, with its folders
+    assert store is not None and store.path.exists()
+    assert store.path == tmp_path / "ros" / "fleet_planner" / "domain_0" / "jobs.sqlite"
+    assert open_store(MEMORY) is None
+    assert open_store(str(tmp_path / "x.db")).path == tmp_path / "x.db"
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="job_store: cannot open"):
+        open_store(str(tmp_path / "file" / "jobs.db"))  # its folder is a file
+
+
+def test_a_locked_store_is_one_planners_until_closed_or_its_process_dies(tmp_path):
+    path = tmp_path / "jobs.db"
+    first = JobStore(path, lock=True)
+    with pytest.raises(StoreInUse, match=f"in use by another planner \\(process {os.getpid()}\\)"):
+        JobStore(path, lock=True)
+    assert JobStore(path).counts() == {}   # reading it without the lock is fine (tools, tests)
+    first.close()
+    JobStore(path, lock=True).close()
+    code = f"import os, signal; from fleet_planner.fleet import JobStore; JobStore({str(path)!r}, lock=True); " \
+           "os.kill(os.getpid(), signal.SIGKILL)"
+    assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == -signal.SIGKILL
+    JobStore(path, lock=True).close()   # kill -9 let go of it
+
+
+def test_an_emptied_store_starts_with_no_jobs(tmp_path):
+    path = tmp_path / "jobs.sqlite"
+    FleetManager(WH, FAST, store=JobStore(path)).submit(TASKS[0], 1.0)
+    assert emptied(path) == path and not path.exists()
+    assert FleetManager(WH, FAST, store=JobStore(emptied(path))).jobs == {}

@@ -136,8 +136,9 @@ class PlannerNode(Node):
                         "'behavior' (legs bind only their goals; the robots use BBMRCA)", read_only=True)).value
         store_file = self.declare_parameter("job_store", "", ParameterDescriptor(
             description="SQLite file keeping every accepted job across restarts (created if missing; empty: "
-                        "$ROS_HOME/fleet_planner/jobs.sqlite, ROS_HOME defaulting to ~/.ros; ':memory:': jobs live "
-                        "in memory only); restart with the same file and open jobs carry on", read_only=True)).value
+                        "$ROS_HOME/fleet_planner/domain_<ROS_DOMAIN_ID>/<namespace>/jobs.sqlite, ROS_HOME defaulting "
+                        "to ~/.ros; ':memory:': jobs live in memory only); restart with the same file and open jobs "
+                        "carry on; one planner per file (a second one is refused)", read_only=True)).value
         relay_period = self.declare_parameter("neighbour_period_s", RELAY_PERIOD_S, _range(
             "s of ROS time between the neighbours records sent to each robot (/robots/<id>/neighbours)",
             0.02, 2.0)).value
@@ -186,7 +187,7 @@ class PlannerNode(Node):
         roster = [m.id for m in load_fleet(fleet_file, kinds)] if fleet_file else None
         if coordination not in COORDINATION:
             raise ValueError(f"parameter coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
-        store = open_store(store_file)
+        store = open_store(store_file, namespace=self.get_namespace(), lock=True)
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
                                   [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
                                   store=store, max_clock_skew_s=skew,
@@ -236,6 +237,13 @@ class PlannerNode(Node):
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
+
+    def destroy_node(self) -> None:
+        """Also lets go of the job store (its lock: another planner may open it then)."""
+        super().destroy_node()
+        fleet = getattr(self, "fleet", None)
+        if fleet is not None and fleet.store is not None:
+            fleet.store.close()
 
     # -- callbacks: none of them lets an exception out ----------------------------------------------
     def _on_task(self, msg: String) -> None:
