@@ -54,6 +54,7 @@ from rclpy.logging import LoggingSeverity  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
+from fleet_planner.fleet.jobstore import emptied  # noqa: E402
 from fleet_planner.fleet.placement import parking_spots, place_robots, warehouse_for  # noqa: E402
 from fleet_planner.robots import load_kinds  # noqa: E402
 from fleet_planner.ros.demo.bringup import node_command  # noqa: E402
@@ -116,7 +117,8 @@ def run(context: Context, n: int, opts: argparse.Namespace, tmp: Path, profiler:
     parking = [v for p in parking_spots(warehouse, members) for v in p]
     node = PlannerNode(f"bench_load_planner_{n}", context=context, warehouse=warehouse, kinds=kinds,
                        parameter_overrides=[Parameter("parking", value=parking),
-                                            Parameter("offline_timeout_s", value=3.0)])
+                                            Parameter("offline_timeout_s", value=3.0),
+                                            Parameter("job_store", value=str(emptied(tmp / f"jobs_{n}.sqlite")))])
     node.get_logger().set_level(LoggingSeverity.WARN)
     client = rclpy.create_node(f"bench_load_client_{n}", context=context)
     tasks_pub = client.create_publisher(String, topics.TASKS, topics.TASKS_QOS)

@@ -54,7 +54,7 @@ def main() -> None:
                for i, (kind, s) in enumerate(zip(kinds, wh.stations_of("charger")))]
     ctx = Context()
     rclpy.init(context=ctx)
-    fleet = bring_up(ctx, wh, kinds, members, 20.0)
+    fleet = bring_up(ctx, wh, kinds, members, 20.0, job_store=":memory:")  # (its job ids repeat from run to run)
     op = OperatorClient("bench_operator", context=ctx)
     console = ConsoleNode(context=ctx, warehouse=wh, parameter_overrides=[Parameter("use_sim_time", value=True)])
     for node in (op, console):

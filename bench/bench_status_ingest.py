@@ -45,6 +45,7 @@ import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.logging import LoggingSeverity  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from fleet_planner.ros import planner_node  # noqa: E402
@@ -102,7 +103,8 @@ def publish(count: int, robots: int, rate: float, subscribers: int) -> None:
 
 # -- the planner side ---------------------------------------------------------------------------------
 def run_once(context: Context, opts: argparse.Namespace, index: int) -> dict:
-    node = planner_node.PlannerNode(f"bench_planner_{index}", context=context)
+    node = planner_node.PlannerNode(f"bench_planner_{index}", context=context,  # (no tasks: no job store)
+                                    parameter_overrides=[Parameter("job_store", value=":memory:")])
     node.get_logger().set_level(LoggingSeverity.WARN)  # not a note per robot joining
     listeners = [FleetMonitor(f"bench_listener_{index}_{i}", context=context) for i in range(opts.listeners)]
     executor = fleet_executor(context)

@@ -341,6 +341,9 @@ class RobotStatus(Record):
     rejected_path_id: int | None = spec(optional(integer(lo=0)), default=None)
     # whether it carries the goods of task_id (the robot's word that a pick or place is done)
     loaded: bool | None = spec(optional(boolean), default=None)
+    # the last job whose goods it placed (the robot's word that the place is done, kept until it
+    # places again): a planner restarted after the place counts the job done from it, exactly once
+    placed_task_id: str | None = spec(optional(nonempty), default=None)
 
     #: the compact form of the same record (:meth:`to_compact_json`), read by the same parser
     COMPACT_SCHEMA: ClassVar[str] = "fleet/robot_status@2"
@@ -387,7 +390,8 @@ class RobotStatus(Record):
                                                              separators=(",", ":")),
              _json_flag(self.manual), _json_flag(self.estop),
              "null" if self.travelled_m is None else _floor(self.travelled_m, 4),
-             "null" if self.rejected_path_id is None else str(self.rejected_path_id), _json_flag(self.loaded)]
+             "null" if self.rejected_path_id is None else str(self.rejected_path_id), _json_flag(self.loaded),
+             "null" if self.placed_task_id is None else json.dumps(self.placed_task_id)]
         while v[-1] == "null":
             v.pop()
         return f'{{"schema":"{self.COMPACT_SCHEMA}","id":"{self.id}","v":[{",".join(v)}]}}'
@@ -410,7 +414,7 @@ class RobotStatus(Record):
 #: :data:`_COMPACT_REQUIRED` are required, the others may be null or left out at the end
 COMPACT_FIELDS = ("kind", "x", "y", "yaw", "vx", "vy", "battery", "mode", "progress", "stamp", "radius",
                   "task_id", "path_id", "lateness_s", "behavior", "manual", "estop", "travelled_m",
-                  "rejected_path_id", "loaded")
+                  "rejected_path_id", "loaded", "placed_task_id")
 _COMPACT_REQUIRED = 11
 #: how ``fleet/robot_status@2`` rounds (decimals): positions, heading and velocity to 0.1 mm (rad,
 #: mm/s), battery to 1e-6, lateness to 1 ms; progress and travelled_m are rounded down (a robot

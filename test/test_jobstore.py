@@ -9,11 +9,12 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 from test_dispatch import FAST, PARKING, WH, Sim, manager, status, task
 
-from fleet_planner.fleet import DispatchParams, FleetManager, JobStore
+from fleet_planner.fleet import Decisions, DispatchParams, FleetManager, JobStore
 from fleet_planner.fleet import manager as manager_module
-from fleet_planner.fleet.jobstore import RESENT
+from fleet_planner.fleet.jobstore import MEMORY, RESENT, StoreInUse, default_path, emptied, open_store
 
 FLEET = [("r1", "cargo", 2.25, 10.75, 1.0), ("r2", "cargo", 4.25, 10.75, 1.0), ("r3", "cargo", 6.25, 10.75, 1.0)]
 TASKS = [task(f"J{i}", pick=f"chute_{1 + i % 2}", place=f"B0{1 + i % 4}-01") for i in range(10)]
@@ -180,3 +181,129 @@ def test_the_sqlite_file_is_readable_by_plain_sqlite(tmp_path):
     FleetManager(WH, FAST, store=JobStore(path)).submit(TASKS[0], 1.0)
     with sqlite3.connect(path) as db:
         assert db.execute("SELECT id, state FROM jobs").fetchall() == [("J0", "queued")]
+
+
+class PlannerDown:
+    """No planner: statuses go nowhere, no legs or events come (the agents drive on)."""
+
+    def on_status(self, status, now):
+        pass
+
+    def step(self, now):
+        return Decisions()
+
+
+def planner_killed_when(path, condition, robot_did, **params):
+    """A one-robot Sim on a store at ``path``: J1 runs until ``condition(sim)``; the planner dies (the
+    robot drives on alone) until ``robot_did(agent)``; then a new planner on the same store. The
+    restarted Sim and the events said before the kill."""
+    sim = Sim(FLEET[:1], **params)
+    sim.fm = FleetManager(WH, FAST, DispatchParams(**params), PARKING, store=JobStore(path))
+    sim.submit(TASKS[1])
+    assert sim.run_until(lambda: condition(sim))
+    before, agents = list(sim.events), sim.agents
+    sim.fm = PlannerDown()
+    assert sim.run_until(lambda: robot_did(agents["r1"]), limit=300.0)
+    sim.fm = FleetManager(WH, FAST, DispatchParams(**params), PARKING, store=JobStore(path))
+    sim.events = []
+    return sim, before
+
+
+def test_goods_placed_while_the_planner_was_down_make_the_job_done_once(tmp_path):
+    """The robot placed the goods while no planner ran: its status names the job it placed
+    (``placed_task_id``), and the restarted planner counts the job done from it, exactly once."""
+    path = tmp_path / "jobs.db"
+    sim, before = planner_killed_when(path, lambda s: s.last("J1") == "picked", lambda a: a.placed == "J1")
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=30.0)
+    sim.run_until(lambda: False, limit=20.0)   # and nothing more about it
+    assert [e.event for e in sim.events if e.task_id == "J1"] == ["placed", "done"]
+    assert [e.event for e in before + sim.events].count("picked") == 1
+    assert [t.event for t in JobStore(path).history("J1")] == ["accepted", "assigned", "picked", "done"]
+    assert sim.fm.robots["r1"].free
+
+
+def test_goods_picked_while_the_planner_was_down_are_announced_once_and_placed(tmp_path):
+    path = tmp_path / "jobs.db"
+    sim, before = planner_killed_when(path, lambda s: s.last("J1") == "assigned", lambda a: a.loaded)
+    assert JobStore(path).get("J1").picked is False
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=300.0)
+    events = [e.event for e in before + sim.events if e.task_id == "J1"]
+    assert events == ["accepted", "assigned", "picked", "placed", "done"]
+    assert [t.event for t in JobStore(path).history("J1")] == ["accepted", "assigned", "picked", "done"]
+
+
+def test_a_status_naming_a_placed_job_the_store_had_not_seen_picked_finishes_it_once(tmp_path):
+    """Picked and placed while no planner ran (the store has it assigned to r1): picked, placed and
+    done are announced once; a later status saying the same changes nothing."""
+    path = tmp_path / "jobs.db"
+    store = JobStore(path)
+    FleetManager(WH, FAST, store=store).submit(TASKS[1], 0.0)
+    store.update("J1", "assigned", "active", "r1", False, 5.0)
+    fm = FleetManager(WH, FAST, store=JobStore(path))
+    fm.on_status(status("r1", "cargo", 2.25, 10.75, stamp=9.0, loaded=False, placed_task_id="J1"), 9.0)
+    assert [(e.event, e.robot_id) for e in fm.step(10.0).events] == [("picked", "r1"), ("placed", "r1"),
+                                                                      ("done", "r1")]
+    fm.on_status(status("r1", "cargo", 2.25, 10.75, stamp=10.5, loaded=False, placed_task_id="J1"), 10.5)
+    assert fm.step(11.0).events == [] and fm.robots["r1"].free
+    assert [t.event for t in JobStore(path).history("J1")] == ["accepted", "assigned", "picked", "done"]
+
+
+def test_a_robot_on_its_way_to_the_chute_at_the_restart_keeps_its_job(tmp_path):
+    path = tmp_path / "jobs.db"
+    sim, before = planner_killed_when(path, lambda s: s.last("J1") == "assigned", lambda a: True)
+    assert sim.fm.jobs["J1"].state == "active" and sim.fm.jobs["J1"].robot == "r1"
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=300.0)
+    events = [e.event for e in before + sim.events if e.task_id == "J1"]
+    assert events == ["accepted", "assigned", "picked", "placed", "done"]
+
+
+def test_a_job_whose_robot_never_reports_after_the_restart_is_queued_again_if_not_picked(tmp_path):
+    path = tmp_path / "jobs.db"
+    store = JobStore(path)
+    FleetManager(WH, FAST, store=store).submit(TASKS[0], 0.0)
+    store.update("J0", "assigned", "active", "r9", False, 5.0)
+    fm = FleetManager(WH, FAST, DispatchParams(offline_timeout_s=3.0), store=JobStore(path))
+    assert fm.jobs["J0"].state == "active"
+    fm.step(10.0)
+    fm.step(13.5)
+    assert fm.jobs["J0"].state == "queued" and fm.jobs["J0"].robot is None
+    assert [t.event for t in JobStore(path).history("J0")][-1] == "requeued"
+
+
+def test_the_default_store_is_under_the_ros_home_per_fleet_and_memory_is_asked_for_by_name(tmp_path, monkeypatch):
+    fleet_dir = tmp_path / "fleet_planner"
+    assert default_path({"ROS_HOME": str(tmp_path)}) == fleet_dir / "domain_0" / "jobs.sqlite"
+    assert default_path({"ROS_HOME": str(tmp_path), "ROS_DOMAIN_ID": "31"}, "/site_a/hall_2") == \
+        fleet_dir / "domain_31" / "site_a" / "hall_2" / "jobs.sqlite"
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert default_path({}) == tmp_path / "home" / ".ros" / "fleet_planner" / "domain_0" / "jobs.sqlite"
+    assert default_path({"ROS_HOME": ""}) == default_path({})
+    store = open_store("", {"ROS_HOME": str(tmp_path / "ros")})  # created, with its folders
+    assert store is not None and store.path.exists()
+    assert store.path == tmp_path / "ros" / "fleet_planner" / "domain_0" / "jobs.sqlite"
+    assert open_store(MEMORY) is None
+    assert open_store(str(tmp_path / "x.db")).path == tmp_path / "x.db"
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="job_store: cannot open"):
+        open_store(str(tmp_path / "file" / "jobs.db"))  # its folder is a file
+
+
+def test_a_locked_store_is_one_planners_until_closed_or_its_process_dies(tmp_path):
+    path = tmp_path / "jobs.db"
+    first = JobStore(path, lock=True)
+    with pytest.raises(StoreInUse, match=f"in use by another planner \\(process {os.getpid()}\\)"):
+        JobStore(path, lock=True)
+    assert JobStore(path).counts() == {}   # reading it without the lock is fine (tools, tests)
+    first.close()
+    JobStore(path, lock=True).close()
+    code = f"import os, signal; from fleet_planner.fleet import JobStore; JobStore({str(path)!r}, lock=True); " \
+           "os.kill(os.getpid(), signal.SIGKILL)"
+    assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == -signal.SIGKILL
+    JobStore(path, lock=True).close()   # kill -9 let go of it
+
+
+def test_an_emptied_store_starts_with_no_jobs(tmp_path):
+    path = tmp_path / "jobs.sqlite"
+    FleetManager(WH, FAST, store=JobStore(path)).submit(TASKS[0], 1.0)
+    assert emptied(path) == path and not path.exists()
+    assert FleetManager(WH, FAST, store=JobStore(emptied(path))).jobs == {}

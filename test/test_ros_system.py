@@ -167,3 +167,27 @@ def test_a_restarted_planner_node_with_the_same_job_store_keeps_its_open_jobs(ro
         assert again.event == "accepted" and (again.reason or "").startswith(RESENT) and len(second.fleet.jobs) == 3
     finally:
         second.destroy_node()
+
+
+def test_a_planner_node_keeps_its_jobs_under_the_ros_home_unless_told_memory(ros_context, tmp_path, monkeypatch):
+    """No job_store: $ROS_HOME/fleet_planner/domain_<id>/<namespace>/jobs.sqlite, created with its
+    folders, one planner at a time (a second one on it is refused); ':memory:': none."""
+    from fleet_planner.ros.planner_node import PlannerNode
+
+    monkeypatch.setenv("ROS_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("ROS_DOMAIN_ID", "31")  # (read by rcl at init only: here the path alone)
+    node = PlannerNode("planner_default_store", context=ros_context, namespace="/site_x", warehouse=WH, kinds=KINDS)
+    try:
+        assert node.fleet.store is not None
+        assert node.fleet.store.path == tmp_path / "home" / "fleet_planner" / "domain_31" / "site_x" / "jobs.sqlite"
+        assert node.fleet.store.path.exists()
+        with pytest.raises(ValueError, match="in use by another planner"):
+            PlannerNode("planner_same_store", context=ros_context, namespace="/site_x", warehouse=WH, kinds=KINDS)
+    finally:
+        node.destroy_node()
+    node = PlannerNode("planner_memory_store", context=ros_context, warehouse=WH, kinds=KINDS,
+                       parameter_overrides=[Parameter("job_store", value=":memory:")])
+    try:
+        assert node.fleet.store is None
+    finally:
+        node.destroy_node()

@@ -46,7 +46,8 @@ def same_up_to_rounding(a: RobotStatus, b: RobotStatus) -> None:
 
 
 @pytest.mark.parametrize("over", [{}, {"task_id": None, "path_id": None, "travelled_m": None, "loaded": None},
-                                  {"behavior": BEHAVIOR, "manual": True, "estop": False, "rejected_path_id": 4},
+                                  {"behavior": BEHAVIOR, "manual": True, "estop": False, "rejected_path_id": 4,
+                                   "placed_task_id": 't "11"'},
                                   {"progress": 1.0, "x": -0.0, "battery": 0.0, "lateness_s": 0.0}])
 def test_compact_round_trip(over):
     s = status(**over)
@@ -80,16 +81,17 @@ def test_trailing_nulls_left_out_and_optional_values_may_be_left_out():
     (lambda d: d["v"].__setitem__(7, None), "robot_status.mode: must be one of"),
     (lambda d: d["v"].__setitem__(12, -1), "robot_status.path_id: must be >= 0"),
     (lambda d: d["v"].__setitem__(19, 1), "robot_status.loaded: must be true or false"),
+    (lambda d: d["v"].__setitem__(20, ""), "robot_status.placed_task_id: must be a non-empty string"),
     (lambda d: d.__setitem__("id", "r-1"), "robot_status.id: must be letters, digits and '_'"),
-    (lambda d: d.__setitem__("v", d["v"][:10]), "robot_status.v: must be a list of 11 to 20 values"),
-    (lambda d: d.__setitem__("v", d["v"] + [None]), "robot_status.v: must be a list of 11 to 20 values"),
+    (lambda d: d.__setitem__("v", d["v"][:10]), "robot_status.v: must be a list of 11 to 21 values"),
+    (lambda d: d.__setitem__("v", d["v"] + [None]), "robot_status.v: must be a list of 11 to 21 values"),
     (lambda d: d.__setitem__("v", {"x": 1}), "robot_status.v: must be a list"),
     (lambda d: d.pop("id"), "robot_status.id: required field missing"),
     (lambda d: d.__setitem__("x", 1.0), "robot_status.x: unknown field"),
 ])
 def test_compact_errors_name_the_field(change, error):
-    data = json.loads(status(rejected_path_id=2, loaded=False).to_compact_json())
-    assert len(data["v"]) == 20
+    data = json.loads(status(rejected_path_id=2, loaded=False, placed_task_id="t9").to_compact_json())
+    assert len(data["v"]) == 21
     change(data)
     with pytest.raises(RecordError) as exc:
         RobotStatus.from_json(json.dumps(data).replace('"NaN"', "NaN"))

@@ -50,8 +50,10 @@ class RobotAgent:
     ``gated`` (central coordination): it never drives into a collision region before the robot
     ranked above it there reported leaving it (:mod:`.gate`; its records come in by
     :meth:`on_gate`), whatever the clock says; without a record for its current leg it waits.
-    Its statuses carry the path it follows and how far it drove along it (``travelled_m``), and the
-    last leg it could not take (``rejected_path_id``; it stops where it is until the next one).
+    Its statuses carry the path it follows and how far it drove along it (``travelled_m``), the
+    last leg it could not take (``rejected_path_id``; it stops where it is until the next one), its
+    job and whether it carries the job's goods (``task_id``, ``loaded``) and the last job whose goods
+    it placed (``placed_task_id``): a planner restarted mid-job re-adopts it from them.
     :attr:`speed_scale` slows it down (a speed limit: 0 halts it).
     """
 
@@ -64,6 +66,7 @@ class RobotAgent:
         self.warehouse = warehouse
         self.tasks: dict[str, Task] = {}
         self.loaded = False
+        self.placed: str | None = None            # the last job whose goods it placed
         self.heard: dict[str, RobotStatus] = {}   # the other robots' last statuses
         self.driver = self.strategy.driver(model, warehouse, params, gated)
         self.obstacles = ObstacleMap(max_clock_skew_s=MAX_CLOCK_SKEW_S)   # what the intelligent space reports
@@ -220,13 +223,14 @@ class RobotAgent:
             if self._acting == "pick":
                 self.loaded = True
             else:
-                self.loaded, m.task_id = False, None
+                self.loaded, self.placed, m.task_id = False, m.task_id, None
             self._acting = None
         if m.mode == "idle" and m.speed == 0.0 and m.progress >= 1.0 and not (self.hand.manual or self.hand.estopped):
             self._act(now)
         state = self.driver.behavior_state()
         return RobotStatus(**m.status(now), behavior=state, travelled_m=m.travelled if m.path is not None else None,
-                           rejected_path_id=self.rejected, loaded=self.loaded, **self.hand.status_fields())
+                           rejected_path_id=self.rejected, loaded=self.loaded, placed_task_id=self.placed,
+                           **self.hand.status_fields())
 
     # -- where a leg ends ---------------------------------------------------------------------------
     def _act(self, now: float) -> None:

@@ -14,10 +14,13 @@ returned: an event seen on the wire is in the store. Tables:
 """
 from __future__ import annotations
 
+import fcntl
+import os
 import sqlite3
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
+from typing import IO, cast
 
 from msg_schemas.records import Task
 
@@ -26,6 +29,48 @@ CLOSED = ("done", "failed", "cancelled")
 #: how the answer to a task whose id is known already begins its reason: the event is the job's
 #: current state (:func:`current_event`), not news (``fleet-submit`` reads it so)
 RESENT = "re-sent task id: the job's state now"
+
+
+#: the planner's ``job_store`` setting that keeps jobs in memory only (nothing survives a restart)
+MEMORY = ":memory:"
+#: where the planner keeps its jobs by default: this file under the ROS home, per fleet
+DEFAULT_FILE = "jobs.sqlite"
+
+
+def default_path(env: Mapping[str, str] | None = None, namespace: str = "/") -> Path:
+    """The default job store of the planner in ``namespace``:
+    ``$ROS_HOME/fleet_planner/domain_<ROS_DOMAIN_ID>/<namespace>/jobs.sqlite`` (ROS_HOME unset or
+    empty: ``~/.ros``, as ROS 2 reads it; no domain id: 0). One file per fleet: two fleets on one
+    machine (another domain, another namespace) never share their jobs."""
+    env = os.environ if env is None else env
+    home = env.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros")
+    domain = env.get("ROS_DOMAIN_ID", "").strip()
+    parts = [p for p in namespace.split("/") if p]
+    return Path(home, "fleet_planner", f"domain_{int(domain) if domain.isdigit() else 0}", *parts, DEFAULT_FILE)
+
+
+def open_store(setting: str, env: Mapping[str, str] | None = None, namespace: str = "/",
+               lock: bool = False) -> JobStore | None:
+    """The job store a ``job_store`` setting names: empty, the default file of the fleet in
+    ``namespace`` (:func:`default_path`); :data:`MEMORY`, none (jobs in memory only); else that
+    file. Created, with its folders, if missing; with ``lock``, held for this process alone (see
+    :class:`JobStore`). ValueError naming the setting if it cannot be opened."""
+    if setting == MEMORY:
+        return None
+    path = Path(os.path.expanduser(setting)) if setting else default_path(env, namespace)
+    try:
+        return JobStore(path, lock=lock)
+    except (OSError, sqlite3.Error) as exc:
+        raise ValueError(f"job_store: cannot open {str(path)!r} ({exc})") from None
+
+
+def emptied(path: str | Path) -> Path:
+    """``path`` with no job store left there (the SQLite file and its write-ahead log removed): a
+    run whose job ids repeat those of the last run starts from nothing."""
+    path = Path(path)
+    for old in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+        old.unlink(missing_ok=True)
+    return path
 
 
 def current_event(state: str, picked: bool) -> str:
@@ -89,13 +134,22 @@ class Transition:
     reason: str | None
 
 
+class StoreInUse(OSError):
+    """Another process holds the job store's lock (another planner keeps its jobs there)."""
+
+
 class JobStore:
     """Accepted jobs and their state changes in the SQLite file ``path`` (created, with its
-    folders, if missing). Not closing it is safe: every change is committed when its call returns."""
+    folders, if missing). Not closing it is safe: every change is committed when its call returns.
 
-    def __init__(self, path: str | Path):
+    With ``lock`` the store is this process's alone while it is open (an exclusive ``flock`` on
+    ``<path>.lock``, which the system drops when the process ends, also by kill -9): a second
+    planner on the same file gets :class:`StoreInUse`, never the first one's jobs."""
+
+    def __init__(self, path: str | Path, lock: bool = False):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = _take_lock(self.path) if lock else None
         self._db = sqlite3.connect(str(self.path), isolation_level=None, check_same_thread=False)
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=FULL")
@@ -104,6 +158,9 @@ class JobStore:
 
     def close(self) -> None:
         self._db.close()
+        if self._lock is not None:
+            self._lock.close()  # (the lock goes with it)
+            self._lock = None
 
     def __enter__(self) -> JobStore:
         return self
@@ -194,9 +251,28 @@ class JobStore:
         return {state: int(n) for state, n in self._db.execute("SELECT state, COUNT(*) FROM jobs GROUP BY state")}
 
 
+def _take_lock(path: Path) -> IO[str]:
+    """The open lock file of the store at ``path``, locked for this process (StoreInUse if another holds it)."""
+    lock = open(path.with_name(path.name + ".lock"), "a+")
+    try:
+        fcntl.flock(lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock.seek(0)
+        holder = lock.read(40).strip()
+        lock.close()
+        raise StoreInUse(f"{str(path)!r} is in use by another planner (process {holder or '?'})") from None
+    lock.seek(0)
+    lock.truncate()
+    lock.write(str(os.getpid()))
+    lock.flush()
+    return lock
+
+
 def _job(row: tuple[str, int, str, str | None, int]) -> StoredJob:
     text, seq, state, robot, picked = row
     return StoredJob(cast(Task, Task.from_json(text)), int(seq), state, robot, bool(picked))
 
 
-__all__ = ["CLOSED", "RESENT", "DuplicateJob", "JobStore", "StoredJob", "Transition", "current_event"]
+__all__ = ["CLOSED", "DEFAULT_FILE", "MEMORY", "RESENT", "DuplicateJob", "JobStore", "StoreInUse", "StoredJob",
+           "Transition",
+           "current_event", "default_path", "emptied", "open_store"]

@@ -159,10 +159,12 @@ class FleetManager:
             self._reload(store)
 
     def _reload(self, store: JobStore) -> None:
-        """Take up the open jobs of ``store`` (a restart): one not yet picked is queued again; one
-        whose goods were picked waits for its robot to report it carries them (then it goes on to
-        place them) and fails, with the reason, if that robot does not report within
-        ``offline_timeout_s`` of the first step; it is never picked again."""
+        """Take up the open jobs of ``store`` (a restart): a queued one is queued again; one that was
+        on a robot waits for that robot to report on it (:meth:`_adopt`: it takes the job up again
+        where its status says it got to, or the job is done if it says it placed the goods); one
+        whose robot does not report it within ``offline_timeout_s`` of the first step is queued
+        again if its goods were not picked, and fails, with the reason, if they were (never picked
+        again, :meth:`_orphans`)."""
         self._seq = store.next_seq()
         for stored in store.open_jobs():
             task = stored.task
@@ -175,9 +177,10 @@ class FleetManager:
                 self._notes.append(f"job {task.id}: failed on reload, its stations are gone")
                 continue
             self.jobs[task.id] = job
-            if stored.picked and stored.robot is not None:
-                job.state, job.robot, job.picked = "active", stored.robot, True
-                self._notes.append(f"job {task.id}: reloaded, picked by {stored.robot}; waiting for it")
+            if stored.state == "active" and stored.robot is not None:
+                job.state, job.robot, job.picked = "active", stored.robot, stored.picked
+                self._notes.append(f"job {task.id}: reloaded, {'picked by' if stored.picked else 'on'} "
+                                   f"{stored.robot}; waiting for it")
             else:
                 store.update(task.id, "reloaded", "queued", None, False, 0.0)
                 self._notes.append(f"job {task.id}: reloaded and queued")
@@ -309,7 +312,6 @@ class FleetManager:
         if r is None:
             r = self.robots[status.id] = FleetRobot(kind, status, now, now)
             self._notes.append(f"robot {status.id} ({status.kind}) joined at ({status.x:.2f}, {status.y:.2f})")
-            self._adopt(r)
             return
         if kind is not r.kind:
             raise ValueError(f"robot {status.id!r}: reports kind {status.kind!r}, earlier {r.kind.name!r}")
@@ -372,32 +374,72 @@ class FleetManager:
         here = [(r.id, TimedPath(r.id, r.radius, np.array([[*r.pos, now]])), r.radius)]
         return self.obstacles.threats(here, now, self.margin, STANDING_LOOKAHEAD).get(r.id)
 
-    def _adopt(self, r: FleetRobot) -> None:
-        """After a restart: a robot whose status names a reloaded job it picked the goods of takes
-        it up again and heads for the storing site (the goods are not picked again)."""
-        job = self.jobs.get(r.status.task_id) if r.status.task_id is not None else None
-        if (job is None or r.job is not None or job.robot != r.id or not job.picked or r.status.loaded is False
-                or job.state != "active" or any(o.job == job.task.id for o in self.robots.values())):
+    def _adopt(self, r: FleetRobot, now: float, d: Decisions) -> None:
+        """After a restart: a robot without a job here whose status names an open job it was on
+        takes it up again where its status says it got to: ``loaded`` (the goods on board, picked
+        now if the store did not know it yet: announced once) it heads for the storing site,
+        else for the chute; a robot whose status says it placed the goods of a job that was on it
+        (``placed_task_id``: while the planner was down) finishes that job, once. A queued job
+        the robot still names (queued again while nobody heard from it) goes back to it."""
+        st = r.status
+        if r.job is not None or not r.online or r.immobile or (st.task_id is None and st.placed_task_id is None):
             return
+        placed = self.jobs.get(st.placed_task_id) if st.placed_task_id is not None else None
+        if (placed is not None and placed.state == "active" and placed.robot == r.id and st.task_id != placed.task.id
+                and st.loaded is not True and not self._held(placed)):
+            r.job = placed.task.id
+            d.notes.append(f"robot {r.id} placed the goods of job {placed.task.id} while the planner was down")
+            if not placed.picked:
+                self._action_done(r, Target("pick", placed.pick.name, placed.pick.pose), now, d)
+            self._action_done(r, Target("place", placed.place.name, placed.place.pose), now, d)
+            return
+        job = self.jobs.get(st.task_id) if st.task_id is not None else None
+        if job is None or self._held(job) or not (job.state == "queued" or job.state == "active" and job.robot == r.id):
+            return
+        if job.picked and st.loaded is False:
+            return  # it says the goods are not on board: the job waits for its word (or fails, _orphans)
+        if job.state == "queued":
+            job.state, job.robot = "active", r.id
+            self._record(job, "assigned", now)
+            d.events.append(_event(job.task.id, "assigned", now, r.id))
         r.job = job.task.id
-        r.target, r.replan = Target("place", job.place.name, job.place.pose), True
-        self._notes.append(f"robot {r.id} carries the goods of job {job.task.id} again: on to {job.place.name}")
+        if st.loaded and not job.picked:  # picked while the planner was down
+            self._action_done(r, Target("pick", job.pick.name, job.pick.pose), now, d)
+        else:
+            target = (Target("place", job.place.name, job.place.pose) if job.picked
+                      else Target("pick", job.pick.name, job.pick.pose))
+            # one at its station and already acting finishes there (its word ends it, _arrivals)
+            r.target, r.replan = target, st.mode != ACTING[target.purpose]
+        d.notes.append(f"robot {r.id} is on job {job.task.id} again: on to {r.target.name if r.target else '?'}"
+                       f"{' with the goods' if job.picked else ''}")
+
+    def _held(self, job: Job) -> bool:
+        """Some robot here has ``job``."""
+        return any(o.job == job.task.id for o in self.robots.values())
 
     def _orphans(self, now: float, d: Decisions) -> None:
-        """Reloaded jobs whose goods were picked by a robot that has not reported carrying them
-        within ``offline_timeout_s`` of the first step fail (with the reason), never picked again."""
+        """Reloaded jobs whose robot has not reported being on them within ``offline_timeout_s`` of
+        the first step: queued again if their goods were not picked; failed (with the reason) if
+        they were, never picked again."""
         if self._started is None:
             self._started = now
         if now - self._started <= self.params.offline_timeout_s:
             return
         held = {r.job for r in self.robots.values()}
         for job in self.jobs.values():
-            if job.state == "active" and job.picked and job.task.id not in held:
+            if job.state != "active" or job.task.id in held:
+                continue
+            if job.picked:
                 job.state = "failed"
                 reason = (f"robot {job.robot} held the goods when the planner restarted and has not "
                           "reported carrying them")
                 self._record(job, "failed", now, reason)
                 d.events.append(_event(job.task.id, "failed", now, job.robot, reason))
+            else:
+                d.notes.append(f"job {job.task.id}: robot {job.robot} has not reported being on it since the "
+                               "restart: queued again")
+                job.state, job.robot = "queued", None
+                self._record(job, "requeued", now)
 
     def _note_arrival(self, r: FleetRobot, now: float) -> None:
         """Note when ``r``'s status first shows it at the end of the leg to its target, and whether
@@ -432,7 +474,7 @@ class FleetManager:
         self._find_rejected(now, d)
         if self.store is not None:
             for r in self.robots.values():
-                self._adopt(r)
+                self._adopt(r, now, d)
             self._orphans(now, d)
         for r in self.robots.values():
             if r.stop and r.online:
@@ -503,9 +545,15 @@ class FleetManager:
         no longer at it, with the goods on board after a pick and off it after a place where the
         status says (``loaded``); the clock alone never finishes one. Any other target is simply reached."""
         for r in self.robots.values():
-            if r.arrived_at is None or r.target is None or not r.online:
-                continue
             target = r.target
+            if target is None or not r.online:
+                continue
+            if target.purpose in ACTING and r.job is not None and self._reported_done(r, target.purpose):
+                self._action_done(r, target, now, d)  # its word, even where no status showed it acting
+                r.arrived_at, r.saw_action = None, False
+                continue
+            if r.arrived_at is None:
+                continue
             if target.purpose in ACTING:
                 if r.status.mode == ACTING[target.purpose] or not r.saw_action:
                     continue
@@ -515,6 +563,15 @@ class FleetManager:
             else:
                 r.target, r.idle_since = None, now
             r.arrived_at, r.saw_action = None, False
+
+    @staticmethod
+    def _reported_done(r: FleetRobot, purpose: str) -> bool:
+        """``r``'s status says it did the ``purpose`` (pick | place) of its job: it carries the job's
+        goods, or it names the job as the last whose goods it placed and no longer carries them."""
+        st = r.status
+        if purpose == "pick":
+            return st.loaded is True and st.task_id == r.job
+        return st.placed_task_id == r.job and st.task_id != r.job and st.loaded is not True
 
     def _action_done(self, r: FleetRobot, target: Target, now: float, d: Decisions) -> None:
         """``r`` picked (it heads for the storing site next) or placed (its job is done)."""

@@ -34,7 +34,7 @@ from fleet_planner.fleet.fleet_file import load_fleet
 from fleet_planner.fleet.gate import watched_robots
 from fleet_planner.fleet.inbox import StatusInbox
 from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
-from fleet_planner.fleet.jobstore import JobStore
+from fleet_planner.fleet.jobstore import open_store
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
 from fleet_planner.fleet.manager import STEP_BUDGET_S
 from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
@@ -70,6 +70,14 @@ MARKERS_SHARE = 0.05
 MIN_STEP_BUDGET_S = 0.05
 #: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
 MIN_LEG_LIMIT_S = 0.1
+
+#: a planner that reloaded open jobs waits before its first step until the subscribers of its task
+#: events have stopped appearing for this many wall seconds (events are volatile: one announced
+#: before a subscriber matched is lost to it, and a restart announces picks and places made while
+#: the planner was down) ...
+EVENTS_SETTLE_S = 1.0
+#: ... but no longer than this many wall seconds after it started
+EVENTS_SETTLE_MAX_S = 10.0
 
 #: parameters that shape planned legs and cannot change while the node runs
 _FIXED = ("speed_factor", "safety_margin")
@@ -127,8 +135,10 @@ class PlannerNode(Node):
             description="how the robots avoid each other: 'central' (timed paths with (M,D) delays) or "
                         "'behavior' (legs bind only their goals; the robots use BBMRCA)", read_only=True)).value
         store_file = self.declare_parameter("job_store", "", ParameterDescriptor(
-            description="SQLite file keeping every accepted job across restarts (empty: jobs live in memory "
-                        "only); restart with the same file and open jobs carry on", read_only=True)).value
+            description="SQLite file keeping every accepted job across restarts (created if missing; empty: "
+                        "$ROS_HOME/fleet_planner/domain_<ROS_DOMAIN_ID>/<namespace>/jobs.sqlite, ROS_HOME defaulting "
+                        "to ~/.ros; ':memory:': jobs live in memory only); restart with the same file and open jobs "
+                        "carry on; one planner per file (a second one is refused)", read_only=True)).value
         relay_period = self.declare_parameter("neighbour_period_s", RELAY_PERIOD_S, _range(
             "s of ROS time between the neighbours records sent to each robot (/robots/<id>/neighbours)",
             0.02, 2.0)).value
@@ -177,9 +187,10 @@ class PlannerNode(Node):
         roster = [m.id for m in load_fleet(fleet_file, kinds)] if fleet_file else None
         if coordination not in COORDINATION:
             raise ValueError(f"parameter coordination: {coordination!r} is not one of {', '.join(COORDINATION)}")
+        store = open_store(store_file, namespace=self.get_namespace(), lock=True)
         self.fleet = FleetManager(warehouse, kinds, DispatchParams(**values),
                                   [(spots[i], spots[i + 1]) for i in range(0, len(spots), 2)], coordination,
-                                  store=JobStore(store_file) if store_file else None, max_clock_skew_s=skew,
+                                  store=store, max_clock_skew_s=skew,
                                   roster=roster, obstacle_params=ObstacleParams(**ob_values), gated=bool(gated))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -206,6 +217,8 @@ class PlannerNode(Node):
         # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
         self.operator = PlannerOperator(self, self.fleet, self._publish, Keys(trust_file=operator_file or trust))
         create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
+        # (wall time it started, matched subscribers of its events, when that count last changed)
+        self._settling = (time.monotonic(), -1, time.monotonic()) if self.fleet.jobs else None
         self._timer = self.create_timer(period, self._on_timer)
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py) and the robots its
         # execution gate watches (fleet_planner/fleet/gate.py)
@@ -219,10 +232,18 @@ class PlannerNode(Node):
         self.get_logger().info(
             f"planning for warehouse {warehouse.name!r} ({len(warehouse.stations)} stations), {coordination} "
             f"coordination, margin {self.fleet.margin:.2f} m, {len(self.fleet.parking)} parking spots, "
-            f"step every {period:g} s")
+            f"step every {period:g} s; jobs "
+            + (f"in {str(store.path)!r} ({len(self.fleet.jobs)} open reloaded)" if store else "in memory only"))
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
+
+    def destroy_node(self) -> None:
+        """Also lets go of the job store (its lock: another planner may open it then)."""
+        super().destroy_node()
+        fleet = getattr(self, "fleet", None)
+        if fleet is not None and fleet.store is not None:
+            fleet.store.close()
 
     # -- callbacks: none of them lets an exception out ----------------------------------------------
     def _on_task(self, msg: String) -> None:
@@ -350,8 +371,27 @@ class PlannerNode(Node):
         if self._leg_limit is not None:  # the planner's own limit per leg (md: detours, re-orderings)
             self.fleet.planner.leg_time_limit = min(self._leg_limit, max(MIN_LEG_LIMIT_S, budget))  # type: ignore
 
+    def _heard(self) -> bool:
+        """Whether the task events would reach the fleet's subscribers now: always, but for a planner
+        that reloaded open jobs, not before its events publisher's matched subscribers stopped
+        changing for EVENTS_SETTLE_S (at most EVENTS_SETTLE_MAX_S after it started)."""
+        if self._settling is None:
+            return True
+        started, count, since = self._settling
+        wall, now_count = time.monotonic(), self._events.get_subscription_count()
+        if now_count != count:
+            self._settling = (started, now_count, wall)
+            since = wall
+        if wall - started < EVENTS_SETTLE_MAX_S and (now_count == 0 or wall - since < EVENTS_SETTLE_S):
+            return False
+        self._settling = None
+        self.get_logger().info(f"{now_count} subscribers of the task events matched: first step")
+        return True
+
     def _on_timer(self) -> None:
         self._take_statuses()
+        if not self._heard():
+            return
         now = self._now()
         self._pace(now)
         try:

@@ -58,17 +58,20 @@ class Fleet:
 
 def bring_up(context: Context, warehouse: Warehouse, kinds: Mapping[str, RobotKind], members: Sequence[FleetMember],
              rate: float, planner_params: Sequence[Parameter] = (), params_file: str | Path | None = None,
-             coordination: str = "central", agent_overrides: Sequence[Parameter] = (), sim: bool = False) -> Fleet:
+             coordination: str = "central", agent_overrides: Sequence[Parameter] = (), sim: bool = False,
+             job_store: str | Path | None = None) -> Fleet:
     """Sim clock, planner, one agent per fleet member (``sim``: one fleet-sim node driving them all)
     and a monitor, all on simulated time in ``context`` and on one executor. ``planner_params`` and
     ``params_file`` (a ros__parameters YAML) configure the planner; ``coordination`` goes to the
-    planner and every agent, and ``agent_overrides`` to every agent."""
+    planner and every agent, and ``agent_overrides`` to every agent; ``job_store`` is the planner's
+    (None: its parameter's, by default under the ROS home)."""
     use_sim = [Parameter("use_sim_time", value=True)]
     mode = [Parameter("coordination", value=coordination)]
+    store = [] if job_store is None else [Parameter("job_store", value=str(job_store))]
     clock = SimClock(context=context, parameter_overrides=[Parameter("rate", value=float(rate))])
     cli = ["--ros-args", "--params-file", str(params_file)] if params_file else None
     planner = PlannerNode(context=context, warehouse=warehouse, kinds=kinds, cli_args=cli,
-                          parameter_overrides=use_sim + mode + list(planner_params))
+                          parameter_overrides=use_sim + mode + store + list(planner_params))
     agents = {} if sim else {
         m.id: AgentNode(f"agent_{m.id}", context=context, warehouse=warehouse, kinds=kinds,
                         parameter_overrides=use_sim + mode + agent_params(m) + list(agent_overrides))
@@ -102,10 +105,12 @@ def node_command(script: str, module: str) -> list[str]:
 
 def start_processes(members: Sequence[FleetMember], rate: float, params_file: Path, warehouse_file: Path | None,
                     kinds_file: Path | None = None, log_dir: Path | None = None,
-                    coordination: str = "central", fleet_file: Path | None = None) -> list[subprocess.Popen]:
+                    coordination: str = "central", fleet_file: Path | None = None,
+                    job_store: str | Path | None = None) -> list[subprocess.Popen]:
     """Sim clock, planner and agents as processes in this environment (stop them with stop_processes).
     With ``fleet_file`` (holding ``members``) one ``fleet-sim`` process drives all the robots
-    instead of one agent process each."""
+    instead of one agent process each; ``job_store`` is the planner's (None: the params file's, by
+    default under the ROS home)."""
     common = ["-p", f"coordination:={coordination}"]
     if warehouse_file:
         common += ["-p", f"warehouse_file:={warehouse_file}"]
@@ -116,7 +121,8 @@ def start_processes(members: Sequence[FleetMember], rate: float, params_file: Pa
     clock = ["--catch-up", str(CLOCK_CATCH_UP_S), "--max-lead", str(CLOCK_MAX_LEAD_S)]
     commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)] + clock,
                 "planner": _profiled("planner", node_command("planner", "fleet_planner.ros.planner_node"))
-                + ["--ros-args", "--params-file", str(params_file)] + sim + common}
+                + ["--ros-args", "--params-file", str(params_file)] + sim + common
+                + ([] if job_store is None else ["-p", f"job_store:={job_store}"])}
     if fleet_file is not None:
         commands["fleet_sim"] = _profiled("fleet_sim", node_command("fleet-sim", "fleet_planner.ros.fleet_sim")) + [
             "--ros-args", "-p", f"fleet_file:={fleet_file}"] + sim + common

@@ -14,7 +14,8 @@ the same fleet with the robots avoiding each other by the BBMRCA behaviours inst
 At the end it prints a summary (jobs done, completion time, average speed, and the smallest
 distance ever seen between two robots against the sum of their radii, computed here from the
 robots' own status reports, not by the planner) and draws the robots' trajectories over the map
-to ``out/fleet_demo.png``.
+to ``out/fleet_demo.png``. Each run's planner keeps its jobs in ``out/jobs.sqlite``, emptied when
+the run starts (the job ids repeat from run to run; a store left from the last run is not reloaded).
 """
 from __future__ import annotations
 
@@ -37,6 +38,7 @@ from rclpy.parameter import Parameter
 from tqdm import tqdm
 
 from fleet_planner.fleet import COORDINATION, FleetMember, load_fleet
+from fleet_planner.fleet.jobstore import emptied
 from fleet_planner.fleet.placement import parking_spots, place_robots, warehouse_for
 from fleet_planner.robots import load_kinds
 from fleet_planner.ros.demo.bringup import (
@@ -55,6 +57,8 @@ from fleet_planner.warehouse import Warehouse, config_path, load_warehouse, save
 from msg_schemas.records import Task
 
 DEMO_PARAMS = "planner_params.yaml"
+#: the demo planner's job store in --out, emptied when a run starts
+DEMO_STORE = "jobs.sqlite"
 #: with --sim auto, fleets larger than this are driven by fleet-sim
 SIM_ABOVE = 15
 #: the default job stream: 20 jobs, one every 4 s, for the default nine robots
@@ -137,6 +141,7 @@ def main(args: list[str] | None = None) -> None:
     use_sim = opts.sim == "on" or opts.sim == "auto" and len(members) > SIM_ABOVE
     fleet_file = write_fleet_file(members, opts.out / "fleet_generated.yaml") if use_sim else None
     jobs = random_jobs(warehouse, kinds, members, opts.jobs, opts.seed)
+    store = emptied(opts.out / DEMO_STORE)   # each run starts with no jobs (its job ids repeat)
 
     context = Context()
     procs: list[subprocess.Popen] = []
@@ -150,7 +155,7 @@ def main(args: list[str] | None = None) -> None:
             executor: Executor
             if opts.mode == "inproc":
                 fleet = bring_up(context, warehouse, kinds, members, opts.rate, planner_params, params_file=params_file,
-                                 coordination=opts.coordination, sim=use_sim)
+                                 coordination=opts.coordination, sim=use_sim, job_store=store)
                 executor, monitor = fleet.executor, fleet.monitor
                 parking = list(fleet.planner.fleet.parking.values())
                 if not opts.verbose:
@@ -160,7 +165,7 @@ def main(args: list[str] | None = None) -> None:
                 log_dir = opts.out / "logs"
                 log_dir.mkdir(exist_ok=True)
                 procs = start_processes(members, opts.rate, params_file, warehouse_file, log_dir=log_dir,
-                                        coordination=opts.coordination, fleet_file=fleet_file)
+                                        coordination=opts.coordination, fleet_file=fleet_file, job_store=store)
                 monitor = FleetMonitor(context=context, parameter_overrides=[Parameter("use_sim_time", value=True)])
                 executor, parking = SingleThreadedExecutor(context=context), parking_of(params_file)
                 executor.add_node(monitor)
