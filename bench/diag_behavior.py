@@ -225,8 +225,9 @@ def main() -> None:
     p.add_argument("--cap", type=float, default=4 * 3600.0)
     p.add_argument("--wall-cap", type=float, default=300.0)
     p.add_argument("--near", action="store_true", help="also the robots near each stuck one")
-    p.add_argument("--lanes", choices=("none", "armo"), default="none",
-                   help="armo: the robots plan along ARMO's road map (the 'armo' method)")
+    p.add_argument("--lanes", default="none",
+                   help="armo: the robots plan along ARMO's road map (the 'armo' method); or a lanes file "
+                        "(config/lanes_*.yaml): along its road map")
     p.add_argument("--steps", type=int, default=None, help="stop after this many fleet steps (e.g. to profile)")
     p.add_argument("--profile", type=Path, default=None, help="cProfile the steps into this file (pstats)")
     p.add_argument("--report-every", type=float, default=0.0,
@@ -249,6 +250,11 @@ def main() -> None:
 
             problem, info = armo_problem(problem)
             print("ARMO:", info)
+        elif a.lanes != "none":
+            from fleet_planner.delivery import lanes_problem
+            from fleet_planner.roadmap import load_lanes
+
+            problem = lanes_problem(problem, load_lanes(a.lanes, problem.grid, problem.radius))
         limits = RunLimits(cap_s=a.cap, stall_s=a.stall, no_progress_s=120.0, retry_s=2.0, wall_cap_s=a.wall_cap)
         run = _BehaviorRun(problem, 0.1, limits, False, None)
         for r in run.robots:
