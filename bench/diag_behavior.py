@@ -4,6 +4,9 @@ with its behaviour, partner, the wait chain it is in (partner pointers followed 
 standing robot or a moving one) and a classification of the chain. Not part of the suite.
 
     .venv/bin/python bench/diag_behavior.py --maps-dir /work/shared/data/maps --map warehouse --n 40
+
+``--budget``: where the driving robots' time goes (:class:`Budget`); ``--lanes FILE``: along a
+road map (e.g. config/lanes_large.yaml).
 """
 from __future__ import annotations
 
