@@ -8,7 +8,9 @@ l, dock; each robot takes the next delivery when it has finished one. Simulated 
 :func:`fleet_planner.delivery.simulate`; see that package for the methods and the station discipline.
 
 Maps: ``warehouse`` (the default warehouse of config/: load at chutes, unload at storing sites),
-``large`` (a generated 74 m x 31.5 m warehouse whose rack aisles fit one robot only), and MovingAI
+``large`` (a generated 74 m x 31.5 m warehouse whose rack aisles fit one robot only; it parks about
+100 robots at most), ``large2x`` (the same rack blocks twice across, 146 m x 31.5 m, 22 chutes: room
+for 200 robots, the stress run of issue 13), and MovingAI
 maps from --maps-dir by name (--stations stations spread over the free space, seeded).
 
 Columns: CTime (s, completion of the last delivery; with a ``!`` when the run stopped unfinished,
@@ -48,7 +50,7 @@ from fleet_planner.delivery import (  # noqa: E402
 from fleet_planner.grid import GridMap  # noqa: E402
 from fleet_planner.warehouse import generate_warehouse, load_warehouse  # noqa: E402
 
-BUILTIN_MAPS = ("warehouse", "large")
+BUILTIN_MAPS = ("warehouse", "large", "large2x")
 QUICK = {"maps": "warehouse", "sizes": "20", "methods": "md,prior,behavior", "per_robot": 2}
 #: paper 002's comparison: the open default warehouse, `large` (long one-robot rack aisles) and the
 #: confined MovingAI warehouse, with its three methods and ours
@@ -152,8 +154,9 @@ def make_problem(name: str, n: int, args: argparse.Namespace) -> DeliveryProblem
     common = {"dock_s": args.dock}
     if name == "warehouse":
         return warehouse_problem(load_warehouse(), n, deliveries, args.seed, **common)
-    if name == "large":
-        return warehouse_problem(generate_warehouse(5, 10, 24, 2, 3, 0.5, "large"), n, deliveries, args.seed,
+    if name in ("large", "large2x"):
+        blocks_x = 5 if name == "large" else 10
+        return warehouse_problem(generate_warehouse(blocks_x, 10, 24, 2, 3, 0.5, name), n, deliveries, args.seed,
                                  **common)
     grid = GridMap.from_movingai(args.maps_dir / f"{name}.map")
     stations = spread_stations(grid, args.stations, args.seed)

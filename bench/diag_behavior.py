@@ -4,6 +4,9 @@ with its behaviour, partner, the wait chain it is in (partner pointers followed 
 standing robot or a moving one) and a classification of the chain. Not part of the suite.
 
     .venv/bin/python bench/diag_behavior.py --maps-dir /work/shared/data/maps --map warehouse --n 40
+
+``--budget``: where the driving robots' time goes (:class:`Budget`); ``--lanes FILE``: along a
+road map (e.g. config/lanes_large.yaml).
 """
 from __future__ import annotations
 
@@ -100,6 +103,119 @@ def report(run, near: bool = False, quiet: bool = False) -> collections.Counter:
     return kinds
 
 
+class Budget:
+    """Where the driving robots' time goes (``--budget``): robot-seconds by behaviour, moving or
+    standing, the standing ones by place (near a station, at a junction of aisles, in a narrow
+    aisle, in a wide one), and the distance driven per leg against the leg's first path."""
+
+    def __init__(self, run) -> None:
+        from scipy import ndimage
+
+        grid = run.problem.grid
+        free = ~grid.blocked
+        self.res = grid.resolution
+        self.grid = grid
+        # free run through each cell, across (rows) and along (columns), in cells
+        self.run_x = self._runs(free)
+        self.run_y = self._runs(free.T).T
+        # local free width, m: a cell k cells from the nearest wall cell lies in a passage of 2k - 1 cells
+        self.width = (2 * ndimage.distance_transform_edt(free) - 1) * grid.resolution
+        import numpy as np
+
+        self.stations = np.asarray(list(run.problem.stations.values()), dtype=float)
+        self.time: collections.Counter = collections.Counter()   # (behaviour, moving) -> robot-seconds
+        self.place: collections.Counter = collections.Counter()  # (place, behaviour) -> standing robot-seconds
+        self.prev = run.pos.copy()
+        self.leg_plan = {}                                          # robot -> path length at assignment
+        self.leg_driven = {}
+        self.planned = self.driven_on_legs = 0.0
+        self.legs: list[tuple[float, float, int]] = []
+        self.dist: collections.Counter = collections.Counter()   # behaviour -> metres driven
+
+    @staticmethod
+    def _runs(free):
+        import numpy as np
+
+        out = np.zeros(free.shape, dtype=int)
+        for r in range(free.shape[0]):
+            row, c = free[r], 0
+            while c < len(row):
+                if not row[c]:
+                    c += 1
+                    continue
+                e = c
+                while e < len(row) and row[e]:
+                    e += 1
+                out[r, c:e] = e - c
+                c = e
+        return out
+
+    def where(self, pos, target) -> str:
+        import numpy as np
+
+        if target is not None and math.dist(pos, target) < 4.0:
+            return "own target<4m"
+        if len(self.stations) and float(np.min(np.hypot(*(self.stations - pos).T))) < 1.5:
+            return "other station<1.5m"
+        c, r = self.grid.cell_of(float(pos[0]), float(pos[1]))
+        w = float(self.width[r, c])
+        long_x, long_y = self.run_x[r, c] * self.res > 4.0, self.run_y[r, c] * self.res > 4.0
+        if long_x and long_y:
+            return "junction"
+        return "aisle<2m (one robot)" if w < 2.0 else "aisle>=2m"
+
+    def observe(self, run, dt: float) -> None:
+        import numpy as np
+
+        pos = run.pos
+        step = np.hypot(*(pos - self.prev).T)
+        self.prev = pos.copy()
+        fleet = run.fleet
+        for r in run.robots:
+            c = fleet.controller(r.id)
+            if r.phase != "drive":
+                leg = self.leg_plan.pop(r.id, None)
+                if leg is not None:   # a leg ended: (first path, driven, re-planned/escaped in it)
+                    plan, driven, n0 = leg
+                    self.legs.append((plan, driven, c.replans + c.escapes + c.yields - n0))
+                continue
+            if r.id not in self.leg_plan:            # a new leg: its first path (without the step just driven)
+                self.leg_plan[r.id] = [c.remaining() + float(step[r.idx]), 0.0, c.replans + c.escapes + c.yields]
+                self.planned += self.leg_plan[r.id][0]
+            self.leg_plan[r.id][1] += float(step[r.idx])
+            self.driven_on_legs += float(step[r.idx])
+            moving = step[r.idx] > 0.2 * run.problem.max_speed * dt
+            b = c.behavior.value
+            self.time[(b, moving)] += dt
+            self.dist[b + ("(escape)" if c.escape_to is not None else "")] += float(step[r.idx])
+            if not moving:
+                self.place[(self.where(pos[r.idx], r.target), b)] += dt
+
+    def print(self) -> None:
+        total = sum(self.time.values())
+        print(f"budget: {total:.0f} robot-s driving legs; driven {self.driven_on_legs:.0f} m on legs whose "
+              f"first paths were {self.planned:.0f} m (x{self.driven_on_legs / max(self.planned, 1e-9):.2f})")
+        moving = sum(v for (_, m), v in self.time.items() if m)
+        print(f"  moving {moving / total:.1%}, standing {1 - moving / total:.1%}")
+        for (b, m), v in sorted(self.time.items(), key=lambda kv: -kv[1]):
+            print(f"  {b:<18} {'moving' if m else 'standing':<9} {v:9.0f} robot-s {v / total:6.1%}")
+        plain = [(p, d) for p, d, k in self.legs if k == 0]
+        turned = [(p, d) for p, d, k in self.legs if k > 0]
+        for name, legs in (("legs without re-plan/escape/yield", plain), ("legs with one or more", turned)):
+            if legs:
+                p_sum, d_sum = sum(p for p, _ in legs), sum(d for _, d in legs)
+                print(f"  {name}: {len(legs)}, first paths {p_sum:.0f} m, driven {d_sum:.0f} m "
+                      f"(x{d_sum / max(p_sum, 1e-9):.2f})")
+        print("  metres driven by behaviour:", {k: round(v) for k, v in self.dist.most_common()})
+        stand = sum(self.place.values())
+        by_place: collections.Counter = collections.Counter()
+        for (pl, _), v in self.place.items():
+            by_place[pl] += v
+        print("  standing by place:", {k: f"{v / stand:.1%}" for k, v in by_place.most_common()})
+        for (pl, b), v in self.place.most_common(10):
+            print(f"    {pl:<20} {b:<18} {v / stand:6.1%}")
+
+
 def main() -> None:
     import time
 
@@ -112,8 +228,9 @@ def main() -> None:
     p.add_argument("--cap", type=float, default=4 * 3600.0)
     p.add_argument("--wall-cap", type=float, default=300.0)
     p.add_argument("--near", action="store_true", help="also the robots near each stuck one")
-    p.add_argument("--lanes", choices=("none", "armo"), default="none",
-                   help="armo: the robots plan along ARMO's road map (the 'armo' method)")
+    p.add_argument("--lanes", default="none",
+                   help="armo: the robots plan along ARMO's road map (the 'armo' method); or a lanes file "
+                        "(config/lanes_*.yaml): along its road map")
     p.add_argument("--steps", type=int, default=None, help="stop after this many fleet steps (e.g. to profile)")
     p.add_argument("--profile", type=Path, default=None, help="cProfile the steps into this file (pstats)")
     p.add_argument("--report-every", type=float, default=0.0,
@@ -122,6 +239,8 @@ def main() -> None:
                    help="every this many simulated seconds, pickle the run to --snapshot (to study a jam)")
     p.add_argument("--snapshot", type=Path, default=Path("out/diag_behavior.pkl"))
     p.add_argument("--resume", type=Path, default=None, help="go on from a snapshot (the map options are ignored)")
+    p.add_argument("--budget", action="store_true",
+                   help="where the driving robots' time goes (behaviour, moving/standing, place) and detours")
     a = p.parse_args()
     if a.resume is not None:
         run = load(a.resume)
@@ -134,6 +253,11 @@ def main() -> None:
 
             problem, info = armo_problem(problem)
             print("ARMO:", info)
+        elif a.lanes != "none":
+            from fleet_planner.delivery import lanes_problem
+            from fleet_planner.roadmap import load_lanes
+
+            problem = lanes_problem(problem, load_lanes(a.lanes, problem.grid, problem.radius))
         limits = RunLimits(cap_s=a.cap, stall_s=a.stall, no_progress_s=120.0, retry_s=2.0, wall_cap_s=a.wall_cap)
         run = _BehaviorRun(problem, 0.1, limits, False, None)
         for r in run.robots:
@@ -142,6 +266,7 @@ def main() -> None:
     from tqdm import tqdm
 
     cpu0, wall0, steps0 = time.process_time(), time.time(), run.steps
+    budget = Budget(run) if a.budget else None
     next_report = run.fleet.time + a.report_every
     next_snap = run.fleet.time + a.snapshot_every
     profiler = None
@@ -166,6 +291,8 @@ def main() -> None:
                 stop = why
                 break
             run._step()
+            if budget is not None:
+                budget.observe(run, run.dt)
             t = run.fleet.time
             if a.report_every > 0 and t >= next_report:
                 next_report += a.report_every
@@ -186,6 +313,8 @@ def main() -> None:
           f"t={res.ctime:.0f} coll={res.collisions} dead={res.deadlocks}")
     print(f"  {steps} steps in {cpu:.1f} s CPU ({steps / max(cpu, 1e-9):.1f} steps/s), {wall:.1f} s wall")
     print("  counters:", {k: v for k, v in res.extra.items() if k not in ("mean_phase_s", "stalled")})
+    if budget is not None:
+        budget.print()
     kinds = report(run, a.near)
     print("summary (own behaviour, chain kind):")
     for k, v in kinds.most_common():

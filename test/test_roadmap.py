@@ -167,3 +167,19 @@ def test_the_shipped_lanes_file_of_the_default_warehouse_loads_and_connects_its_
     cells = [wh.grid.cell_of(s.x, s.y) for s in wh.stations.values() if s.type != "charger"]
     cells = [c for c in cells if free[c[1], c[0]]]
     assert len(cells) >= 20 and lanes.unreachable_pairs(free, cells) == []
+
+
+def test_the_one_way_rack_aisles_of_large_load_and_connect_its_stations():
+    # config/lanes_large.yaml (issue 13): bench_delivery's `large`, every rack aisle one-way, the
+    # aisles alternating east / west; main, side and cross aisles two-way
+    from fleet_planner.warehouse import config_path, generate_warehouse
+
+    wh = generate_warehouse(5, 10, 24, 2, 3, 0.5, "large")
+    lanes = load_lanes(config_path("lanes_large.yaml"), wh.grid)
+    free = free_cells(wh.grid, lanes.radius)
+    assert lanes.allows(10, 11, 1, 0) and not lanes.allows(10, 11, -1, 0)     # top rack aisle: east
+    assert lanes.allows(10, 16, -1, 0) and not lanes.allows(10, 16, 1, 0)     # the next one: west
+    assert lanes.allows(30, 11, -1, 0) and lanes.allows(30, 11, 1, 0)         # a cross aisle: both ways
+    cells = [wh.grid.cell_of(s.x, s.y) for s in wh.stations.values() if s.type != "charger"]
+    cells = [c for c in cells if free[c[1], c[0]]]
+    assert len(cells) >= 50 and lanes.unreachable_pairs(free, cells) == []
