@@ -60,6 +60,7 @@ class DispatchPolicy:
     batch: bool = True
     staging: bool = False
     queue: bool = False
+    sites: bool = True
     charge_below: float = 1.0
     leave_charger_at: float = 1.0
 
@@ -73,7 +74,7 @@ class DispatchPolicy:
 #: idle robots wait by the chutes, the next job of a taken chute waits on its spot (not the default: see above)
 STAGED = DispatchPolicy(staging=True, queue=True, charge_below=0.6, leave_charger_at=0.95)
 #: the old rules: the nearest robot for each job in turn, idle robots charge
-LEGACY = DispatchPolicy(batch=False, staging=False, queue=False, charge_below=1.0, leave_charger_at=1.0)
+LEGACY = DispatchPolicy(batch=False, staging=False, queue=False, sites=False, charge_below=1.0, leave_charger_at=1.0)
 
 
 class TravelTimes:
@@ -154,18 +155,24 @@ class Candidate:
 
 def assign(robots: Sequence[Candidate], jobs: Sequence[tuple[str, str]], able: Callable[[str, str], bool],
            lengths: Callable[[str, np.ndarray], np.ndarray], busy: Callable[[str], bool] = lambda c: False,
-           ) -> list[tuple[str, str, float]]:
+           site_taken: Callable[[str], bool] = lambda j: False) -> list[tuple[str, str, float]]:
     """Pair free ``robots`` with queued ``jobs`` ((job id, chute), in the queue's order):
-    per chute not ``busy``, the first job some robot is ``able(robot id, job id)`` to do; then the
-    pairing with the smallest sum of estimated arrival times (way length from ``lengths(chute,
-    points)`` over the robot's speed; ties to the fuller battery). Returns (robot id, job id,
-    estimated s) in order of arrival."""
+    per chute not ``busy``, the first job some robot is ``able(robot id, job id)`` to do whose
+    storing site is not ``site_taken(job id)`` (another robot's job goes there); then the pairing
+    with the smallest sum of estimated arrival times (way length from ``lengths(chute, points)``
+    over the robot's speed; ties to the fuller battery). Returns (robot id, job id, estimated s) in
+    order of arrival.
+
+    A job whose site is taken waits for it (it stays first in its chute's line once the site is
+    free): its robot would otherwise pick and then stand on the chute until the other robot has
+    placed and left, and the chute's next job with it (measured at 30 robots: the largest loss of
+    chute time, ``bench/bench_dispatch.py --time-use``)."""
     if not robots or not jobs:
         return []
     chosen: list[tuple[str, str]] = []
     seen: set[str] = set()
     for job, chute in jobs:
-        if chute in seen or busy(chute):
+        if chute in seen or busy(chute) or site_taken(job):
             continue
         if any(able(r.id, job) for r in robots):
             chosen.append((job, chute))

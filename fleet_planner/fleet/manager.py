@@ -615,8 +615,10 @@ class FleetManager:
             return [Candidate(r.id, r.pos, r.kind.max_speed * self.params.speed_factor, r.status.battery)
                     for r in free.values()]
 
+        sites = {j.place.name for j in self.jobs.values() if j.state == "active"}
         pairs = assign(cands(), jobs, able, self.travel.length,
-                       busy=lambda chute: chute in waiting or self._reserved(self.work_stops[chute]))
+                       busy=lambda chute: chute in waiting or self._reserved(self.work_stops[chute]),
+                       site_taken=lambda jid: self.policy.sites and self.jobs[jid].place.name in sites)
         for rid, jid, _ in pairs:
             if self._out_of_time():
                 return
