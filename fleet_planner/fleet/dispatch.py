@@ -21,7 +21,7 @@ manager (:mod:`.manager`), as pure algorithms over positions, speeds and the war
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -155,10 +155,12 @@ class Candidate:
 
 def assign(robots: Sequence[Candidate], jobs: Sequence[tuple[str, str]], able: Callable[[str, str], bool],
            lengths: Callable[[str, np.ndarray], np.ndarray], busy: Callable[[str], bool] = lambda c: False,
-           site_taken: Callable[[str], bool] = lambda j: False) -> list[tuple[str, str, float]]:
+           site_of: Callable[[str], str] | None = None, taken_sites: Collection[str] = (),
+           ) -> list[tuple[str, str, float]]:
     """Pair free ``robots`` with queued ``jobs`` ((job id, chute), in the queue's order):
     per chute not ``busy``, the first job some robot is ``able(robot id, job id)`` to do whose
-    storing site is not ``site_taken(job id)`` (another robot's job goes there); then the pairing
+    storing site (``site_of(job id)``, if given) is neither in ``taken_sites`` (another robot's job
+    goes there) nor that of a job chosen before it; then the pairing
     with the smallest sum of estimated arrival times (way length from ``lengths(chute, points)``
     over the robot's speed; ties to the fuller battery). Returns (robot id, job id, estimated s) in
     order of arrival.
@@ -171,12 +173,16 @@ def assign(robots: Sequence[Candidate], jobs: Sequence[tuple[str, str]], able: C
         return []
     chosen: list[tuple[str, str]] = []
     seen: set[str] = set()
+    sites = set(taken_sites)
     for job, chute in jobs:
-        if chute in seen or busy(chute) or site_taken(job):
+        site = site_of(job) if site_of is not None else None
+        if chute in seen or busy(chute) or site in sites:
             continue
         if any(able(r.id, job) for r in robots):
             chosen.append((job, chute))
             seen.add(chute)
+            if site is not None:
+                sites.add(site)
     if not chosen:
         return []
     pts = np.array([r.pos for r in robots], dtype=float)
