@@ -136,8 +136,8 @@ def main() -> None:
             r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit, progress=opts.progress,
                     seed=opts.seed)
             span = f"{r['span']:.0f}" if r["span"] else "-"
-            print(f"{r['n']:>4} {name:>12} {r['done']:>4}/{r['jobs']:<4} {span:>7} {r['per_h']:>7.0f} {r['gap']:>+8.3f} "
-                  f"{r['cpu']:>6.0f}", flush=True)
+            print(f"{r['n']:>4} {name:>12} {r['done']:>4}/{r['jobs']:<4} {span:>7} {r['per_h']:>7.0f} "
+                  f"{r['gap']:>+8.3f} {r['cpu']:>6.0f}", flush=True)
             if opts.time_use and "use" in r:
                 print("     " + "\n     ".join(r["use"].lines()), flush=True)
 

@@ -50,17 +50,17 @@ class DispatchPolicy:
     a chute is taken, the next job there goes to a robot that waits on the chute's staging spot and
     drives the last metres the moment the chute is free (one robot waiting per chute);
     ``sites``: a chute's next job is the first whose storing site no active job (nor one chosen
-    before it in the round) goes to; ``charge_below``: an idle robot goes to a charger rather than a staging spot only below this
-    battery (1.0: always, the old rule); ``leave_charger_at``: an idle robot at a charger leaves for
-    a staging spot once charged this far.
+    before it in the round) goes to; ``charge_below``: an idle robot goes to a charger rather than
+    a staging spot only below this battery (1.0: always, the old rule); ``leave_charger_at``: an
+    idle robot at a charger leaves for a staging spot once charged this far.
 
     Default: batch assignment and one job per site (measured, ``bench/bench_dispatch.py --robots 30
     --jobs 100``: batch alone 224 / 273 jobs per simulated hour with job seeds 1 / 3, with sites 279 /
     304; before that the nearest robot per job 231). Staging without the queue (``staged-no-queue``
-    in the bench) measured 282 / 284, and 97 of 100 with seed 2. :data:`STAGED` (staging, queue, charging below 0.6) is not the
-    default: with 17 staging spots the north aisle jammed (ROS run), and with one per chute and the
-    queue the in-process run stopped at 93 of 100 jobs (a robot waiting by a chute never released;
-    not yet found)."""
+    in the bench) measured 282 / 284, and 97 of 100 with seed 2; :data:`STAGED` (staging, queue,
+    charging below 0.6) 277 with seed 1 (before the site rule: 264). Neither is the default: with 17
+    staging spots the north aisle jammed (ROS run), and one per chute with the queue once stopped at
+    93 of 100 jobs (a robot waiting by a chute never released; not found)."""
 
     batch: bool = True
     staging: bool = False
