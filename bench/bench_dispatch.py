@@ -23,29 +23,38 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from fleet_planner.fleet import DispatchParams, FleetManager  # noqa: E402
+import yaml  # noqa: E402
+
+from fleet_planner.fleet import DispatchParams, FleetManager, load_fleet  # noqa: E402
 from fleet_planner.fleet.dispatch import LEGACY, STAGED, DispatchPolicy  # noqa: E402
 from fleet_planner.fleet.placement import parking_spots, place_robots  # noqa: E402
 from fleet_planner.fleet.sim import SimFleet  # noqa: E402
 from fleet_planner.robots import load_kinds  # noqa: E402
 from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
 from fleet_planner.ros.demo.timeuse import time_use  # noqa: E402
-from fleet_planner.warehouse import load_warehouse  # noqa: E402
+from fleet_planner.warehouse import config_path, load_warehouse  # noqa: E402
 
-POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "staged": STAGED,
+POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "batch": DispatchPolicy(sites=False), "staged": STAGED,
             "staged-no-queue": DispatchPolicy(staging=True, charge_below=0.6, leave_charger_at=0.95)}
 
 
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
-        period: float = 0.5, progress: bool = False) -> dict:
+        period: float = 0.5, progress: bool = False, seed: int = 1) -> dict:
     kinds = load_kinds()
     wh = load_warehouse()
-    members = place_robots(wh, kinds, n)
-    fm = FleetManager(wh, kinds, DispatchParams(), parking_spots(wh, members))
+    if n == 0:   # the demo's default fleet (config/fleet.yaml) and parking spots (config/planner_params.yaml)
+        members = load_fleet(None, kinds, wh)
+        flat = yaml.safe_load(config_path("planner_params.yaml").read_text())["/**"]["ros__parameters"]["parking"]
+        parking = list(zip(flat[0::2], flat[1::2]))
+        n = len(members)
+    else:
+        members = place_robots(wh, kinds, n)
+        parking = parking_spots(wh, members)
+    fm = FleetManager(wh, kinds, DispatchParams(), parking)
     fm.policy = policy
     fm.step_budget_s = 1e9   # no wall-clock budget: the planner keeps up whatever the load
     sim = SimFleet(members, kinds, wh, gated=True)
-    jobs = random_jobs(wh, kinds, members, jobs_n if jobs_n is not None else max(1, round(20 / 9 * n)), seed=1)
+    jobs = random_jobs(wh, kinds, members, jobs_n if jobs_n is not None else max(1, round(20 / 9 * n)), seed=seed)
     interval = interval if interval is not None else 36.0 / n
     radius = {m.id: kinds[m.kind].radius for m in members}
     ids = list(radius)
@@ -111,21 +120,24 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
 
 def main() -> None:
     p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    p.add_argument("--robots", type=int, nargs="+", default=[9, 30])
+    p.add_argument("--robots", type=int, nargs="+", default=[9, 30],
+                   help="fleet sizes (robots placed as fleet-demo --robots N places them; 0: the demo's default fleet)")
     p.add_argument("--policies", nargs="+", default=["legacy", "new"], choices=sorted(POLICIES))
     p.add_argument("--jobs", type=int, help="jobs (default: the demo's, 20/9 per robot)")
     p.add_argument("--interval", type=float, help="simulated s between jobs (default: the demo's, 36/N)")
     p.add_argument("--limit", type=float, default=4000.0, help="simulated s at most (default 4000)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the random jobs (default 1, as the demo)")
     p.add_argument("--time-use", action="store_true", help="print where the robots' time went")
     p.add_argument("--progress", action="store_true", help="jobs done every 100 simulated s (on stderr)")
     opts = p.parse_args()
     print(f"{'N':>4} {'policy':>12} {'done':>9} {'span s':>7} {'jobs/h':>7} {'closest':>8} {'CPU s':>6}")
     for n in opts.robots:
         for name in opts.policies:
-            r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit, progress=opts.progress)
+            r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit, progress=opts.progress,
+                    seed=opts.seed)
             span = f"{r['span']:.0f}" if r["span"] else "-"
-            print(f"{n:>4} {name:>12} {r['done']:>4}/{r['jobs']:<4} {span:>7} {r['per_h']:>7.0f} {r['gap']:>+8.3f} "
-                  f"{r['cpu']:>6.0f}", flush=True)
+            print(f"{r['n']:>4} {name:>12} {r['done']:>4}/{r['jobs']:<4} {span:>7} {r['per_h']:>7.0f} "
+                  f"{r['gap']:>+8.3f} {r['cpu']:>6.0f}", flush=True)
             if opts.time_use and "use" in r:
                 print("     " + "\n     ".join(r["use"].lines()), flush=True)
 

@@ -59,6 +59,37 @@ def test_one_job_per_chute_the_first_in_the_queue_busy_chutes_and_inability_resp
     assert assign([], jobs, lambda r, j: True, lengths_table(table)) == []
 
 
+def test_a_job_whose_storing_site_is_taken_waits_and_the_next_at_its_chute_goes_first():
+    robots = [Candidate(f"r{i}", (float(i), 0.0), 1.0, 1.0) for i in range(2)]
+    table = {c: {(float(i), 0.0): 1.0 + i for i in range(2)} for c in "XY"}
+    jobs = [("J1", "X"), ("J2", "X"), ("J3", "Y")]
+    site = {"J1": "S1", "J2": "S2", "J3": "S3"}.get
+    # J1's site is taken by another robot's job: J2 is the first at X; J3 (site free) at Y as before
+    pairs = assign(robots, jobs, lambda r, j: True, lengths_table(table), site_of=site, taken_sites={"S1"})
+    assert sorted(j for _, j, _ in pairs) == ["J2", "J3"]
+    # every job of a chute has its site taken: the chute waits (no robot picks there to stand on it)
+    pairs = assign(robots, jobs, lambda r, j: True, lengths_table(table), site_of=site, taken_sites={"S1", "S2"})
+    assert [j for _, j, _ in pairs] == ["J3"]
+    # two chutes' first jobs for one site: only the first in the queue goes
+    same = {"J1": "S1", "J2": "S2", "J3": "S1"}.get
+    pairs = assign(robots, jobs, lambda r, j: True, lengths_table(table), site_of=same)
+    assert [j for _, j, _ in pairs] == ["J1"]
+
+
+def test_the_manager_holds_back_a_job_for_a_site_another_job_goes_to():
+    fm = FleetManager(WH, KINDS, DispatchParams(idle_s=5.0))
+    fm.step_budget_s = 60.0
+    assert fm.policy.sites
+    fm.on_status(status("r1", "cargo", 6.25, 3.75), 0.0)
+    fm.on_status(status("r2", "cargo", 12.75, 11.75), 0.0)
+    fm.submit(Task(id="J1", pick="chute_1", place="B01-01"), 0.0)
+    fm.submit(Task(id="J2", pick="chute_2", place="B01-02"), 0.0)   # the same storing site
+    d = fm.step(0.5)
+    assert [e.task_id for e in d.events if e.event == "assigned"] == ["J1"]
+    fm.policy = DispatchPolicy(sites=False)   # without the rule both go at once
+    assert [e.task_id for e in fm.step(1.0).events if e.event == "assigned"] == ["J2"]
+
+
 def test_way_lengths_go_round_the_racks():
     wh = load_warehouse()
     tt = TravelTimes(wh)

@@ -143,9 +143,9 @@ def test_a_step_plans_legs_only_within_its_budget():
     for m in members:
         fleet.on_status(status(m.id, m.x, m.y, m.kind), 0.0)
     chutes = [s for s in wh.stations.values() if s.type == "chute"]
-    store = next(s for s in wh.stations.values() if s.type == "storage")
+    stores = [s for s in wh.stations.values() if s.type == "storage"]   # (one site each: one job per site at a time)
     for k, c in enumerate(chutes):
-        assert fleet.submit(Task(id=f"j{k}", pick=c.name, place=store.tags[0]), 0.0)[0].event == "accepted"
+        assert fleet.submit(Task(id=f"j{k}", pick=c.name, place=stores[k].tags[0]), 0.0)[0].event == "accepted"
     fleet.step_budget_s = 0.0   # spent at once: no leg this step
     fleet.step(0.5)
     assert planner.calls == 0

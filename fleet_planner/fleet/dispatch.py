@@ -11,7 +11,9 @@ manager (:mod:`.manager`), as pure algorithms over positions, speeds and the war
   (``scipy.optimize.linear_sum_assignment``), instead of handing each job in turn to the robot
   nearest to it (which sends a far robot to one chute while the one next to it goes elsewhere).
   One job per chute at a time: a second robot bound for an occupied chute would only queue in the
-  aisle in front of it.
+  aisle in front of it. One job per storing site at a time too (policy ``sites``): a robot that has
+  picked for a site another robot is bound for or placing at cannot plan its way there (the other
+  "parks on its goal in the way") and stands on the chute meanwhile, and the chute's next job with it.
 * :func:`staging_spots` - where idle robots wait: spots along the chutes' wall, between it and the
   chutes' line (the recesses a chute wall leaves between its chutes), clear of every station, so
   that the next job starts a few metres from its chute rather than from a parking spot across the
@@ -21,7 +23,7 @@ manager (:mod:`.manager`), as pure algorithms over positions, speeds and the war
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,19 +49,23 @@ class DispatchPolicy:
     spots near the chutes rather than at chargers; ``queue`` (with ``batch`` and ``staging``): while
     a chute is taken, the next job there goes to a robot that waits on the chute's staging spot and
     drives the last metres the moment the chute is free (one robot waiting per chute);
-    ``charge_below``: an idle robot goes to a charger rather than a staging spot only below this
-    battery (1.0: always, the old rule); ``leave_charger_at``: an idle robot at a charger leaves for
-    a staging spot once charged this far.
+    ``sites``: a chute's next job is the first whose storing site no active job (nor one chosen
+    before it in the round) goes to; ``charge_below``: an idle robot goes to a charger rather than
+    a staging spot only below this battery (1.0: always, the old rule); ``leave_charger_at``: an
+    idle robot at a charger leaves for a staging spot once charged this far.
 
-    Default: batch assignment only (measured: 231 -> 255 jobs per simulated hour at 30 robots,
-    ``bench/bench_dispatch.py``). :data:`STAGED` (staging, queue, charging below 0.6) is not the
-    default: with 17 staging spots the north aisle jammed (ROS run), and with one per chute and the
-    queue the in-process run stopped at 93 of 100 jobs (a robot waiting by a chute never released;
-    not yet found)."""
+    Default: batch assignment and one job per site (measured, ``bench/bench_dispatch.py --robots 30
+    --jobs 100``: batch alone 224 / 273 jobs per simulated hour with job seeds 1 / 3, with sites 279 /
+    304; before that the nearest robot per job 231). Staging without the queue (``staged-no-queue``
+    in the bench) measured 282 / 284, and 97 of 100 with seed 2; :data:`STAGED` (staging, queue,
+    charging below 0.6) 277 with seed 1 (before the site rule: 264). Neither is the default: with 17
+    staging spots the north aisle jammed (ROS run), and one per chute with the queue once stopped at
+    93 of 100 jobs (a robot waiting by a chute never released; not found)."""
 
     batch: bool = True
     staging: bool = False
     queue: bool = False
+    sites: bool = True
     charge_below: float = 1.0
     leave_charger_at: float = 1.0
 
@@ -73,7 +79,7 @@ class DispatchPolicy:
 #: idle robots wait by the chutes, the next job of a taken chute waits on its spot (not the default: see above)
 STAGED = DispatchPolicy(staging=True, queue=True, charge_below=0.6, leave_charger_at=0.95)
 #: the old rules: the nearest robot for each job in turn, idle robots charge
-LEGACY = DispatchPolicy(batch=False, staging=False, queue=False, charge_below=1.0, leave_charger_at=1.0)
+LEGACY = DispatchPolicy(batch=False, staging=False, queue=False, sites=False, charge_below=1.0, leave_charger_at=1.0)
 
 
 class TravelTimes:
@@ -154,22 +160,34 @@ class Candidate:
 
 def assign(robots: Sequence[Candidate], jobs: Sequence[tuple[str, str]], able: Callable[[str, str], bool],
            lengths: Callable[[str, np.ndarray], np.ndarray], busy: Callable[[str], bool] = lambda c: False,
+           site_of: Callable[[str], str] | None = None, taken_sites: Collection[str] = (),
            ) -> list[tuple[str, str, float]]:
     """Pair free ``robots`` with queued ``jobs`` ((job id, chute), in the queue's order):
-    per chute not ``busy``, the first job some robot is ``able(robot id, job id)`` to do; then the
-    pairing with the smallest sum of estimated arrival times (way length from ``lengths(chute,
-    points)`` over the robot's speed; ties to the fuller battery). Returns (robot id, job id,
-    estimated s) in order of arrival."""
+    per chute not ``busy``, the first job some robot is ``able(robot id, job id)`` to do whose
+    storing site (``site_of(job id)``, if given) is neither in ``taken_sites`` (another robot's job
+    goes there) nor that of a job chosen before it; then the pairing
+    with the smallest sum of estimated arrival times (way length from ``lengths(chute, points)``
+    over the robot's speed; ties to the fuller battery). Returns (robot id, job id, estimated s) in
+    order of arrival.
+
+    A job whose site is taken waits for it (it stays first in its chute's line once the site is
+    free): its robot would otherwise pick and then stand on the chute until the other robot has
+    placed and left, and the chute's next job with it (measured at 30 robots: the largest loss of
+    chute time, ``bench/bench_dispatch.py --time-use``)."""
     if not robots or not jobs:
         return []
     chosen: list[tuple[str, str]] = []
     seen: set[str] = set()
+    sites = set(taken_sites)
     for job, chute in jobs:
-        if chute in seen or busy(chute):
+        site = site_of(job) if site_of is not None else None
+        if chute in seen or busy(chute) or site in sites:
             continue
         if any(able(r.id, job) for r in robots):
             chosen.append((job, chute))
             seen.add(chute)
+            if site is not None:
+                sites.add(site)
     if not chosen:
         return []
     pts = np.array([r.pos for r in robots], dtype=float)

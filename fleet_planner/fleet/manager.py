@@ -736,8 +736,11 @@ class FleetManager:
             return [Candidate(r.id, r.pos, r.kind.max_speed * self.params.speed_factor, r.status.battery)
                     for r in free.values()]
 
+        sites = self.policy.sites
         pairs = assign(cands(), jobs, able, self.travel.length,
-                       busy=lambda chute: chute in waiting or self._reserved(self.work_stops[chute]))
+                       busy=lambda chute: chute in waiting or self._reserved(self.work_stops[chute]),
+                       site_of=(lambda jid: self.jobs[jid].place.name) if sites else None,
+                       taken_sites={j.place.name for j in self.jobs.values() if j.state == "active"} if sites else ())
         for rid, jid, _ in pairs:
             if self._out_of_time():
                 return
