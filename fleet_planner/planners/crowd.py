@@ -151,7 +151,13 @@ class CrowdPlanner(Planner):
         if refine_s > 0 and len(robots) > 1 and configs.shape[0] + 64 < MAX_HORIZON:
             if progress:
                 progress(1, 3, "refinement (LNS)")
-            refiner = Refiner(graph, search.fields, search.grow, search.goals, configs, durations, self.seed)
+            # plain A* re-plans after the prioritized first plan from 200 robots (measured, 5 speed seeds at 400:
+            # SoC/free 1.250 -> 1.243; 2000 on warehouse-20-40-10-2-2: 1.265 -> 1.245; at 100 no gain: 1.0624 ->
+            # 1.0628), weight 1.5 otherwise and after LaCAM's long first plan (plain A* hits its expansion limit
+            # there: 1000 robots 3.43 -> 3.77)
+            plain = first == "prioritized" and len(robots) >= 200
+            refiner = Refiner(graph, search.fields, search.grow, search.goals, configs, durations, self.seed,
+                              weight10=10 if plain else 15)
             refiner.run(deadline, cpu_s=refine_s)
             configs = refiner.configs()
             info.update(lns_iterations=refiner.iterations, lns_accepted=refiner.accepted)

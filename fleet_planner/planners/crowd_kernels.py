@@ -154,13 +154,25 @@ def _swap_partner(i, best, q_from, q_to, dist, grow, occ_now, goals, nb, deg):
 
 
 @_jit
-def _after(u, v, d, occ_now, tie):
-    """Does candidate u sort after v: (distance to goal, occupied now, random tie)?"""
+def _blocking(u, occ_now, goals, q_to):
+    """0: cell u is free now, 1: its robot leaves it this step, 2: a robot on its way is on it, 3: a
+    robot parked on its goal is."""
+    j = occ_now[u]
+    if j == NIL:
+        return 0
+    if q_to[j] != NIL and q_to[j] != u:
+        return 1
+    return 3 if goals[j] == u else 2
+
+
+@_jit
+def _after(u, v, d, occ_now, goals, q_to, tie):
+    """Does candidate u sort after v: (distance to goal, how it is held now (:func:`_blocking`), random tie)?"""
     if d[u] != d[v]:
         return d[u] > d[v]
-    ou, ov = occ_now[u] != NIL, occ_now[v] != NIL
+    ou, ov = _blocking(u, occ_now, goals, q_to), _blocking(v, occ_now, goals, q_to)
     if ou != ov:
-        return ou
+        return ou > ov
     return tie[u] > tie[v]
 
 
@@ -184,7 +196,7 @@ def _open_frame(i, sp, q_from, occ_now, occ_next, q_to, dist, grow, goals, nb, d
     for a in range(1, nc):   # insertion sort by (distance to goal, occupied now, random tie)
         v = cands[a]
         b = a - 1
-        while b >= 0 and _after(cands[b], v, d, occ_now, tie):
+        while b >= 0 and _after(cands[b], v, d, occ_now, goals, q_to, tie):
             cands[b + 1] = cands[b]
             b -= 1
         cands[b + 1] = v

@@ -50,7 +50,7 @@ class Refiner(LNSStats):
     (:func:`.crowd_st.lns_iterations`); :meth:`run` calls them in small batches until its deadline."""
 
     def __init__(self, graph, fields: np.ndarray, grow: np.ndarray, goals: np.ndarray, configs: np.ndarray,
-                 weights: np.ndarray, seed: int = 0, size: int = 4):
+                 weights: np.ndarray, seed: int = 0, size: int = 4, weight10: int = 15):
         self.graph = graph
         self.fields, self.grow = fields, grow
         self.goals = np.asarray(goals, dtype=np.int32)
@@ -74,7 +74,7 @@ class Refiner(LNSStats):
         self.stats = np.zeros(2, dtype=np.int64)      # iterations, accepted
         self.strategy = np.ones(2)
         self.expansion_limit = 4 * graph.n
-        self.weight10 = 15        # the space-time search's heuristic weight x 10 (bounded suboptimal)
+        self.weight10 = int(weight10)
         st.seed_rng(int(seed))
 
     def weighted_cost(self) -> float:
