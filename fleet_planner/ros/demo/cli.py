@@ -13,8 +13,10 @@ the same fleet with the robots avoiding each other by the BBMRCA behaviours inst
 
 At the end it prints a summary (jobs done, completion time, average speed, and the smallest
 distance ever seen between two robots against the sum of their radii, computed here from the
-robots' own status reports, not by the planner) and draws the robots' trajectories over the map
-to ``out/fleet_demo.png``.
+robots' own status reports, not by the planner, and the CPU and peak memory of each process) and
+draws the robots' trajectories over the map to ``out/fleet_demo.png``. Ctrl-C or SIGTERM ends the run
+early the same way, with the summary of what was done so far (exit status 130); every process it
+started is stopped (and ends by itself should the demo be killed outright).
 """
 from __future__ import annotations
 
