@@ -30,53 +30,10 @@ from collections import defaultdict
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
 
-
-def _stat(pid: int) -> tuple[int, float, str] | None:
-    """(parent pid, CPU seconds, command name) of a process, None if it is gone."""
-    try:
-        text = Path(f"/proc/{pid}/stat").read_text()
-        cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return None
-    fields = text.rsplit(")", 1)[1].split()
-    return int(fields[1]), (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"), cmd
-
-
-def _rss_mb(pid: int) -> float:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return 0.0
-
-
-def _role(cmd: str) -> str:
-    if "fleet_planner.ros.demo" in cmd or "fleet-demo" in cmd:
-        return "demo"
-    for key, role in (("sim_clock", "clock"), ("fleet_sim", "fleet-sim"), ("fleet-sim", "fleet-sim"),
-                      ("robot_agent", "agent"), ("agent_node", "agent"), ("__node:=agent", "agent"),
-                      ("planner", "planner")):
-        if key in cmd:
-            return role
-    return "other"
-
-
-def descendants(root: int) -> list[int]:
-    parents: dict[int, list[int]] = defaultdict(list)
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            st = _stat(int(entry.name))
-            if st is not None:
-                parents[st[0]].append(int(entry.name))
-    out, todo = [], [root]
-    while todo:
-        pid = todo.pop()
-        out.append(pid)
-        todo.extend(parents.get(pid, []))
-    return out
+from fleet_planner.ros.demo.procstat import descendants, memory_mb, stat  # noqa: E402
+from fleet_planner.ros.demo.procstat import role as process_role  # noqa: E402
 
 
 def run(n: int, large: bool, opts: argparse.Namespace) -> dict:
@@ -101,10 +58,10 @@ def run(n: int, large: bool, opts: argparse.Namespace) -> dict:
     peak: dict[int, float] = {}
     while demo.poll() is None:
         for pid in descendants(demo.pid):
-            st = _stat(pid)
+            st = stat(pid)
             if st is not None:
-                cpu[pid] = (_role(st[2]), st[1])
-                peak[pid] = max(peak.get(pid, 0.0), _rss_mb(pid))
+                cpu[pid] = (process_role(st[2]), st[1])
+                peak[pid] = max(peak.get(pid, 0.0), memory_mb(pid))
         time.sleep(1.0)
     wall = time.monotonic() - t0
     text = demo.stdout.read() if demo.stdout else ""

@@ -13,25 +13,29 @@ the same fleet with the robots avoiding each other by the BBMRCA behaviours inst
 
 At the end it prints a summary (jobs done, completion time, average speed, and the smallest
 distance ever seen between two robots against the sum of their radii, computed here from the
-robots' own status reports, not by the planner) and draws the robots' trajectories over the map
-to ``out/fleet_demo.png``. Each run's planner keeps its jobs in ``out/jobs.sqlite``, emptied when
-the run starts (the job ids repeat from run to run; a store left from the last run is not reloaded).
+robots' own status reports, not by the planner, and the CPU and peak memory of each process) and
+draws the robots' trajectories over the map to ``out/fleet_demo.png``. Ctrl-C or SIGTERM ends the run
+early the same way, with the summary of what was done so far (exit status 130); every process it
+started is stopped (and ends by itself should the demo be killed outright). Each run's planner keeps
+its jobs in ``out/jobs.sqlite``, emptied when the run starts (the job ids repeat from run to run; a
+store left from the last run is not reloaded).
 """
 from __future__ import annotations
 
 import argparse
 import os
 import random
+import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import rclpy
 import yaml
 from rclpy.context import Context
-from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -51,6 +55,7 @@ from fleet_planner.ros.demo.bringup import (
 )
 from fleet_planner.ros.demo.jobs import TERMINAL, random_jobs
 from fleet_planner.ros.demo.monitor import FleetMonitor, spin_until
+from fleet_planner.ros.demo.procstat import Usage, usage, usage_lines
 from fleet_planner.ros.demo.summary import Summary, plot_run, summarise
 from fleet_planner.ros.entry import ros_session
 from fleet_planner.warehouse import Warehouse, config_path, load_warehouse, save_warehouse
@@ -143,14 +148,29 @@ def main(args: list[str] | None = None) -> None:
     jobs = random_jobs(warehouse, kinds, members, opts.jobs, opts.seed)
     store = emptied(opts.out / DEMO_STORE)   # each run starts with no jobs (its job ids repeat)
 
+    signal.signal(signal.SIGTERM, _interrupt)   # SIGTERM ends the demo as Ctrl-C does
     context = Context()
     procs: list[subprocess.Popen] = []
+    used: list[Usage] = []
+    spans: list[float] = []   # when the cost was read: wall s since the fleet came up, simulated s
+    wall0 = time.monotonic()
+
     fleet: Fleet | None = None
     monitor: FleetMonitor | None = None
     console = None
     extras: list[Node] = []
+
+    def stop_fleet() -> None:
+        """The cost of every process of the run so far, then its processes stopped (not with a console
+        lingering: it shows the fleet after the last job)."""
+        if not used:
+            used.extend(usage([os.getpid()] + [p.pid for p in procs]))
+            spans[:] = [time.monotonic() - wall0, monitor.latest_stamp() if monitor is not None else 0.0]
+        if console is None:
+            _shielded(stop_processes, procs)
+
     # a failure while the fleet comes up shows its traceback, as it always did (errors=())
-    with ros_session(argv, prog="fleet-demo", context=context, errors=()):
+    with ros_session(argv, prog="fleet-demo", context=context, errors=(), interrupted=INTERRUPTED):
         try:
             executor: Executor
             if opts.mode == "inproc":
@@ -177,16 +197,18 @@ def main(args: list[str] | None = None) -> None:
             for node in extras:
                 executor.add_node(node)
             summary = run_jobs(executor, monitor, [m.id for m in members], jobs, interval=opts.interval,
-                               timeout=opts.timeout, progress=not opts.no_progress)
-            if console is not None:
+                               timeout=opts.timeout, progress=not opts.no_progress, on_end=stop_fleet)
+            if console is not None and not summary.interrupted:
                 spin_until(executor, lambda: False, max(0.0, opts.linger))
             title = (f"fleet-demo ({opts.coordination}): {summary.done}/{summary.jobs} jobs, {len(members)} robots, "
                      f"closest approach {summary.min_gap:+.2f} m beyond the sum of radii")
             png = opts.out / "fleet_demo.png"
-            for _ in range(20):   # what is still on its way to the recorder
+            for _ in range(20 if context.ok() else 0):   # what is still on its way to the recorder
                 executor.spin_once(timeout_sec=0.02)
             plot_run(warehouse, monitor.trajectories(), png, title, parking, monitor.obstacle_trajectories())
             lines = summary.lines(monitor.radius, opts.rate)
+            if spans:
+                lines += usage_lines(used, *spans)
             if opts.time_use and summary.completion_s:
                 from fleet_planner.ros.demo.timeuse import time_use
                 chutes = {s.name: s.pose for s in warehouse.stations_of("chute")}
@@ -204,7 +226,9 @@ def main(args: list[str] | None = None) -> None:
                 lines.append(f"recording: {opts.record} (fleet-replay {opts.record} --plot out.png draws it)")
             lines.append(f"robots: {len(members)} ({'fleet-sim' if use_sim else 'one agent each'}, {opts.mode}) on "
                          f"{warehouse.name} ({warehouse.grid.size_m[0]:g} m x {warehouse.grid.size_m[1]:g} m)")
-            print("\n".join(lines + [f"picture: {png}"]))
+            print("\n".join(lines + [f"picture: {png}"]), flush=True)
+            if summary.interrupted:
+                sys.exit(INTERRUPTED)
             if summary.done < summary.jobs:
                 sys.exit(1)
         finally:
@@ -214,7 +238,7 @@ def main(args: list[str] | None = None) -> None:
                 console[1].stop()
                 executor.remove_node(console[0])
                 console[0].destroy_node()
-            stop_processes(procs)
+            _shielded(stop_processes, procs)
             if fleet is not None:
                 fleet.destroy()
             elif monitor is not None:
@@ -250,9 +274,32 @@ def _with_parking(params_file: Path, spots: list[float], out: Path) -> Path:
 
 
 def run_jobs(executor: Executor, monitor: FleetMonitor, robot_ids: Sequence[str], jobs: Sequence[Task], *,
-             interval: float, timeout: float, progress: bool = True) -> Summary:
+             interval: float, timeout: float, progress: bool = True,
+             on_end: Callable[[], None] | None = None) -> Summary:
     """Wait for the fleet (the planner and every robot in ``robot_ids``), submit the jobs one by one
-    every ``interval`` simulated seconds, show progress, summarise; ``timeout`` wall seconds in all."""
+    every ``interval`` simulated seconds, show progress, summarise; ``timeout`` wall seconds in all.
+    Ctrl-C or SIGTERM (the ROS context shut down) ends it early: the summary of what was done so far,
+    marked ``interrupted``. ``on_end`` runs once the jobs are over, before the summary (the demo reads
+    the processes' cost and stops them there, so they do not compete with the summary for CPU)."""
+    # when the stream began: (simulated s of the first submission, wall s); none if interrupted before
+    began: list[float] = []
+    interrupted = False
+    try:
+        _stream(executor, monitor, robot_ids, jobs, interval, timeout, progress, began)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        interrupted = True
+    wall = time.monotonic() - began[1] if began else 0.0
+    if on_end is not None:
+        on_end()
+    summary = summarise(monitor, jobs, began[0] if began else monitor.latest_stamp(), wall)
+    summary.interrupted = interrupted
+    return summary
+
+
+def _stream(executor: Executor, monitor: FleetMonitor, robot_ids: Sequence[str], jobs: Sequence[Task],
+            interval: float, timeout: float, progress: bool, began: list[float]) -> None:
+    """run_jobs' wait for the fleet and its stream of jobs; ``began`` gets the simulated time of the
+    first submission and the wall time then."""
     wall0 = time.monotonic()
     deadline = wall0 + timeout
     ids = set(robot_ids)
@@ -267,7 +314,7 @@ def run_jobs(executor: Executor, monitor: FleetMonitor, robot_ids: Sequence[str]
         bar = tqdm(total=len(jobs), desc="jobs done", unit="job", file=sys.stderr, dynamic_ncols=True)
     first = monitor.now()
     submitted = 0
-    wall_start = time.monotonic()
+    began[:] = [first, time.monotonic()]
 
     def finished() -> int:
         return sum(j.id in monitor.last_event and monitor.last_event[j.id].event in TERMINAL for j in jobs)
@@ -287,4 +334,25 @@ def run_jobs(executor: Executor, monitor: FleetMonitor, robot_ids: Sequence[str]
     finally:
         if bar is not None:
             bar.close()
-    return summarise(monitor, jobs, first, time.monotonic() - wall_start)
+
+
+#: the demo's exit status when Ctrl-C or SIGTERM ended it (128 + SIGINT, as a shell reports it)
+INTERRUPTED = 130
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM handled as Ctrl-C: the run ends, its summary is printed, its processes are stopped."""
+    raise KeyboardInterrupt
+
+
+def _shielded(stop: Callable[[Sequence[subprocess.Popen]], None], procs: list[subprocess.Popen]) -> None:
+    """``stop(procs)`` with Ctrl-C and SIGTERM ignored until it is done (it is bounded: the processes
+    get SIGINT, and SIGKILL after a grace period), so a second Ctrl-C leaves no process behind;
+    ``procs`` is emptied."""
+    old = [signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)]
+    try:
+        stop(procs)
+        procs.clear()
+    finally:
+        for s, handler in zip((signal.SIGINT, signal.SIGTERM), old):
+            signal.signal(s, handler)

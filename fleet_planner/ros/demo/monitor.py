@@ -32,6 +32,7 @@ class FleetMonitor(Node):
         super().__init__(name, **kwargs)
         self.events: list[TaskEvent] = []
         self.last_event: dict[str, TaskEvent] = {}
+        #: per robot, its reported positions (x, y, stamp); of a stay at one spot only its first and last
         self.tracks: dict[str, list[tuple[float, float, float]]] = {}
         self.radius: dict[str, float] = {}
         self.status: dict[str, RobotStatus] = {}
@@ -50,6 +51,10 @@ class FleetMonitor(Node):
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
+
+    def latest_stamp(self) -> float:
+        """The newest status stamp heard (simulated s; 0 before any), readable after ROS shut down."""
+        return max((st.stamp for st in self.status.values()), default=0.0)
 
     def submit(self, task: Task | str) -> None:
         self._tasks.publish(String(data=task if isinstance(task, str) else task.to_json()))
@@ -74,7 +79,14 @@ class FleetMonitor(Node):
             return
         self.status[st.id] = st
         self.radius[st.id] = st.radius
-        self.tracks.setdefault(st.id, []).append((st.x, st.y, st.stamp))
+        track = self.tracks.setdefault(st.id, [])
+        if len(track) >= 2 and track[-1][0] == track[-2][0] == st.x and track[-1][1] == track[-2][1] == st.y:
+            # standing still: the stay is its first and its latest report (the same timed path, exactly;
+            # a fleet mostly waiting would otherwise make the closest-approach sweep of the summary
+            # quadratic in the reports at one spot)
+            track[-1] = (st.x, st.y, st.stamp)
+        else:
+            track.append((st.x, st.y, st.stamp))
         entry = (st.stamp, st.mode, st.lateness_s > LATE_S, st.task_id, bool(st.loaded), st.kind)
         log = self.modes.setdefault(st.id, [])
         if not log or log[-1][1:] != entry[1:]:

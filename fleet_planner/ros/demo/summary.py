@@ -29,6 +29,7 @@ class Summary:
     closest: tuple[str | None, str | None, float | None]
     wall_s: float
     start: float = 0.0              # the first submission (simulated s)
+    interrupted: bool = False       # Ctrl-C or SIGTERM ended the run: what was done so far
 
     @property
     def jobs_per_hour(self) -> float:
@@ -41,7 +42,8 @@ class Summary:
         return self.completion_s / self.wall_s if self.completion_s and self.wall_s > 0 else 0.0
 
     def lines(self, radius: Mapping[str, float], asked_rate: float | None = None) -> list[str]:
-        out = [f"jobs: {self.done} done, {self.failed} failed, {self.rejected} rejected of {self.jobs}"]
+        out = [f"jobs: {self.done} done, {self.failed} failed, {self.rejected} rejected of {self.jobs}"
+               + (" (interrupted: what was done so far)" if self.interrupted else "")]
         if self.completion_s is not None:
             out.append(f"completion time: {self.completion_s:.1f} s simulated ({self.wall_s:.1f} s wall, "
                        f"{self.sim_rate:.1f}x real time)")
