@@ -149,6 +149,8 @@ def main(args: list[str] | None = None) -> None:
     store = emptied(opts.out / DEMO_STORE)   # each run starts with no jobs (its job ids repeat)
 
     signal.signal(signal.SIGTERM, _interrupt)   # SIGTERM ends the demo as Ctrl-C does
+    # (and Ctrl-C is heard even when a script started the demo in the background, which ignores SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     context = Context()
     procs: list[subprocess.Popen] = []
     used: list[Usage] = []
