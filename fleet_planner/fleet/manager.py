@@ -363,9 +363,9 @@ class FleetManager:
                     and r.status.mode not in acting and now >= r.evade_retry_at
                     and (r.leg is None or r.status.path_id == r.leg.path_id)]
         for r in standing:
-            oid = self._walks_into(r, now)
-            if oid is not None:
-                self._evade(r, oid, now, d)
+            walker = self._walks_into(r, now)
+            if walker is not None:
+                self._evade(r, walker, now, d)
 
     def _walks_into(self, r: FleetRobot, now: float) -> str | None:
         """The moving obstacle that would walk into ``r`` if it stood where it is (or stops), if any."""
@@ -610,10 +610,10 @@ class FleetManager:
                 return   # the rest next step (a robot on its leg drives on meanwhile; it re-plans then)
             if self._plan_leg(r, target, now, d) is not None:
                 r.replan = r.conflict = False
-            elif r.on_leg and (r.conflict or self.gates is None and r.leg.goal != EVADE):  # late or in conflict
-                # and no new leg yet (a robot stepping aside from an obstacle drives on to its refuge):
-                oid = self._walks_into(r, now)
-                if oid is None or not self._evade(r, oid, now, d):
+            elif r.on_leg and (r.conflict or self.gates is None and r.leg is not None and r.leg.goal != EVADE):
+                # late or in conflict and no new leg yet (one stepping aside from an obstacle drives on to its refuge):
+                walker = self._walks_into(r, now)
+                if walker is None or not self._evade(r, walker, now, d):
                     self._hold(r, now, d)  # stand still, so the others plan around where it is, not around a leg
                 # it no longer keeps (gated and only late: it keeps its leg, the gates keep the others clear)
 
