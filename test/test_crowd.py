@@ -300,3 +300,21 @@ def test_the_prioritized_first_plan_keeps_the_rules_and_gives_way_to_lacam_where
     starts = [graph.cell(*r.start) for r in POCKET_ROBOTS]
     search = ConfigSearch(graph, starts, [graph.cell(*r.goal) for r in POCKET_ROBOTS])
     assert prioritized_first(graph, search.fields, search.grow, starts, search.goals, np.ones(4)) is None
+
+
+def test_a_cutoff_below_the_lower_bound_gives_up_at_once_and_a_bad_one_is_named():
+    """``cutoff``: the robots' hop distances at top speed bound any plan's sum of arrivals from
+    below (a: 6 cells at 1.0, b: 6 at 0.7, c: 4 at 0.8, d: 4 at 0.9 = 24.02 s): asked to beat 24 s
+    the solver gives up at once; asked to beat its own plan's sum plus a second it plans as before."""
+    from fleet_planner.planners.md_crowd import sum_of_arrivals
+
+    grid = GridMap.from_rows(POCKET)
+    with pytest.raises(PlanningError, match="cutoff 24.0 s"):
+        get_planner("dense", cutoff=24.0).plan(grid, POCKET_ROBOTS)
+    plan = get_planner("dense").plan(grid, POCKET_ROBOTS)
+    assert sum_of_arrivals(plan) >= 6 + 6 / 0.7 + 4 / 0.8 + 4 / 0.9 - 1e-9
+    again = get_planner("dense", cutoff=sum_of_arrivals(plan) + 1.0).plan(grid, POCKET_ROBOTS)
+    assert check_plan(grid, POCKET_ROBOTS, again) == []
+    for bad in (float("nan"), "1", float("inf")):
+        with pytest.raises(ValueError, match="cutoff"):
+            get_planner("dense", cutoff=bad)

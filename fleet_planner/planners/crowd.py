@@ -44,6 +44,7 @@ move robots that are not its own, and any-angle trajectories have no exact cell 
 """
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 
@@ -79,6 +80,10 @@ class CrowdPlanner(Planner):
     ``first``: the first discrete plan: "auto" tries prioritized planning (:func:`.crowd_lns.prioritized_first`,
     at most 0.5 s + 1 ms per robot of CPU) and lets the configuration search plan when it fails, "lacam"
     always the configuration search (the plan's info says which: ``first_plan``).
+    ``cutoff`` (None: off): a sum of arrival times (s) to beat; when the robots' hop distances on
+    the grid graph at top speed (a lower bound of this solver's sum of arrivals: every plan moves
+    along the graph's edges, one cell step each, at most at top speed) already sum to at least it,
+    the solver gives up at once with PlanningError (md's comparison: its plan cannot lose).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
@@ -88,7 +93,7 @@ class CrowdPlanner(Planner):
 
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
                  network: bool = True, time_limit_s: float | None = None, margin: float = 0.02,
-                 timed_refine_s: float | None = None, first: str = "auto"):
+                 timed_refine_s: float | None = None, first: str = "auto", cutoff: float | None = None):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
@@ -102,6 +107,9 @@ class CrowdPlanner(Planner):
         if first not in ("auto", "lacam"):
             raise ValueError(f"first: 'auto' or 'lacam' (got {first!r})")
         self.first = first
+        if cutoff is not None and not (isinstance(cutoff, (int, float)) and math.isfinite(cutoff)):
+            raise ValueError(f"cutoff: must be a finite number or None (got {cutoff!r})")
+        self.cutoff = None if cutoff is None else float(cutoff)
         self.time_limit_s = float(limit)
         self.refine_s = None if refine_s is None else float(refine_s)
         self.seed = int(seed)
@@ -131,6 +139,11 @@ class CrowdPlanner(Planner):
                                  "of cells its disc fits on" for i in cut})
         res = grid.resolution
         durations = np.array([res / r.max_speed for r in robots])
+        if self.cutoff is not None:
+            bound = float(search.lower_bounds() @ durations)
+            if bound >= self.cutoff:
+                raise PlanningError({r.id: f"dense solver: its lower bound {bound:.1f} s on the sum of arrivals "
+                                     f"is not below the cutoff {self.cutoff:.1f} s" for r in robots})
         configs = None
         if self.first == "auto":
             configs = prioritized_first(graph, search.fields, search.grow, starts, search.goals, durations,

@@ -217,9 +217,12 @@ class MDPlanner(Planner):
             return plan
         # md's robots wait a lot: the dense solver's plan may be better; the lower sum of arrivals wins
         try:
+            # (the dense solver gives up at once when its lower bound says it cannot win: cutoff)
             other = self._dense(grid, robots, t_start, deadline, plan.info.get("search", {}).get("attempts", 1),
-                                f"md's sum of arrivals {ours:.1f} s is {ours / drive:.3f} x its routes driven alone")
+                                f"md's sum of arrivals {ours:.1f} s is {ours / drive:.3f} x its routes driven alone",
+                                cutoff=ours)
         except PlanningError:
+            plan.planning_time_s = time.perf_counter() - t_start
             return plan
         theirs = sum_of_arrivals(other)
         if theirs < ours - 1e-6:
@@ -292,16 +295,16 @@ class MDPlanner(Planner):
         return "dense" if "dense" in planner_names() else str(self.fallback)
 
     def _dense(self, grid: GridMap, robots: list[RobotSpec], t_start: float, deadline: float, attempts: int,
-               why: str) -> Plan:
+               why: str, **options) -> Plan:
         """The dense solver's plan under md's name, with ``info["fallback"]`` naming the solver and
         ``info["why"]`` saying why it planned; with what is left of the time budget (at least half
-        of it). PlanningError when it cannot plan."""
+        of it); ``options`` go to the dense solver when it takes them. PlanningError when it cannot plan."""
         from . import get_planner
 
         name = self._dense_name()
         budget = max(deadline - time.perf_counter(), 0.5 * self.time_limit)
         try:
-            dense = get_planner(name, time_limit_s=budget, margin=self.margin)
+            dense = get_planner(name, time_limit_s=budget, margin=self.margin, **options)
         except TypeError:
             dense = get_planner(name)
         plan = dense.plan(grid, robots)
