@@ -362,17 +362,15 @@ class FleetManager:
                     if r.online and not r.immobile and not r.manual and not r.paused and not r.on_leg
                     and r.status.mode not in acting and now >= r.evade_retry_at
                     and (r.leg is None or r.status.path_id == r.leg.path_id)]
-        for r in standing:
-            walker = self._walks_into(r, now)
-            if walker is not None:
-                self._evade(r, walker, now, d)
+        for rid, walker in self._walk_into(standing, now).items():
+            self._evade(self.robots[rid], walker, now, d)
 
-    def _walks_into(self, r: FleetRobot, now: float) -> str | None:
-        """The moving obstacle that would walk into ``r`` if it stood where it is (or stops), if any."""
-        if not self.strategy.plans_around_obstacles or not len(self.obstacles):
-            return None
-        here = [(r.id, TimedPath(r.id, r.radius, np.array([[*r.pos, now]])), r.radius)]
-        return self.obstacles.threats(here, now, self.margin, STANDING_LOOKAHEAD).get(r.id)
+    def _walk_into(self, robots: Sequence[FleetRobot], now: float) -> dict[str, str]:
+        """Robot id -> the moving obstacle that would walk into it if it stood where it is (or stops)."""
+        if not robots or not self.strategy.plans_around_obstacles or not len(self.obstacles):
+            return {}
+        here = [(r.id, TimedPath(r.id, r.radius, np.array([[*r.pos, now]])), r.radius) for r in robots]
+        return self.obstacles.threats(here, now, self.margin, STANDING_LOOKAHEAD)
 
     def _adopt(self, r: FleetRobot, now: float, d: Decisions) -> None:
         """After a restart: a robot without a job here whose status names an open job it was on
@@ -612,7 +610,7 @@ class FleetManager:
                 r.replan = r.conflict = False
             elif r.on_leg and (r.conflict or self.gates is None and r.leg is not None and r.leg.goal != EVADE):
                 # late or in conflict and no new leg yet (one stepping aside from an obstacle drives on to its refuge):
-                walker = self._walks_into(r, now)
+                walker = self._walk_into([r], now).get(r.id)
                 if walker is None or not self._evade(r, walker, now, d):
                     self._hold(r, now, d)  # stand still, so the others plan around where it is, not around a leg
                 # it no longer keeps (gated and only late: it keeps its leg, the gates keep the others clear)
@@ -646,10 +644,7 @@ class FleetManager:
             if self._out_of_time():
                 return False   # tried again next step
             try:
-                path = self.strategy.plan_leg(r, start, Target("hold", EVADE, spot), t0, grid=grid,
-                                              planner=self.planner, speed=r.kind.max_speed * self.params.speed_factor,
-                                              fleet=self.robots.values(),
-                                              obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD))
+                path = self._leg_path(r, start, Target("hold", EVADE, spot), t0, now)
             except LegNotPlanned:
                 continue
             if not self._give(r, Leg(r.id, path, path_id, "hold", EVADE), d, now):
@@ -897,10 +892,7 @@ class FleetManager:
             path = TimedPath(r.id, r.radius, np.array([[*target.pose, t0]]))
         else:
             try:
-                path = self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
-                                              speed=r.kind.max_speed * self.params.speed_factor,
-                                              fleet=self.robots.values(),
-                                              obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD))
+                path = self._leg_path(r, start, target, t0, now)
             except LegNotPlanned as exc:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
@@ -921,6 +913,13 @@ class FleetManager:
         if self._reserved_at is not None:
             self._reserved_at.append(target.pose)
         return leg
+
+    def _leg_path(self, r: FleetRobot, start: Point, target: Target, t0: float, now: float) -> TimedPath:
+        """``r``'s timed path from ``start`` at ``t0`` to ``target``, as the coordination mode plans it
+        round the fleet and the obstacles (followed OBSTACLE_LOOKAHEAD horizons); LegNotPlanned if none."""
+        return self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
+                                      speed=r.kind.max_speed * self.params.speed_factor, fleet=self.robots.values(),
+                                      obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD))
 
     def _out_of_time(self) -> bool:
         """This step has spent its leg-planning budget (``step_budget_s`` wall seconds)."""

@@ -175,15 +175,8 @@ class ObstacleMap:
             return {}
         moving = [o for o in self.obstacles.values() if not is_static(o)]
         static = [o for o in self.obstacles.values() if is_static(o)]
-        h = self.params.horizon_s
-        ts = np.append(np.arange(now, now + h * lookahead, SAMPLE_S), now + h * lookahead)
         if moving:
-            stamps = np.array([o.stamp for o in moving])
-            ahead = np.clip(ts[None, :] - stamps[:, None], 0.0, None)   # (K, T): prediction time
-            ox = np.array([o.x for o in moving])[:, None] + np.array([o.vx for o in moving])[:, None] * ahead
-            oy = np.array([o.y for o in moving])[:, None] + np.array([o.vy for o in moving])[:, None] * ahead
-            reach = np.array([o.radius for o in moving])[:, None] + self.params.growth * np.minimum(
-                ahead, np.clip(now + h - stamps[:, None], 0.0, None))   # (growing over the first horizon only)
+            ts, ox, oy, reach = self._predicted(moving, now, lookahead)
         out: dict[str, str] = {}
         for rid, path, radius in legs:
             wp = path.waypoints
@@ -208,6 +201,21 @@ class ObstacleMap:
                 self.affected.setdefault(hit, set()).add(rid)
         return out
 
+    def _predicted(self, moving: Sequence[ObstacleRecord], now: float, lookahead: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The sample times (T,) from ``now`` over ``lookahead`` horizons and, for each of ``moving``,
+        its predicted centre x, y and disc radius at them (K, T): constant velocity from its stamp,
+        the disc growing by ``growth`` per second of prediction up to the first horizon."""
+        h = self.params.horizon_s
+        ts = np.append(np.arange(now, now + h * lookahead, SAMPLE_S), now + h * lookahead)
+        stamps = np.array([o.stamp for o in moving])
+        ahead = np.clip(ts[None, :] - stamps[:, None], 0.0, None)   # (K, T): prediction time
+        ox = np.array([o.x for o in moving])[:, None] + np.array([o.vx for o in moving])[:, None] * ahead
+        oy = np.array([o.y for o in moving])[:, None] + np.array([o.vy for o in moving])[:, None] * ahead
+        reach = np.array([o.radius for o in moving])[:, None] + self.params.growth * np.minimum(
+            ahead, np.clip(now + h - stamps[:, None], 0.0, None))
+        return ts, ox, oy, reach
+
     def refuges(self, pos: Point, radius: float, margin: float, now: float, is_free,
                 within: float = REFUGE_WITHIN_M, step: float = 0.5, most: int = 8) -> list[Point]:
         """Where a robot of ``radius`` standing at ``pos`` may step aside from the moving obstacles:
@@ -220,24 +228,20 @@ class ObstacleMap:
         moving = [o for o in self.obstacles.values() if not is_static(o)]
         if not moving:
             return []
+        _, ox, oy, reach = self._predicted(moving, now, OBSTACLE_LOOKAHEAD)
         k = int(within / step)
         offs = np.arange(-k, k + 1) * step
         gx, gy = np.meshgrid(pos[0] + offs, pos[1] + offs)
         cand = np.column_stack([gx.ravel(), gy.ravel()])
         far = np.hypot(cand[:, 0] - pos[0], cand[:, 1] - pos[1])
         cand, far = cand[far <= within + 1e-9], far[far <= within + 1e-9]
-        h = self.params.horizon_s
-        ts = np.append(np.arange(now, now + OBSTACLE_LOOKAHEAD * h, SAMPLE_S), now + OBSTACLE_LOOKAHEAD * h)
         ok = np.ones(len(cand), dtype=bool)
         across = np.zeros(len(cand), dtype=bool)
-        for o in moving:
+        for i, o in enumerate(moving):
             side = o.vx * (pos[1] - o.y) - o.vy * (pos[0] - o.x)
             across |= (o.vx * (cand[:, 1] - o.y) - o.vy * (cand[:, 0] - o.x)) * side < 0.0
-            ahead = np.clip(ts - o.stamp, 0.0, None)
-            ox, oy = o.x + o.vx * ahead, o.y + o.vy * ahead
-            reach = o.radius + self.params.growth * np.minimum(ahead, max(0.0, now + h - o.stamp)) + radius + margin
-            gap = np.hypot(cand[:, None, 0] - ox[None, :], cand[:, None, 1] - oy[None, :]) - reach[None, :]
-            ok &= gap.min(axis=1) > 0.0
+            gap = np.hypot(cand[:, None, 0] - ox[i][None, :], cand[:, None, 1] - oy[i][None, :]) - reach[i][None, :]
+            ok &= gap.min(axis=1) > radius + margin
         out: list[Point] = []
         for x, y in cand[ok][np.lexsort((far[ok], across[ok]))]:
             if len(out) >= most:
