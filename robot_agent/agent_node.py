@@ -16,7 +16,7 @@ Avoidance"; see docs/ARCHITECTURE.md), with wait messages on ``/fleet/wait_messa
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from functools import partial
 from typing import Any
 
@@ -157,7 +157,9 @@ class AgentNode(Node):
         events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
         self._gate_origin = OriginCheck(self, gates, planner)
+        # a record refused only because its publisher had no known name yet, and until when it may be taken
         self._gate_pending: tuple[GateRecord, float] | None = None
+        self._path_pending: tuple[Path, float] | None = None
         self.keys = Keys(trust_file=trust_file)
         self._events_topic, self._gates_topic = events.topic_name, gates.topic_name
         self._pairing: PathPairing | None = None
@@ -187,9 +189,12 @@ class AgentNode(Node):
             return
         problem = self._path_origin.problem()
         if problem:
+            if self._path_origin.unnamed_only:  # likely the planner, just discovered: asked again (origin.py)
+                self._path_pending = (msg, time.monotonic() + GATE_SETTLE_S)
             self.get_logger().error(printable(f"timed path ignored: not from the planner: {problem}", 300),
                                     throttle_duration_sec=1.0)
             return
+        self._path_pending = None
         self._follow(msg)
 
     def _on_path_auth(self, msg: String) -> None:
@@ -307,22 +312,28 @@ class AgentNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
 
-    def _settle_gate(self) -> None:
-        """A gate record refused only because its publisher had no known name yet: taken once the
-        graph names only the planner there, dropped if another node is named or after GATE_SETTLE_S."""
-        record, until = self._gate_pending  # type: ignore[misc]
-        settled = self._gate_origin.settled()
+    def _settle(self, pending: tuple[Any, float], origin: OriginCheck, take: Callable[[Any], None],
+                what: str) -> tuple[Any, float] | None:
+        """A record refused only because its publisher had no known name yet (a gate record or a
+        timed path): taken once the graph names only the planner there, dropped if another node is
+        named or after GATE_SETTLE_S. Returns what is still pending."""
+        record, until = pending
+        settled = origin.settled()
         if settled is None and time.monotonic() < until:
-            return
-        self._gate_pending = None
+            return pending
         if settled:
-            self.get_logger().info(f"gate record {record.path_id}/{record.seq} taken: the planner is known now")
-            self.agent.on_gate(record)
+            self.get_logger().info(f"{what} taken: the planner is known now")
+            take(record)
+        return None
 
     def _on_timer(self) -> None:
         try:
             if self._gate_pending is not None:
-                self._settle_gate()
+                gate = self._gate_pending[0]
+                self._gate_pending = self._settle(self._gate_pending, self._gate_origin, self.agent.on_gate,
+                                                  f"gate record {gate.path_id}/{gate.seq}")
+            if self._path_pending is not None:
+                self._path_pending = self._settle(self._path_pending, self._path_origin, self._follow, "timed path")
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_compact_json()))  # fleet/robot_status@2
             for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any
