@@ -195,6 +195,24 @@ def pull_string(pts, blocked, res, limit, discs):
 # the move graph
 # ---------------------------------------------------------------------------------------------
 @_jit
+def _heap_push(hkey, hnode, size, key, node):
+    """Push ``node`` with ``key`` onto the binary min-heap held in ``hkey[:size]`` / ``hnode[:size]``,
+    doubling both arrays when full; the (possibly new) arrays and the new size."""
+    if size == hkey.shape[0]:
+        hkey = np.concatenate((hkey, np.empty(size)))
+        hnode = np.concatenate((hnode, np.empty(size, dtype=np.int64)))
+    i = size
+    while i > 0:
+        p = (i - 1) >> 1
+        if hkey[p] <= key:
+            break
+        hkey[i], hnode[i] = hkey[p], hnode[p]
+        i = p
+    hkey[i], hnode[i] = key, node
+    return hkey, hnode, size + 1
+
+
+@_jit
 def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src_cost, tgt, tgt_cost,
           start_c, start_r, goal_c, goal_r, slack, tie):
     """Nodes of a shortest path from a source node (entered at ``src_cost``) to a target node (left
@@ -245,9 +263,8 @@ def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src
     norm = math.hypot(ax, ay)
     if norm == 0.0:
         norm = 1.0
-    cap = 1024
-    hkey = np.empty(cap)
-    hnode = np.empty(cap, dtype=np.int64)
+    hkey = np.empty(1024)
+    hnode = np.empty(1024, dtype=np.int64)
     size = 0
     target = v_count   # the virtual target node in the heap
     best_t, best_par = _INF, -1
@@ -262,20 +279,7 @@ def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src
             continue
         ex, ey = abs(col[s] - goal_c), abs(row[s] - goal_r)
         f = g[s] + max(ex + ey + (_SQRT2 - 2.0) * min(ex, ey) - slack, 0.0)
-        if size == cap:
-            cap *= 2
-            hkey = np.concatenate((hkey, np.empty(cap - size)))
-            hnode = np.concatenate((hnode, np.empty(cap - size, dtype=np.int64)))
-        # push
-        i = size
-        size += 1
-        while i > 0:
-            p = (i - 1) >> 1
-            if hkey[p] <= f:
-                break
-            hkey[i], hnode[i] = hkey[p], hnode[p]
-            i = p
-        hkey[i], hnode[i] = f, s
+        hkey, hnode, size = _heap_push(hkey, hnode, size, f, s)
     while size > 0:
         # pop the smallest
         u = hnode[0]
@@ -346,19 +350,7 @@ def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src
                 parent[v] = u
                 ex, ey = abs(col[v] - goal_c), abs(row[v] - goal_r)
                 f = nv + max(ex + ey + (_SQRT2 - 2.0) * min(ex, ey) - slack, 0.0)
-            if size == cap:
-                cap *= 2
-                hkey = np.concatenate((hkey, np.empty(cap - size)))
-                hnode = np.concatenate((hnode, np.empty(cap - size, dtype=np.int64)))
-            i = size
-            size += 1
-            while i > 0:
-                p = (i - 1) >> 1
-                if hkey[p] <= f:
-                    break
-                hkey[i], hnode[i] = hkey[p], hnode[p]
-                i = p
-            hkey[i], hnode[i] = f, v
+            hkey, hnode, size = _heap_push(hkey, hnode, size, f, v)
     if best_par < 0 or not closed[best_par] or u != target:
         return np.zeros(0, dtype=np.int64)
     count = 0
