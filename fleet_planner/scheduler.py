@@ -103,6 +103,8 @@ class DelayScheduler:
         for x in range(len(model.paths)):
             self.set_timing(x, 0.0)
         self._done: set[int] = set()   # robots whose delay is up to date
+        #: piece tables with the pair's robots swapped (:meth:`_facing`), by (i, j) with i > j
+        self._swapped: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         #: called after robot x is scheduled (holds); True if it changed x's path (route choice)
         self.after: Callable[[int], bool] | None = None
 
@@ -250,6 +252,14 @@ class DelayScheduler:
                     changed.add(x)
         return None
 
+    def checkpoint(self) -> tuple:
+        """The scheduler's state (delays, vertex times, who is up to date), for :meth:`rollback`."""
+        return self.delays.copy(), list(self.arr), list(self.dep), set(self._done)
+
+    def rollback(self, state: tuple) -> None:
+        delays, arr, dep, done = state
+        self.delays, self.arr, self.dep, self._done = delays.copy(), list(arr), list(dep), set(done)
+
     def network(self, order: Sequence[int], ids: Sequence[str]) -> Network:
         """The network under the current delays (links listed by lower robot, then k)."""
         if self.holds == "anywhere":
@@ -302,14 +312,13 @@ class DelayScheduler:
         i moving is the window in which i's segment passes within reach of j's vertex; j standing
         / i holding is i's hold interval when the two points are within reach."""
         m = self.model
-        tables = [m.pieces(i, j) for i in higher]
+        tables = [self._facing(i, j) for i in higher]
         sizes = [len(t) for t in tables]
-        P = np.vstack(tables)
+        P = np.vstack(tables)   # every row as seen from j: i in the x columns, j in the y columns
         who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
-        sw = who > j
 
         def col(x_col: int, y_col: int) -> np.ndarray:
-            return np.where(sw, P[:, y_col], P[:, x_col])
+            return P[:, x_col]
 
         i_seg = col(C.P_X_SEG, C.P_Y_SEG).astype(np.int64)
         j_seg = col(C.P_Y_SEG, C.P_X_SEG).astype(np.int64)
@@ -323,8 +332,7 @@ class DelayScheduler:
         s1 = first + np.minimum(s0 + 1, last)
         s0 = first + s0
         a0, d0, a1, d1 = arr_all[s0], dep_all[s0], arr_all[s1], dep_all[s1]
-        phi_lo = np.where(sw, -P[:, C.P_PHI_HI], P[:, C.P_PHI_LO])
-        phi_hi = np.where(sw, -P[:, C.P_PHI_LO], P[:, C.P_PHI_HI])
+        phi_lo, phi_hi = P[:, C.P_PHI_LO], P[:, C.P_PHI_HI]
         is_lo, is_hi = col(C.P_XS_LO, C.P_YS_LO), col(C.P_XS_HI, C.P_YS_HI)   # j's range, i at its segment start
         ie_lo, ie_hi = col(C.P_XE_LO, C.P_YE_LO), col(C.P_XE_HI, C.P_YE_HI)   # j's range, i at its segment end
         js_lo, js_hi = col(C.P_YS_LO, C.P_XS_LO), col(C.P_YS_HI, C.P_XS_HI)   # i's range, j at its segment start
@@ -369,6 +377,20 @@ class DelayScheduler:
         G = stack([(j_seg, *c) for c in g])
         F = stack([(np.minimum(v, nv - 1), mask, lo, hi) for v, mask, lo, hi in f])
         return G, F
+
+    def _facing(self, i: int, j: int) -> np.ndarray:
+        """The pieces of the pair (i, j) with i in the x columns and j in the y columns (the model
+        lists the smaller index first; the swapped table is kept while the model's is the same)."""
+        raw = self.model.pieces(i, j)
+        if i < j:
+            return raw
+        got = self._swapped.get((i, j))
+        if got is not None and got[0] is raw:
+            return got[1]
+        out = raw[:, _SWAP]
+        out[:, C.P_PHI_LO], out[:, C.P_PHI_HI] = -raw[:, C.P_PHI_HI], -raw[:, C.P_PHI_LO]
+        self._swapped[(i, j)] = (raw, out)
+        return out
 
     def _schedule_holds(self, j: int, rank: dict[int, int]) -> Blocked | None:
         """Earliest arrival of j along its fixed path with waits at its vertices (safe-interval
@@ -504,6 +526,15 @@ class DelayScheduler:
                                                 t1.tolist(), t4.tolist(), R[:, 5].tolist(), R[:, 6].tolist()):
             net.links.append(Link(ids[i], ids[j], kk, m, d, a, b, lo, hi))
         return net
+
+
+#: column order of a piece table with its two robots swapped (x columns <-> y columns)
+_SWAP = np.arange(C.P_Y_SEG + 1)
+for _a, _b in ((C.P_X, C.P_Y), (C.P_A_LO, C.P_B_LO), (C.P_A_HI, C.P_B_HI), (C.P_XS_LO, C.P_YS_LO),
+               (C.P_XS_HI, C.P_YS_HI), (C.P_XE_LO, C.P_YE_LO), (C.P_XE_HI, C.P_YE_HI), (C.P_X_FIRST, C.P_Y_FIRST),
+               (C.P_X_LAST, C.P_Y_LAST), (C.P_X_OFF, C.P_Y_OFF), (C.P_X_T0, C.P_Y_T0), (C.P_X_V, C.P_Y_V),
+               (C.P_X_SEG, C.P_Y_SEG)):
+    _SWAP[_a], _SWAP[_b] = _b, _a
 
 
 def _grouped(key: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

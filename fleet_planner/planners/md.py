@@ -50,6 +50,9 @@ if TYPE_CHECKING:
 
 _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
 ORDERS = ("shortest", "longest", "given", "parking")
+#: moves of the improvement search over priorities tried by default (holds anywhere; ours, see
+#: :meth:`_Session.improve`)
+IMPROVE_TRIES = 12
 
 
 class _SearchFailed(Exception):
@@ -133,7 +136,10 @@ class MDPlanner(Planner):
     solver when its plan won, ``info["compared"]`` its sum when md's did. The live fleet's legs
     (:meth:`plan_incremental`) stop trying detours and re-orderings once
     ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
-    fleet manager re-plans later)."""
+    fleet manager re-plans later). ``improve`` (default :data:`IMPROVE_TRIES` with holds, else 0;
+    one-shot plans only): moves of a large-neighbourhood search over priorities after a plan is
+    found (the robot that waits longest goes just ahead of the robot it waits for; kept when the
+    sum of arrival times drops; ours, not the paper's), within the time budget."""
 
     name = "md"
 
@@ -141,7 +147,8 @@ class MDPlanner(Planner):
                  mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
                  detours: int | None = None, detour_min: float = 2.0, early_holds: bool | None = None,
                  time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd",
-                 leg_time_limit: float = 0.5, crowded: bool = True, compare_above: float | None = 1.05):
+                 leg_time_limit: float = 0.5, crowded: bool = True, compare_above: float | None = 1.05,
+                 improve: int | None = None):
         if holds is None:
             holds = "anywhere" if mode == "exact" else "none"
         if detours is None:
@@ -164,6 +171,13 @@ class MDPlanner(Planner):
         if not (math.isfinite(detour_min) and detour_min >= 0):
             raise ValueError(f"detour_min: must be a finite number >= 0 (got {detour_min!r})")
         self.detours, self.detour_min = detours, float(detour_min)
+        if improve is None:
+            improve = IMPROVE_TRIES if holds == "anywhere" else 0
+        if isinstance(improve, bool) or not isinstance(improve, int) or improve < 0:
+            raise ValueError(f"improve: must be an integer >= 0 (got {improve!r})")
+        if improve and holds != "anywhere":
+            raise ValueError("improve: needs holds 'anywhere'")
+        self.improve = improve
         self.early_holds = early_holds if early_holds is None else bool(early_holds)
         if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) \
                 or not (math.isfinite(time_limit) and time_limit > 0):
@@ -262,9 +276,12 @@ class MDPlanner(Planner):
                 order = search.next_order(session.order, ids[blocked[0]], ids[blocked[1]])
                 if progress:
                     progress(attempts, attempts + 1, "priority search")
+        improved = session.improve(self.improve, deadline) if self.improve else 0
         network = session.sched.network(session.order, [r.id for r in robots])
         info: dict[str, Any] = {"reorders": session.reorders, "reroutes": session.reroutes,
                                 "regions": session.model.region_count}
+        if self.improve:
+            info["improved"] = improved
         if self.detours:
             info["detours"] = session.detoured
         if attempts > 1:
@@ -582,10 +599,14 @@ class _Session:
         """Schedule; where a delay cannot help, first re-route around the disc in the way, then
         move the blocked robot just ahead of its blocker (measured fact 2), re-planning only the paths
         whose avoidance changed and re-scheduling only what that changes."""
+        self._repair(self.sched.schedule(self.order, start_at=self.fixed), progress)
+
+    def _repair(self, blocked: Blocked | None, progress: Progress | None = None) -> None:
+        """:meth:`resolve` from a schedule that stopped at ``blocked``; PlanningError when re-routing
+        and re-ordering do not help."""
         robots, n = self.robots, len(self.robots)
         limit = 4 * n if self.planner.max_reorders is None else self.planner.max_reorders
         tries: dict[tuple[int, int], int] = {}
-        blocked = self.sched.schedule(self.order, start_at=self.fixed)
         while blocked is not None:
             j, i = blocked.j, blocked.blocker
             tries[(j, i)] = tries.get((j, i), 0) + 1
@@ -605,23 +626,110 @@ class _Session:
             if i < self.fixed:
                 raise PlanningError({robots[j].id: why}, {robots[j].id: robots[i].id})
             self.reorders += 1
-            old_j, pos_i = self.rank[j], self.rank[i]
-            if tries[(j, i)] == 3:   # moving just ahead did not stick: try j ahead of everyone
-                pos_i = self.fixed
-            self.order.insert(pos_i, self.order.pop(old_j))
-            self.rank = {x: k for k, x in enumerate(self.order)}
-            # robots between the blocker and j now have j above them: those crossing j's goal re-plan
-            replan = [j] + [x for x in self.order[pos_i + 1:old_j + 1]
-                            if polyline_passes_near(self.route_of(x)[0], robots[j].goal, self.keep_out(x, j))]
-            changed = {}
-            for x in replan:
-                path = self.safe_path(x)
-                if path is None:
-                    raise PlanningError({robots[x].id: "no path from start to goal on this map for its radius"})
-                changed.update(self._set_route(x, path))
-            blocked = self.sched.schedule(self.order, start_at=pos_i, dirty=_apply(self.model, changed, j))
+            # moving just ahead did not stick: try j ahead of everyone
+            blocked = self._move_ahead(j, self.fixed if tries[(j, i)] == 3 else self.rank[i])
             if progress:
                 progress(self.reorders, limit, "re-ordering")
+
+    def _move_ahead(self, j: int, pos: int) -> Blocked | None:
+        """Robot j moved up to place ``pos`` of the order; the robots it passes that cross its goal
+        re-plan their paths (they now have j above them), and everything that changes is re-scheduled."""
+        robots = self.robots
+        old_j = self.rank[j]
+        self.order.insert(pos, self.order.pop(old_j))
+        self.rank = {x: k for k, x in enumerate(self.order)}
+        replan = [j] + [x for x in self.order[pos + 1:old_j + 1]
+                        if polyline_passes_near(self.route_of(x)[0], robots[j].goal, self.keep_out(x, j))]
+        changed = {}
+        for x in replan:
+            path = self.safe_path(x)
+            if path is None:
+                raise PlanningError({robots[x].id: "no path from start to goal on this map for its radius"})
+            changed.update(self._set_route(x, path))
+        return self.sched.schedule(self.order, start_at=pos, dirty=_apply(self.model, changed, j))
+
+    # -- improvement of a plan found (ours, not the paper's) -----------------------------------
+    def improve(self, tries: int, deadline: float | None = None) -> int:
+        """Large-neighbourhood search over the priorities of a plan found (ours): up to ``tries``
+        times, the robot that waits longest in all (not tried yet) moves just ahead of the robot
+        whose trajectory ends its longest wait, and what that changes is re-planned and
+        re-scheduled as in a re-ordering; the move stays when the sum of arrival times drops,
+        else everything is put back as it was. Returns how many moves stayed.
+
+        Measured at 100 robots (full re-plans per move, 12 tries): warehouse-10-20-10-2-2 sum of
+        arrivals / free 1.059 -> 1.032, 8 moves kept; a robot moved to the front instead ruined
+        the plans as often as it helped (up to 1.133)."""
+        kept, tried = 0, set()
+        total = self._arrivals()
+        for _ in range(tries):
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            waits = {x: float(self.sched.arr[x][-1] - self.times[x][-1])   # type: ignore[index]
+                     for x in range(self.fixed, len(self.robots)) if x not in tried and len(self.sched.arr[x]) > 1}
+            if not waits:
+                break
+            x = max(waits, key=lambda y: waits[y])
+            if waits[x] <= self.planner.detour_min:
+                break
+            tried.add(x)
+            ahead_of = self._waits_for(x)
+            if ahead_of is None or ahead_of < self.fixed:
+                continue
+            state = self._checkpoint()
+            # the moved robot has a new rank: its route choice is tried again (the others keep theirs:
+            # trying theirs again too, measured: sums of arrivals 1-3% lower at 1.5-2x the time)
+            self.detour_tries.pop(x, None)
+            try:
+                self._repair(self._move_ahead(x, self.rank[ahead_of]))
+                better = self._arrivals() < total - 1e-6
+            except PlanningError:
+                better = False
+            if better:
+                total = self._arrivals()
+                kept += 1
+            else:
+                self._rollback(state)
+        return kept
+
+    def _arrivals(self) -> float:
+        return float(sum(a[-1] for a in self.sched.arr if len(a) > 1))
+
+    def _waits_for(self, x: int) -> int | None:
+        """The higher robot whose trajectory ends x's longest wait: of the constraints on the
+        stretch from that wait on, the one x clears by the least margin."""
+        arr, dep = self.sched.arr[x], self.sched.dep[x]
+        higher = [i for i in self.model.neighbours(x) if self.rank[i] < self.rank[x]]
+        if not higher or len(arr) < 2:
+            return None
+        k = int(np.argmax(dep[:-1] - arr[:-1]))
+        (g_key, g_lo, g_hi, g_own), (f_key, f_lo, f_hi, f_own) = self.sched._hold_constraints(x, higher)
+        span = 6   # vertices after the wait in which the binding constraint is looked for
+        g = (g_key >= k) & (g_key < k + span)
+        f = (f_key > k) & (f_key <= k + span)
+        slack = np.concatenate([dep[g_key[g]] - g_hi[g], arr[f_key[f]] - f_hi[f]])
+        owner = np.concatenate([g_own[g], f_own[f]])
+        ok = slack >= -1e-6
+        if not ok.any():
+            return None
+        return int(owner[ok][np.argmin(slack[ok])])
+
+    def _checkpoint(self) -> tuple:
+        return (list(self.order), dict(self.rank), list(self.paths), list(self.times),
+                {x: {o: list(d) for o, d in by.items()} for x, by in self.must.items()}, dict(self.hints),
+                dict(self.detour_tries), self.reorders, self.reroutes, self.detoured,
+                self.model.checkpoint(), self.sched.checkpoint())
+
+    def _rollback(self, state: tuple) -> None:
+        (order, rank, paths, times, must, hints, detour_tries, self.reorders, self.reroutes, self.detoured,
+         model, sched) = state
+        self.order[:] = order
+        self.rank = dict(rank)
+        self.paths[:], self.times[:] = paths, times
+        self.must.clear()
+        self.must.update(must)
+        self.hints, self.detour_tries = dict(hints), dict(detour_tries)
+        self.model.rollback(model)
+        self.sched.rollback(sched)
 
     def _detour(self, x: int) -> bool:
         """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
