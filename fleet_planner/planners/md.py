@@ -57,10 +57,11 @@ IMPROVE_TRIES = 12
 #: plan (measured at 100 robots: the search lowers md's sum by 1.1-1.6%; warehouse-10-20-10-2-1:
 #: dense 6% below md's first plan, md's after the search still 5% above it)
 IMPROVE_GAIN = 0.04
-#: the dense solver's refinement budgets (CPU s) when md compares plans (measured on
-#: warehouse-10-20-10-2-1, 100 robots: its defaults SoC/free 1.0617, these 1.0627 for 0.6-0.9 s
-#: less CPU)
-COMPARE_BUDGET = {"refine_s": 0.2, "timed_refine_s": 0.2}
+#: the dense solver's two refinement budgets (CPU s per 100 robots each) when md compares plans
+#: (measured with 0.2: 100 robots on warehouse-10-20-10-2-1, SoC/free 1.0627 against 1.0617 with the
+#: dense solver's defaults, 0.6-0.9 s less CPU; 200 robots on it and on warehouse-10-20-10-2-2: 1.1003 /
+#: 1.1123 against 1.0995 / 1.1121, 0.6 s less)
+COMPARE_REFINE_S = 0.2
 
 
 class _SearchFailed(Exception):
@@ -137,10 +138,11 @@ class MDPlanner(Planner):
     ``crowded`` (default on): an instance crowded for prioritized planning (many starts and goals in
     aisles too narrow for two robots to pass, or very many robots: :mod:`.md_crowd`) goes to the
     dense solver first, with the whole budget, before any path is planned; md plans only if the dense
-    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when md's sum of arrival times
-    exceeds this multiple of its routes driven alone (its robots wait a lot), the dense solver plans
-    too, with a small refinement budget (:data:`COMPARE_BUDGET`) within what is left of the time
-    budget, and the plan with the lower sum of arrival times is returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
+    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when the sum of
+    arrival times of md's first plan exceeds this multiple of its routes driven alone (its robots
+    wait a lot), the dense solver plans too, with small refinement budgets (:data:`COMPARE_REFINE_S`)
+    within what is left of the time budget, and the plan with the lower sum of arrival times is
+    returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
     solver when its plan won, ``info["compared"]`` its sum when md's did. The live fleet's legs
     (:meth:`plan_incremental`) stop trying detours and re-orderings once
     ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
@@ -240,10 +242,11 @@ class MDPlanner(Planner):
                 and first > self.compare_above * drive:
             # md's robots wait a lot: the dense solver's plan may be better; the lower sum of arrivals
             # wins (it gives up at once when its lower bound says it cannot beat md's first plan: cutoff)
+            budget = COMPARE_REFINE_S * len(robots) / 100
             try:
                 other = self._dense(grid, robots, t_start, deadline, search[0],
                                     f"md's sum of arrivals {first:.1f} s is {first / drive:.3f} x its routes "
-                                    "driven alone", cutoff=first, **COMPARE_BUDGET)
+                                    "driven alone", cutoff=first, refine_s=budget, timed_refine_s=budget)
             except PlanningError:
                 other = None
         theirs = math.inf if other is None else sum_of_arrivals(other)
