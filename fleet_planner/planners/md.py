@@ -52,10 +52,10 @@ _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front
 ORDERS = ("shortest", "longest", "given", "parking")
 #: moves of the improvement search over priorities tried by default (holds anywhere; ours, see
 #: :meth:`_Session.improve`)
-IMPROVE_TRIES = 12
+IMPROVE_TRIES = 8
 #: ... not tried when the dense plan md compares with is already this much lower than md's first
-#: plan (measured at 100 robots: the search lowers md's sum by 1.1-1.6%; warehouse-10-20-10-2-1:
-#: dense 6% below md's first plan, md's after the search still 5% above it)
+#: plan (measured at 100 robots: the search lowers md's sum by 0.3-2.1%; warehouse-10-20-10-2-1:
+#: dense 6% below md's first plan, md's after the search still 4.6% above it)
 IMPROVE_GAIN = 0.04
 #: the dense solver's two refinement budgets (CPU s per 100 robots each) when md compares plans
 #: (measured with 0.2: 100 robots on warehouse-10-20-10-2-1, SoC/free 1.0627 against 1.0617 with the
@@ -531,6 +531,9 @@ class _Session:
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {} if must is None else must
         self.reorders = self.reroutes = self.detoured = 0
         self.detour_tries: dict[int, int] = {}
+        #: during an improvement move: each robot's wait before it (a robot that comes to wait
+        #: longer tries its route choice again)
+        self.waits_before: dict[int, float] = {}
         #: shortest paths already known (robot -> path): kept when they avoid what they must
         self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
@@ -675,16 +678,19 @@ class _Session:
         re-scheduled as in a re-ordering; the move stays when the sum of arrival times drops,
         else everything is put back as it was. Returns how many moves stayed.
 
-        Measured at 100 robots (full re-plans per move, 12 tries): warehouse-10-20-10-2-2 sum of
-        arrivals / free 1.059 -> 1.032, 8 moves kept; a robot moved to the front instead ruined
-        the plans as often as it helped (up to 1.133)."""
+        Measured at 100 robots (sum of arrivals / free, md's own plan, CPU under load 6-8): 8 tries
+        warehouse-10-20-10-2-2 1.059 -> 1.037 (6 moves kept, +0.4 s), warehouse-20-40-10-2-2 1.014
+        -> 1.011, warehouse-10-20-10-2-1 1.131 -> 1.112; 12 tries 1.033 / 1.009 / 1.101 for about
+        twice the extra time. Without route choice again for the robots a move makes wait longer:
+        1.042 / 1.010 / 1.118 at 12 tries; with it for every robot below the moved one: 1.037 /
+        - / 1.085 at 1.5-2x the time. A robot moved to the front instead ruined the plans as often
+        as it helped (full re-plans: up to 1.133)."""
         kept, tried = 0, set()
         total = self._arrivals()
         for _ in range(tries):
             if deadline is not None and time.perf_counter() > deadline:
                 break
-            waits = {x: float(self.sched.arr[x][-1] - self.times[x][-1])   # type: ignore[index]
-                     for x in range(self.fixed, len(self.robots)) if x not in tried and len(self.sched.arr[x]) > 1}
+            waits = {x: w for x, w in self._waits().items() if x not in tried}
             if not waits:
                 break
             x = max(waits, key=lambda y: waits[y])
@@ -695,20 +701,27 @@ class _Session:
             if ahead_of is None or ahead_of < self.fixed:
                 continue
             state = self._checkpoint()
-            # the moved robot has a new rank: its route choice is tried again (the others keep theirs:
-            # trying theirs again too, measured: sums of arrivals 1-3% lower at 1.5-2x the time)
+            # the moved robot has a new rank: its route choice is tried again, and so is the route
+            # choice of every robot the move makes wait longer
             self.detour_tries.pop(x, None)
+            self.waits_before = self._waits()
             try:
                 self._repair(self._move_ahead(x, self.rank[ahead_of]))
                 better = self._arrivals() < total - 1e-6
             except PlanningError:
                 better = False
+            self.waits_before = {}
             if better:
                 total = self._arrivals()
                 kept += 1
             else:
                 self._rollback(state)
         return kept
+
+    def _waits(self) -> dict[int, float]:
+        """Each robot's waits in all (s), of those that are not fixed and move."""
+        return {x: float(self.sched.arr[x][-1] - self.times[x][-1])   # type: ignore[index]
+                for x in range(self.fixed, len(self.robots)) if len(self.sched.arr[x]) > 1}
 
     def _arrivals(self) -> float:
         """Sum of the robots' arrival times as scheduled."""
@@ -763,6 +776,9 @@ class _Session:
             return False
         me, sched = self.robots[x], self.sched
         changed = False
+        before = self.waits_before.pop(x, None)
+        if before is not None and float(sched.arr[x][-1] - self.times[x][-1]) > before + self.planner.detour_min:
+            self.detour_tries.pop(x, None)   # an improvement move made x wait longer: its route choice again
         # at most ``detours`` tries per robot in a session: a re-ordering re-schedules everyone
         # below, and trying the same detours again rarely pays
         while self.detour_tries.get(x, 0) < self.planner.detours:
