@@ -720,7 +720,7 @@ class _Session:
 
     def _waits(self) -> dict[int, float]:
         """Each robot's waits in all (s), of those that are not fixed and move."""
-        return {x: float(self.sched.arr[x][-1] - self.times[x][-1])   # type: ignore[index]
+        return {x: float(self.sched.arr[x][-1] - self.route_of(x)[1][-1])
                 for x in range(self.fixed, len(self.robots)) if len(self.sched.arr[x]) > 1}
 
     def _arrivals(self) -> float:
@@ -777,7 +777,7 @@ class _Session:
         me, sched = self.robots[x], self.sched
         changed = False
         before = self.waits_before.pop(x, None)
-        if before is not None and float(sched.arr[x][-1] - self.times[x][-1]) > before + self.planner.detour_min:
+        if before is not None and float(sched.arr[x][-1] - self.route_of(x)[1][-1]) > before + self.planner.detour_min:
             self.detour_tries.pop(x, None)   # an improvement move made x wait longer: its route choice again
         # at most ``detours`` tries per robot in a session: a re-ordering re-schedules everyone
         # below, and trying the same detours again rarely pays
