@@ -285,7 +285,9 @@ def test_early_holds_keep_the_arrival_and_wait_further_back(early):
     10 + sqrt 2 - 7 = 3 + sqrt 2 (7 m to robot 1's crossing)."""
     from test_md_holds import GRID, SPECS
 
-    plan = get_planner("md", order="given", margin=0.0, early_holds=early, detours=0).plan(GRID, SPECS)
+    # worked out with a place to wait at every cell (one-shot plans default to one every few cells)
+    plan = get_planner("md", order="given", margin=0.0, early_holds=early, detours=0,
+                       hold_step=GRID.resolution).plan(GRID, SPECS)
     assert check_plan(GRID, SPECS, plan) == []
     j = plan.by_id()["j"]
     assert j.arrival_time == pytest.approx(15 + math.sqrt(2))

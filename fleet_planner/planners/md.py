@@ -62,6 +62,15 @@ IMPROVE_GAIN = 0.04
 #: dense solver's defaults, 0.6-0.9 s less CPU; 200 robots on it and on warehouse-10-20-10-2-2: 1.1003 /
 #: 1.1123 against 1.0995 / 1.1121, 0.6 s less)
 COMPARE_REFINE_S = 0.2
+#: with holds, one-shot plans (:meth:`MDPlanner.plan`): a place to wait at least every this many grid
+#: cells along a path (ours). Each path was cut into one-cell pieces: about 150 segments per path at
+#: 100 robots, and the segment-pair pieces, the hold constraints and every re-scheduling grow with
+#: them. Measured at 100 robots (SoC/free, CPU s in one process, load ~20): 1 cell 1.0365 / 1.0106 on
+#: warehouse-10-20-10-2-2 / 20-40-10-2-2; 3 cells 1.0324 / 1.0060; 4 cells 1.0253 / 1.0057 (0.65 / 0.83
+#: s against 1.15 / 1.67); 6 cells 1.0262 / 1.0050; 8 cells 1.0390 / 1.0043; only the string-pulled
+#: corners 1.0366 / 1.0060. Legs (plan_incremental) keep one cell (not measured in the delivery
+#: benchmark with more).
+HOLD_CELLS = 4
 
 
 class _SearchFailed(Exception):
@@ -121,8 +130,9 @@ class MDPlanner(Planner):
     trajectories) or "none" (only before it departs, the paper's departure delays; the default and
     only choice with boxes). Robots with ``max_accel`` wait only before they depart in either case
     (a stop en route would need braking and accelerating ramps their drive profile does not have).
-    ``hold_step`` (m, default one grid cell): with holds, paths get a vertex at least this often, so
-    that there is somewhere to wait. ``early_holds``: move waits back along the path as far as the
+    ``hold_step`` (m, default :data:`HOLD_CELLS` grid cells in :meth:`plan`, one in
+    :meth:`plan_incremental`): with holds, paths get a vertex at least this often, so that there is
+    somewhere to wait. ``early_holds``: move waits back along the path as far as the
     arrival allows, to where the robot already stands (default: in :meth:`plan_incremental` only;
     measured: the delivery benchmark finishes sooner with them, one-shot sums of arrivals are
     slightly worse).
@@ -522,7 +532,8 @@ class _Session:
         self.rank = {x: k for k, x in enumerate(order)}
         self.finder = planner._finders.of(grid)
         #: with holds: longest stretch of a path without a vertex to wait at (m)
-        self.hold_step = grid.resolution if planner.hold_step is None else planner.hold_step
+        self.hold_step = (grid.resolution * (1 if incremental else HOLD_CELLS) if planner.hold_step is None
+                          else planner.hold_step)
         #: per robot its path and the times (from its departure) at which it passes the vertices
         self.paths: list[np.ndarray | None] = [p for p, _ in fixed_paths] + [None] * (len(robots) - fixed)
         self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
@@ -568,7 +579,7 @@ class _Session:
             return {}
         r = self.robots[x]
         if self.planner.holds == "anywhere" and r.max_accel is None:
-            path = _subdivide(path, self.hold_step)   # places to wait: about one per cell
+            path = _subdivide(path, self.hold_step)   # places to wait
         points, times = drive_profile(path, r.max_speed, r.max_accel)
         self.paths[x], self.times[x] = points, times
         return {x: (points, times)}
