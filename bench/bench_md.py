@@ -278,6 +278,8 @@ def run_one(inst: Instance, n: int, planner: str, timeout: float, alone: AloneTi
         notes.append(f"search {plan.info['search'].get('attempts')}")
     if plan.info.get("detours"):
         notes.append(f"detours {plan.info['detours']}")
+    if plan.info.get("improved"):   # moves of md's improvement search over priorities that stayed
+        notes.append(f"improved {plan.info['improved']}")
     row.notes = ", ".join(notes)
     violations = check_plan(inst.grid, robots, plan)
     if violations:

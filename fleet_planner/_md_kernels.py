@@ -37,6 +37,14 @@ def _jit(fn: Any) -> Any:
     return _numba_njit(cache=True, nogil=True)(fn)
 
 
+def _jit_numpy_errors(fn: Any) -> Any:
+    """:func:`_jit` with numpy's floating-point semantics (x / 0 is inf or nan, as in the numpy
+    code a kernel replaces, not ZeroDivisionError)."""
+    if _numba_njit is None:   # pragma: no cover
+        return fn
+    return _numba_njit(cache=True, nogil=True, error_model="numpy")(fn)
+
+
 # ---------------------------------------------------------------------------------------------
 # safe intervals and the earliest arrival along a chain of hold vertices
 # ---------------------------------------------------------------------------------------------
@@ -476,6 +484,87 @@ def box_pairs(lo, hi, rlo, rhi):
     return out_q, out_t
 
 
+# ---------------------------------------------------------------------------------------------
+# what higher robots' timed trajectories forbid a robot on its path (holds anywhere)
+# ---------------------------------------------------------------------------------------------
+#: the columns :func:`hold_constraints` reads, in this order, from a piece table seen from j (i in the
+#: x columns): i's segment, j's segment, phi lo / hi, j's range with i at its segment start (lo, hi)
+#: and end, i's range with j at its segment start and end, i's offset / t0 / speed, j's
+HOLD_COLUMNS = ("X_SEG", "Y_SEG", "PHI_LO", "PHI_HI", "XS_LO", "XS_HI", "XE_LO", "XE_HI", "YS_LO", "YS_HI",
+                "YE_LO", "YE_HI", "X_OFF", "X_T0", "X_V", "Y_OFF", "Y_T0", "Y_V")
+
+
+@_jit_numpy_errors
+def hold_constraints(P, cols, who, first, last, arr_all, dep_all, cum_j):
+    """The forbidden intervals of :meth:`fleet_planner.scheduler.DelayScheduler._hold_constraints`
+    from its pieces ``P`` (rows seen from j, columns ``cols`` in the order of HOLD_COLUMNS), each
+    row's higher robot ``who``, where that robot's vertex times start in ``arr_all`` / ``dep_all``
+    (``first``) and its last vertex (``last``), and j's travelled length at its vertices ``cum_j``:
+    (G key, lo, hi, owner, F key, lo, hi, owner), the candidates of each kind in row order, kinds in
+    the scheduler's order, open intervals kept when lo < hi and hi > 0."""
+    n = P.shape[0]
+    nv = len(cum_j)
+    g_key = np.empty(3 * n, dtype=np.int64)
+    g_lo = np.empty(3 * n)
+    g_hi = np.empty(3 * n)
+    g_own = np.empty(3 * n, dtype=np.int64)
+    f_key = np.empty(6 * n, dtype=np.int64)
+    f_lo = np.empty(6 * n)
+    f_hi = np.empty(6 * n)
+    f_own = np.empty(6 * n, dtype=np.int64)
+    ng = 0
+    nf = 0
+    for kind in range(9):
+        for r in range(n):
+            i_seg = np.int64(P[r, cols[0]])
+            j_seg = np.int64(P[r, cols[1]])
+            s0 = min(i_seg, last[r])
+            s1 = first[r] + min(s0 + 1, last[r])
+            s0 = first[r] + s0
+            a0, d0, a1, d1 = arr_all[s0], dep_all[s0], arr_all[s1], dep_all[s1]
+            is_lo, is_hi, ie_lo, ie_hi = P[r, cols[4]], P[r, cols[5]], P[r, cols[6]], P[r, cols[7]]
+            i_off, i_v, j_off, j_v = P[r, cols[12]], P[r, cols[14]], P[r, cols[15]], P[r, cols[17]]
+            ok = False
+            lo = 0.0
+            hi = 0.0
+            key = j_seg
+            if kind == 0:   # both moving: the piece's phi range shifted by i's entry time
+                phi_lo, phi_hi = P[r, cols[2]], P[r, cols[3]]
+                sh_i = d0 - P[r, cols[13]]
+                j_t0 = P[r, cols[16]]
+                ok = np.isfinite(phi_lo) and np.isfinite(sh_i)
+                lo, hi = sh_i + phi_lo + j_t0, sh_i + phi_hi + j_t0
+            elif kind == 1:   # i holding at its segment start
+                ok = d0 > a0 and is_lo <= is_hi
+                lo, hi = a0 - (is_hi - j_off) / j_v, d0 - (is_lo - j_off) / j_v
+            elif kind == 2:   # i holding at its segment end
+                ok = d1 > a1 and ie_lo <= ie_hi
+                lo, hi = a1 - (ie_hi - j_off) / j_v, d1 - (ie_lo - j_off) / j_v
+            else:
+                j_end = cum_j[min(j_seg + 1, nv - 1)]
+                at = j_off if kind <= 5 else j_end   # j standing at its segment's start / end
+                if kind == 3 or kind == 6:   # i's segment passes within reach
+                    e_lo, e_hi = (P[r, cols[8]], P[r, cols[9]]) if kind == 3 else (P[r, cols[10]], P[r, cols[11]])
+                    ok = np.isfinite(d0) and e_lo <= e_hi
+                    lo, hi = d0 + (e_lo - i_off) / i_v, d0 + (e_hi - i_off) / i_v
+                elif kind == 4 or kind == 7:   # i holding at its segment start within reach
+                    ok = d0 > a0 and is_lo <= at and at <= is_hi
+                    lo, hi = a0, d0
+                else:   # i holding at its segment end within reach
+                    ok = d1 > a1 and ie_lo <= at and at <= ie_hi
+                    lo, hi = a1, d1
+                key = min(j_seg if kind <= 5 else j_seg + 1, nv - 1)
+            if not ok or not (lo < hi and hi > 0):
+                continue
+            if kind < 3:
+                g_key[ng], g_lo[ng], g_hi[ng], g_own[ng] = key, lo, hi, who[r]
+                ng += 1
+            else:
+                f_key[nf], f_lo[nf], f_hi[nf], f_own[nf] = key, lo, hi, who[r]
+                nf += 1
+    return g_key[:ng], g_lo[:ng], g_hi[:ng], g_own[:ng], f_key[:nf], f_lo[:nf], f_hi[:nf], f_own[:nf]
+
+
 _WARM = False
 
 
@@ -496,4 +585,7 @@ def warm_up() -> None:
     box_pairs(p0 - 1.0, p0 + 1.0, p0 - 1.0, p0 + 1.0)
     segment_pieces(np.array([0]), np.array([1]), p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1,
                    p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1, np.full(2, 0.4), 0.0, 28)
+    hold_constraints(np.ones((1, 28)), np.arange(18, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                     np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.int64), np.array([0.0, 1.0]),
+                     np.array([0.5, np.inf]), np.array([0.0, 1.0]))
     _WARM = True

@@ -195,6 +195,25 @@ class CollisionModel:
                 self._adj.get(y, set()).discard(x)
         self._compute(sorted(dirty), all_pairs=False)
 
+    def checkpoint(self) -> tuple:
+        """What :meth:`rollback` needs to put the whole model back as it is now (an improvement
+        try of the planner that does not pay is undone without recomputing anything). Arrays are
+        replaced, never changed in place, except the per-robot ones copied here."""
+        return (list(self.paths), list(self.times), list(self.cumlen), self.lengths.copy(), self.travel.copy(),
+                list(self._segs), self._bb.copy(), dict(self._regions), dict(self._pieces),
+                {x: set(ys) for x, ys in self._adj.items()}, self._tree, self._tree_segs, set(self._stale),
+                self._stale_rows)
+
+    def rollback(self, state: tuple) -> None:
+        """The model as it was at :meth:`checkpoint` (state taken from this model)."""
+        (paths, times, cumlen, lengths, travel, segs, bb, regions, pieces, adj, tree, tree_segs, stale,
+         stale_rows) = state
+        self.paths, self.times, self.cumlen = list(paths), list(times), list(cumlen)
+        self.lengths, self.travel, self._segs, self._bb = lengths.copy(), travel.copy(), list(segs), bb.copy()
+        self._regions, self._pieces = dict(regions), dict(pieces)
+        self._adj = {x: set(ys) for x, ys in adj.items()}
+        self._tree, self._tree_segs, self._stale, self._stale_rows = tree, tree_segs, set(stale), stale_rows
+
     def snapshot(self, x: int) -> tuple:
         """What :meth:`restore` needs to put robot x's path and pairs back as they are now (a
         route-choice try that does not pay is undone without recomputing anything)."""

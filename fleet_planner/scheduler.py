@@ -103,6 +103,8 @@ class DelayScheduler:
         for x in range(len(model.paths)):
             self.set_timing(x, 0.0)
         self._done: set[int] = set()   # robots whose delay is up to date
+        #: piece tables with the pair's robots swapped (:meth:`_facing`), by (i, j) with i > j
+        self._swapped: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         #: called after robot x is scheduled (holds); True if it changed x's path (route choice)
         self.after: Callable[[int], bool] | None = None
 
@@ -250,6 +252,14 @@ class DelayScheduler:
                     changed.add(x)
         return None
 
+    def checkpoint(self) -> tuple:
+        """The scheduler's state (delays, vertex times, who is up to date), for :meth:`rollback`."""
+        return self.delays.copy(), list(self.arr), list(self.dep), set(self._done)
+
+    def rollback(self, state: tuple) -> None:
+        delays, arr, dep, done = state
+        self.delays, self.arr, self.dep, self._done = delays.copy(), list(arr), list(dep), set(done)
+
     def network(self, order: Sequence[int], ids: Sequence[str]) -> Network:
         """The network under the current delays (links listed by lower robot, then k)."""
         if self.holds == "anywhere":
@@ -301,74 +311,39 @@ class DelayScheduler:
         i holding at a segment end is j's range near that point (a zero-speed piece); j standing /
         i moving is the window in which i's segment passes within reach of j's vertex; j standing
         / i holding is i's hold interval when the two points are within reach."""
-        m = self.model
-        tables = [m.pieces(i, j) for i in higher]
+        tables = [self._facing(i, j) for i in higher]
         sizes = [len(t) for t in tables]
-        P = np.vstack(tables)
+        P = np.vstack(tables)   # every row as seen from j: i in the x columns, j in the y columns
         who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
-        sw = who > j
-
-        def col(x_col: int, y_col: int) -> np.ndarray:
-            return np.where(sw, P[:, y_col], P[:, x_col])
-
-        i_seg = col(C.P_X_SEG, C.P_Y_SEG).astype(np.int64)
-        j_seg = col(C.P_Y_SEG, C.P_X_SEG).astype(np.int64)
         # each row's segment ends as timed: i's vertex times of all higher robots in one array
         lens = np.array([len(self.arr[i]) for i in higher], dtype=np.int64)
         first = np.repeat(np.cumsum(lens) - lens, sizes)
         last = np.repeat(lens - 1, sizes)
         arr_all = np.concatenate([self.arr[i] for i in higher])
         dep_all = np.concatenate([self.dep[i] for i in higher])
-        s0 = np.minimum(i_seg, last)
-        s1 = first + np.minimum(s0 + 1, last)
-        s0 = first + s0
-        a0, d0, a1, d1 = arr_all[s0], dep_all[s0], arr_all[s1], dep_all[s1]
-        phi_lo = np.where(sw, -P[:, C.P_PHI_HI], P[:, C.P_PHI_LO])
-        phi_hi = np.where(sw, -P[:, C.P_PHI_LO], P[:, C.P_PHI_HI])
-        is_lo, is_hi = col(C.P_XS_LO, C.P_YS_LO), col(C.P_XS_HI, C.P_YS_HI)   # j's range, i at its segment start
-        ie_lo, ie_hi = col(C.P_XE_LO, C.P_YE_LO), col(C.P_XE_HI, C.P_YE_HI)   # j's range, i at its segment end
-        js_lo, js_hi = col(C.P_YS_LO, C.P_XS_LO), col(C.P_YS_HI, C.P_XS_HI)   # i's range, j at its segment start
-        je_lo, je_hi = col(C.P_YE_LO, C.P_XE_LO), col(C.P_YE_HI, C.P_XE_HI)   # i's range, j at its segment end
-        i_off, i_t0, i_v = col(C.P_X_OFF, C.P_Y_OFF), col(C.P_X_T0, C.P_Y_T0), col(C.P_X_V, C.P_Y_V)
-        j_off, j_t0, j_v = col(C.P_Y_OFF, C.P_X_OFF), col(C.P_Y_T0, C.P_X_T0), col(C.P_Y_V, C.P_X_V)
-        cum_j = m.cumlen[j]
-        nv = len(cum_j)
-        j_end = cum_j[np.minimum(j_seg + 1, nv - 1)]   # travelled length of j at its segment's end
-        with np.errstate(invalid="ignore", over="ignore"):
-            sh_i = d0 - i_t0   # how much later than its drive profile i enters this segment
-
-            def rel_i(a: np.ndarray) -> np.ndarray:
-                return (a - i_off) / i_v
-
-            def rel_j(b: np.ndarray) -> np.ndarray:
-                return (b - j_off) / j_v
-
-            held0, held1 = d0 > a0, d1 > a1
-            g = [  # open intervals of times at which j must not enter its segment
-                (np.isfinite(phi_lo) & np.isfinite(sh_i), sh_i + phi_lo + j_t0, sh_i + phi_hi + j_t0),
-                (held0 & (is_lo <= is_hi), a0 - rel_j(is_hi), d0 - rel_j(is_lo)),
-                (held1 & (ie_lo <= ie_hi), a1 - rel_j(ie_hi), d1 - rel_j(ie_lo)),
-            ]
-            f = [  # (vertex of j, open interval of times at which j must not stand there)
-                (j_seg, np.isfinite(d0) & (js_lo <= js_hi), d0 + rel_i(js_lo), d0 + rel_i(js_hi)),
-                (j_seg, held0 & (is_lo <= j_off) & (j_off <= is_hi), a0, d0),
-                (j_seg, held1 & (ie_lo <= j_off) & (j_off <= ie_hi), a1, d1),
-                (j_seg + 1, np.isfinite(d0) & (je_lo <= je_hi), d0 + rel_i(je_lo), d0 + rel_i(je_hi)),
-                (j_seg + 1, held0 & (is_lo <= j_end) & (j_end <= is_hi), a0, d0),
-                (j_seg + 1, held1 & (ie_lo <= j_end) & (j_end <= ie_hi), a1, d1),
-            ]
-
-        def stack(parts):
-            key = np.concatenate([p[0][p[1]] for p in parts])
-            lo = np.concatenate([p[2][p[1]] for p in parts])
-            hi = np.concatenate([p[3][p[1]] for p in parts])
-            own = np.concatenate([who[p[1]] for p in parts])
-            keep = (lo < hi) & (hi > 0)
-            return key[keep], lo[keep], hi[keep], own[keep]
-
-        G = stack([(j_seg, *c) for c in g])
-        F = stack([(np.minimum(v, nv - 1), mask, lo, hi) for v, mask, lo, hi in f])
+        # the candidates of each kind for every row, compiled (fleet_planner._md_kernels): j moving
+        # / i moving (the piece's range of t_i(a) - t_j(b) shifted by i's entry time), j moving / i
+        # holding at its segment's start or end, then j standing at its segment's start or end / i
+        # moving, holding at its segment's start, or at its end
+        g_key, g_lo, g_hi, g_own, f_key, f_lo, f_hi, f_own = K.hold_constraints(
+            P, _HOLD_COLUMNS, who, first, last, arr_all, dep_all, self.model.cumlen[j])
+        G = g_key, g_lo, g_hi, g_own
+        F = f_key, f_lo, f_hi, f_own
         return G, F
+
+    def _facing(self, i: int, j: int) -> np.ndarray:
+        """The pieces of the pair (i, j) with i in the x columns and j in the y columns (the model
+        lists the smaller index first; the swapped table is kept while the model's is the same)."""
+        raw = self.model.pieces(i, j)
+        if i < j:
+            return raw
+        got = self._swapped.get((i, j))
+        if got is not None and got[0] is raw:
+            return got[1]
+        out = raw[:, _SWAP]
+        out[:, C.P_PHI_LO], out[:, C.P_PHI_HI] = -raw[:, C.P_PHI_HI], -raw[:, C.P_PHI_LO]
+        self._swapped[(i, j)] = (raw, out)
+        return out
 
     def _schedule_holds(self, j: int, rank: dict[int, int]) -> Blocked | None:
         """Earliest arrival of j along its fixed path with waits at its vertices (safe-interval
@@ -504,6 +479,17 @@ class DelayScheduler:
                                                 t1.tolist(), t4.tolist(), R[:, 5].tolist(), R[:, 6].tolist()):
             net.links.append(Link(ids[i], ids[j], kk, m, d, a, b, lo, hi))
         return net
+
+
+#: the piece columns the compiled hold constraints read (fleet_planner._md_kernels.HOLD_COLUMNS)
+_HOLD_COLUMNS = np.array([getattr(C, "P_" + name) for name in K.HOLD_COLUMNS], dtype=np.int64)
+#: column order of a piece table with its two robots swapped (x columns <-> y columns)
+_SWAP = np.arange(C.P_Y_SEG + 1)
+for _a, _b in ((C.P_X, C.P_Y), (C.P_A_LO, C.P_B_LO), (C.P_A_HI, C.P_B_HI), (C.P_XS_LO, C.P_YS_LO),
+               (C.P_XS_HI, C.P_YS_HI), (C.P_XE_LO, C.P_YE_LO), (C.P_XE_HI, C.P_YE_HI), (C.P_X_FIRST, C.P_Y_FIRST),
+               (C.P_X_LAST, C.P_Y_LAST), (C.P_X_OFF, C.P_Y_OFF), (C.P_X_T0, C.P_Y_T0), (C.P_X_V, C.P_Y_V),
+               (C.P_X_SEG, C.P_Y_SEG)):
+    _SWAP[_a], _SWAP[_b] = _b, _a
 
 
 def _grouped(key: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -371,3 +371,86 @@ def test_the_compiled_merge_gives_the_regions_of_the_scipy_batch_in_the_same_ord
     bounds = np.searchsorted(chunk, np.arange(len(chunks) + 1))
     expect = [[tuple(r) for r in boxes[lo:hi].tolist()] for lo, hi in zip(bounds[:-1], bounds[1:])]
     assert _merge_boxes_batch(chunks) == expect
+
+
+def ref_hold_constraints(sched, j: int, higher: list[int]):
+    """The scheduler's forbidden intervals as numpy computed them before they were compiled (a
+    transcription: rows seen from j, candidates of each kind stacked in order, then kept when
+    lo < hi and hi > 0)."""
+    from fleet_planner import collision as C
+
+    tables = [sched._facing(i, j) for i in higher]
+    sizes = [len(t) for t in tables]
+    P = np.vstack(tables)
+    who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
+    i_seg, j_seg = P[:, C.P_X_SEG].astype(np.int64), P[:, C.P_Y_SEG].astype(np.int64)
+    lens = np.array([len(sched.arr[i]) for i in higher], dtype=np.int64)
+    first, last = np.repeat(np.cumsum(lens) - lens, sizes), np.repeat(lens - 1, sizes)
+    arr_all, dep_all = np.concatenate([sched.arr[i] for i in higher]), np.concatenate([sched.dep[i] for i in higher])
+    s0 = np.minimum(i_seg, last)
+    s1 = first + np.minimum(s0 + 1, last)
+    s0 = first + s0
+    a0, d0, a1, d1 = arr_all[s0], dep_all[s0], arr_all[s1], dep_all[s1]
+    phi_lo, phi_hi = P[:, C.P_PHI_LO], P[:, C.P_PHI_HI]
+    is_lo, is_hi, ie_lo, ie_hi = P[:, C.P_XS_LO], P[:, C.P_XS_HI], P[:, C.P_XE_LO], P[:, C.P_XE_HI]
+    js_lo, js_hi, je_lo, je_hi = P[:, C.P_YS_LO], P[:, C.P_YS_HI], P[:, C.P_YE_LO], P[:, C.P_YE_HI]
+    i_off, i_t0, i_v = P[:, C.P_X_OFF], P[:, C.P_X_T0], P[:, C.P_X_V]
+    j_off, j_t0, j_v = P[:, C.P_Y_OFF], P[:, C.P_Y_T0], P[:, C.P_Y_V]
+    cum_j = sched.model.cumlen[j]
+    nv = len(cum_j)
+    j_end = cum_j[np.minimum(j_seg + 1, nv - 1)]
+    with np.errstate(invalid="ignore", over="ignore"):
+        sh_i = d0 - i_t0
+        held0, held1 = d0 > a0, d1 > a1
+        g = [(np.isfinite(phi_lo) & np.isfinite(sh_i), sh_i + phi_lo + j_t0, sh_i + phi_hi + j_t0),
+             (held0 & (is_lo <= is_hi), a0 - (is_hi - j_off) / j_v, d0 - (is_lo - j_off) / j_v),
+             (held1 & (ie_lo <= ie_hi), a1 - (ie_hi - j_off) / j_v, d1 - (ie_lo - j_off) / j_v)]
+        f = [(j_seg, np.isfinite(d0) & (js_lo <= js_hi), d0 + (js_lo - i_off) / i_v, d0 + (js_hi - i_off) / i_v),
+             (j_seg, held0 & (is_lo <= j_off) & (j_off <= is_hi), a0, d0),
+             (j_seg, held1 & (ie_lo <= j_off) & (j_off <= ie_hi), a1, d1),
+             (j_seg + 1, np.isfinite(d0) & (je_lo <= je_hi), d0 + (je_lo - i_off) / i_v, d0 + (je_hi - i_off) / i_v),
+             (j_seg + 1, held0 & (is_lo <= j_end) & (j_end <= is_hi), a0, d0),
+             (j_seg + 1, held1 & (ie_lo <= j_end) & (j_end <= ie_hi), a1, d1)]
+
+    def stack(parts):
+        key = np.concatenate([p[0][p[1]] for p in parts])
+        lo = np.concatenate([p[2][p[1]] for p in parts])
+        hi = np.concatenate([p[3][p[1]] for p in parts])
+        own = np.concatenate([who[p[1]] for p in parts])
+        keep = (lo < hi) & (hi > 0)
+        return key[keep], lo[keep], hi[keep], own[keep]
+
+    return stack([(j_seg, *c) for c in g]), stack([(np.minimum(v, nv - 1), m, lo, hi) for v, m, lo, hi in f])
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_the_compiled_hold_constraints_are_the_numpy_ones(monkeypatch, seed):
+    """Every call of the scheduler's compiled constraints while md plans 25 robots on the generated
+    warehouse (route choice and the improvement search included, with holds of all kinds) gives
+    exactly the arrays of the numpy transcription (the same floats, the same order)."""
+    import sys
+    from pathlib import Path
+
+    from fleet_planner.scheduler import DelayScheduler
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import bench_md
+
+    compiled = DelayScheduler._hold_constraints
+    calls = []
+
+    def both(self, j, higher):
+        got = compiled(self, j, higher)
+        want = ref_hold_constraints(self, j, higher)
+        for a, b in zip(got + (), want):
+            for x, y in zip(a, b):
+                np.testing.assert_array_equal(x, y)
+        calls.append(sum(len(a[0]) for a in got))
+        return got
+
+    monkeypatch.setattr(DelayScheduler, "_hold_constraints", both)
+    inst = bench_md.generated_instance(25, seed)
+    # (a generous budget: the kernels may compile inside the first plan)
+    plan = get_planner("md", compare_above=None, time_limit=600.0).plan(inst.grid, inst.robots)
+    assert check_plan(inst.grid, inst.robots, plan) == []
+    assert len(calls) > 25 and sum(calls) > 1000   # many calls, many intervals

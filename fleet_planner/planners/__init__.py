@@ -57,10 +57,10 @@ register("md-departure", "fleet_planner.planners.md:MDPlanner",
 register("md-holds", "fleet_planner.planners.md:MDPlanner",
          "md with holds anywhere along the path but no route choice "
          "(earliest arrival against the higher robots' timed trajectories)",
-         mode="exact", holds="anywhere", detours=0, crowded=False, compare_above=None)
+         mode="exact", holds="anywhere", detours=0, crowded=False, compare_above=None, improve=0)
 register("md-routes", "fleet_planner.planners.md:MDPlanner",
          "md with route choice in time: robots that wait long try detours, the earliest arrival wins",
-         mode="exact", holds="anywhere", detours=2, crowded=False, compare_above=None)
+         mode="exact", holds="anywhere", detours=2, crowded=False, compare_above=None, improve=0)
 register("crowd", "fleet_planner.planners.crowd:CrowdPlanner", "LaCAM/PIBT for dense crowds, timed by precedence")
 register("dense", "fleet_planner.planners.crowd:DensePlanner", "the dense-crowd solver (LaCAM/PIBT + LNS; = crowd)")
 

@@ -50,6 +50,27 @@ if TYPE_CHECKING:
 
 _MAX_TRIES = 3   # per blocked pair: re-route, re-order, re-order j to the front; then give up
 ORDERS = ("shortest", "longest", "given", "parking")
+#: moves of the improvement search over priorities tried by default (holds anywhere; ours, see
+#: :meth:`_Session.improve`)
+IMPROVE_TRIES = 8
+#: ... not tried when the dense plan md compares with is already this much lower than md's first
+#: plan (measured at 100 robots: the search lowers md's sum by 0.3-2.1%; warehouse-10-20-10-2-1:
+#: dense 6% below md's first plan, md's after the search still 4.6% above it)
+IMPROVE_GAIN = 0.04
+#: the dense solver's two refinement budgets (CPU s per 100 robots each) when md compares plans
+#: (measured with 0.2: 100 robots on warehouse-10-20-10-2-1, SoC/free 1.0627 against 1.0617 with the
+#: dense solver's defaults, 0.6-0.9 s less CPU; 200 robots on it and on warehouse-10-20-10-2-2: 1.1003 /
+#: 1.1123 against 1.0995 / 1.1121, 0.6 s less)
+COMPARE_REFINE_S = 0.2
+#: with holds, one-shot plans (:meth:`MDPlanner.plan`): a place to wait at least every this many grid
+#: cells along a path (ours). Each path was cut into one-cell pieces: about 150 segments per path at
+#: 100 robots, and the segment-pair pieces, the hold constraints and every re-scheduling grow with
+#: them. Measured at 100 robots (SoC/free, CPU s in one process, load ~20): 1 cell 1.0365 / 1.0106 on
+#: warehouse-10-20-10-2-2 / 20-40-10-2-2; 3 cells 1.0324 / 1.0060; 4 cells 1.0253 / 1.0057 (0.65 / 0.83
+#: s against 1.15 / 1.67); 6 cells 1.0262 / 1.0050; 8 cells 1.0390 / 1.0043; only the string-pulled
+#: corners 1.0366 / 1.0060. Legs (plan_incremental) keep one cell (not measured in the delivery
+#: benchmark with more).
+HOLD_CELLS = 4
 
 
 class _SearchFailed(Exception):
@@ -109,8 +130,9 @@ class MDPlanner(Planner):
     trajectories) or "none" (only before it departs, the paper's departure delays; the default and
     only choice with boxes). Robots with ``max_accel`` wait only before they depart in either case
     (a stop en route would need braking and accelerating ramps their drive profile does not have).
-    ``hold_step`` (m, default one grid cell): with holds, paths get a vertex at least this often, so
-    that there is somewhere to wait. ``early_holds``: move waits back along the path as far as the
+    ``hold_step`` (m, default :data:`HOLD_CELLS` grid cells in :meth:`plan`, one in
+    :meth:`plan_incremental`): with holds, paths get a vertex at least this often, so that there is
+    somewhere to wait. ``early_holds``: move waits back along the path as far as the
     arrival allows, to where the robot already stands (default: in :meth:`plan_incremental` only;
     measured: the delivery benchmark finishes sooner with them, one-shot sums of arrivals are
     slightly worse).
@@ -126,14 +148,18 @@ class MDPlanner(Planner):
     ``crowded`` (default on): an instance crowded for prioritized planning (many starts and goals in
     aisles too narrow for two robots to pass, or very many robots: :mod:`.md_crowd`) goes to the
     dense solver first, with the whole budget, before any path is planned; md plans only if the dense
-    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when md's sum of arrival times
-    exceeds this multiple of its routes driven alone (its robots wait a lot), the dense solver plans
-    too, within what is left of the budget, and the plan with the lower sum of arrival times is
+    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when the sum of
+    arrival times of md's first plan exceeds this multiple of its routes driven alone (its robots
+    wait a lot), the dense solver plans too, with small refinement budgets (:data:`COMPARE_REFINE_S`)
+    within what is left of the time budget, and the plan with the lower sum of arrival times is
     returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
     solver when its plan won, ``info["compared"]`` its sum when md's did. The live fleet's legs
     (:meth:`plan_incremental`) stop trying detours and re-orderings once
     ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
-    fleet manager re-plans later)."""
+    fleet manager re-plans later). ``improve`` (default :data:`IMPROVE_TRIES` with holds, else 0;
+    one-shot plans only): moves of a large-neighbourhood search over priorities after a plan is
+    found (the robot that waits longest goes just ahead of the robot it waits for; kept when the
+    sum of arrival times drops; ours, not the paper's), within the time budget."""
 
     name = "md"
 
@@ -141,7 +167,8 @@ class MDPlanner(Planner):
                  mode: str = "exact", holds: str | None = None, hold_step: float | None = None,
                  detours: int | None = None, detour_min: float = 2.0, early_holds: bool | None = None,
                  time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd",
-                 leg_time_limit: float = 0.5, crowded: bool = True, compare_above: float | None = 1.05):
+                 leg_time_limit: float = 0.5, crowded: bool = True, compare_above: float | None = 1.05,
+                 improve: int | None = None):
         if holds is None:
             holds = "anywhere" if mode == "exact" else "none"
         if detours is None:
@@ -164,6 +191,13 @@ class MDPlanner(Planner):
         if not (math.isfinite(detour_min) and detour_min >= 0):
             raise ValueError(f"detour_min: must be a finite number >= 0 (got {detour_min!r})")
         self.detours, self.detour_min = detours, float(detour_min)
+        if improve is None:
+            improve = IMPROVE_TRIES if holds == "anywhere" else 0
+        if isinstance(improve, bool) or not isinstance(improve, int) or improve < 0:
+            raise ValueError(f"improve: must be an integer >= 0 (got {improve!r})")
+        if improve and holds != "anywhere":
+            raise ValueError("improve: needs holds 'anywhere'")
+        self.improve = improve
         self.early_holds = early_holds if early_holds is None else bool(early_holds)
         if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) \
                 or not (math.isfinite(time_limit) and time_limit > 0):
@@ -207,37 +241,45 @@ class MDPlanner(Planner):
                 except PlanningError:
                     pass   # e.g. robots off cell centres: md tries with what is left
         try:
-            plan, drive = self._prioritized(grid, robots, progress, t_start, deadline)
+            session, search = self._prioritized(grid, robots, progress, deadline)
         except _SearchFailed as failed:
             return self._fallback(grid, robots, failed.error, failed.attempts, t_start, deadline)
-        if not v2 or self.compare_above is None or len(robots) < md_crowd.MIN_ROBOTS:
-            return plan   # a few robots: md's own plan (the hand-worked cases stay md's)
+        first = session._arrivals()
+        drive = session.drive()
+        other: Plan | None = None
+        # (a few robots: md's own plan; the hand-worked cases stay md's)
+        if v2 and self.compare_above is not None and len(robots) >= md_crowd.MIN_ROBOTS \
+                and first > self.compare_above * drive:
+            # md's robots wait a lot: the dense solver's plan may be better; the lower sum of arrivals
+            # wins (it gives up at once when its lower bound says it cannot beat md's first plan: cutoff)
+            budget = COMPARE_REFINE_S * len(robots) / 100
+            try:
+                other = self._dense(grid, robots, t_start, deadline, search[0],
+                                    f"md's sum of arrivals {first:.1f} s is {first / drive:.3f} x its routes "
+                                    "driven alone", cutoff=first, refine_s=budget, timed_refine_s=budget)
+            except PlanningError:
+                other = None
+        theirs = math.inf if other is None else sum_of_arrivals(other)
+        improved = 0
+        if self.improve and theirs >= (1 - IMPROVE_GAIN) * first:   # else the search cannot catch up
+            improved = session.improve(self.improve, deadline)
+        plan = self._plan_of(session, search, improved, t_start)
         ours = sum_of_arrivals(plan)
-        if ours <= self.compare_above * drive:
-            return plan
-        # md's robots wait a lot: the dense solver's plan may be better; the lower sum of arrivals wins
-        try:
-            # (the dense solver gives up at once when its lower bound says it cannot win: cutoff)
-            other = self._dense(grid, robots, t_start, deadline, plan.info.get("search", {}).get("attempts", 1),
-                                f"md's sum of arrivals {ours:.1f} s is {ours / drive:.3f} x its routes driven alone",
-                                cutoff=ours)
-        except PlanningError:
-            plan.planning_time_s = time.perf_counter() - t_start
-            return plan
-        theirs = sum_of_arrivals(other)
-        if theirs < ours - 1e-6:
+        if other is not None and theirs < ours - 1e-6:
             other.info["md"] = {"sum_of_arrivals": round(ours, 3), **plan.info}
             other.info["why"] += f"; the dense plan's {theirs:.1f} s is lower"
+            other.planning_time_s = time.perf_counter() - t_start
             return other
-        plan.info["compared"] = {other.info["fallback"]: round(theirs, 3)}
+        if other is not None:
+            plan.info["compared"] = {other.info["fallback"]: round(theirs, 3)}
         plan.planning_time_s = time.perf_counter() - t_start
         return plan
 
-    def _prioritized(self, grid: GridMap, robots: list[RobotSpec], progress: Progress | None, t_start: float,
-                     deadline: float) -> tuple[Plan, float]:
+    def _prioritized(self, grid: GridMap, robots: list[RobotSpec], progress: Progress | None,
+                     deadline: float) -> tuple[_Session, tuple[int, int]]:
         """md itself: safe paths, holds, route choice, greedy re-ordering, and the priority search when
-        that gives up, until ``deadline``; the plan and the sum of its routes driven alone (s); or
-        _SearchFailed."""
+        that gives up, until ``deadline``; the session that found a plan and (attempts, learnt
+        priorities); or _SearchFailed."""
         shortest: dict[int, np.ndarray] = {}
         order = self._initial_order(grid, robots, shortest)
         search = PrioritySearch(seed=0)
@@ -253,7 +295,7 @@ class MDPlanner(Planner):
             try:
                 session.route(progress)
                 session.resolve(progress)
-                break
+                return session, (attempts, len(search.constraints))
             except PlanningError as exc:
                 blocked = next(iter(exc.blockers.items()), None)
                 if (not self.search or blocked is None or time.perf_counter() >= deadline
@@ -262,15 +304,19 @@ class MDPlanner(Planner):
                 order = search.next_order(session.order, ids[blocked[0]], ids[blocked[1]])
                 if progress:
                     progress(attempts, attempts + 1, "priority search")
-        network = session.sched.network(session.order, [r.id for r in robots])
+
+    def _plan_of(self, session: _Session, search: tuple[int, int], improved: int, t_start: float) -> Plan:
+        """md's plan from the session that found it (its network, what the planner did in ``info``)."""
+        network = session.sched.network(session.order, [r.id for r in session.robots])
         info: dict[str, Any] = {"reorders": session.reorders, "reroutes": session.reroutes,
                                 "regions": session.model.region_count}
+        if self.improve:
+            info["improved"] = improved
         if self.detours:
             info["detours"] = session.detoured
-        if attempts > 1:
-            info["search"] = {"attempts": attempts, "priorities": len(search.constraints)}
-        drive = float(sum(session.route_of(x)[1][-1] for x in range(len(robots))))
-        return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network), drive
+        if search[0] > 1:
+            info["search"] = {"attempts": search[0], "priorities": search[1]}
+        return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network)
 
     def _fallback(self, grid: GridMap, robots: list[RobotSpec], failure: PlanningError, attempts: int,
                   t_start: float, deadline: float) -> Plan:
@@ -486,7 +532,8 @@ class _Session:
         self.rank = {x: k for k, x in enumerate(order)}
         self.finder = planner._finders.of(grid)
         #: with holds: longest stretch of a path without a vertex to wait at (m)
-        self.hold_step = grid.resolution if planner.hold_step is None else planner.hold_step
+        self.hold_step = (grid.resolution * (1 if incremental else HOLD_CELLS) if planner.hold_step is None
+                          else planner.hold_step)
         #: per robot its path and the times (from its departure) at which it passes the vertices
         self.paths: list[np.ndarray | None] = [p for p, _ in fixed_paths] + [None] * (len(robots) - fixed)
         self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
@@ -495,6 +542,9 @@ class _Session:
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {} if must is None else must
         self.reorders = self.reroutes = self.detoured = 0
         self.detour_tries: dict[int, int] = {}
+        #: during an improvement move: each robot's wait before it (a robot that comes to wait
+        #: longer tries its route choice again)
+        self.waits_before: dict[int, float] = {}
         #: shortest paths already known (robot -> path): kept when they avoid what they must
         self.hints: dict[int, np.ndarray] = {} if hints is None else hints
 
@@ -529,7 +579,7 @@ class _Session:
             return {}
         r = self.robots[x]
         if self.planner.holds == "anywhere" and r.max_accel is None:
-            path = _subdivide(path, self.hold_step)   # places to wait: about one per cell
+            path = _subdivide(path, self.hold_step)   # places to wait
         points, times = drive_profile(path, r.max_speed, r.max_accel)
         self.paths[x], self.times[x] = points, times
         return {x: (points, times)}
@@ -582,10 +632,14 @@ class _Session:
         """Schedule; where a delay cannot help, first re-route around the disc in the way, then
         move the blocked robot just ahead of its blocker (measured fact 2), re-planning only the paths
         whose avoidance changed and re-scheduling only what that changes."""
+        self._repair(self.sched.schedule(self.order, start_at=self.fixed), progress)
+
+    def _repair(self, blocked: Blocked | None, progress: Progress | None = None) -> None:
+        """:meth:`resolve` from a schedule that stopped at ``blocked``; PlanningError when re-routing
+        and re-ordering do not help."""
         robots, n = self.robots, len(self.robots)
         limit = 4 * n if self.planner.max_reorders is None else self.planner.max_reorders
         tries: dict[tuple[int, int], int] = {}
-        blocked = self.sched.schedule(self.order, start_at=self.fixed)
         while blocked is not None:
             j, i = blocked.j, blocked.blocker
             tries[(j, i)] = tries.get((j, i), 0) + 1
@@ -605,23 +659,125 @@ class _Session:
             if i < self.fixed:
                 raise PlanningError({robots[j].id: why}, {robots[j].id: robots[i].id})
             self.reorders += 1
-            old_j, pos_i = self.rank[j], self.rank[i]
-            if tries[(j, i)] == 3:   # moving just ahead did not stick: try j ahead of everyone
-                pos_i = self.fixed
-            self.order.insert(pos_i, self.order.pop(old_j))
-            self.rank = {x: k for k, x in enumerate(self.order)}
-            # robots between the blocker and j now have j above them: those crossing j's goal re-plan
-            replan = [j] + [x for x in self.order[pos_i + 1:old_j + 1]
-                            if polyline_passes_near(self.route_of(x)[0], robots[j].goal, self.keep_out(x, j))]
-            changed = {}
-            for x in replan:
-                path = self.safe_path(x)
-                if path is None:
-                    raise PlanningError({robots[x].id: "no path from start to goal on this map for its radius"})
-                changed.update(self._set_route(x, path))
-            blocked = self.sched.schedule(self.order, start_at=pos_i, dirty=_apply(self.model, changed, j))
+            # moving just ahead did not stick: try j ahead of everyone
+            blocked = self._move_ahead(j, self.fixed if tries[(j, i)] == 3 else self.rank[i])
             if progress:
                 progress(self.reorders, limit, "re-ordering")
+
+    def _move_ahead(self, j: int, pos: int) -> Blocked | None:
+        """Robot j moved up to place ``pos`` of the order; the robots it passes that cross its goal
+        re-plan their paths (they now have j above them), and everything that changes is re-scheduled."""
+        robots = self.robots
+        old_j = self.rank[j]
+        self.order.insert(pos, self.order.pop(old_j))
+        self.rank = {x: k for k, x in enumerate(self.order)}
+        replan = [j] + [x for x in self.order[pos + 1:old_j + 1]
+                        if polyline_passes_near(self.route_of(x)[0], robots[j].goal, self.keep_out(x, j))]
+        changed = {}
+        for x in replan:
+            path = self.safe_path(x)
+            if path is None:
+                raise PlanningError({robots[x].id: "no path from start to goal on this map for its radius"})
+            changed.update(self._set_route(x, path))
+        return self.sched.schedule(self.order, start_at=pos, dirty=_apply(self.model, changed, j))
+
+    # -- improvement of a plan found (ours, not the paper's) -----------------------------------
+    def improve(self, tries: int, deadline: float | None = None) -> int:
+        """Large-neighbourhood search over the priorities of a plan found (ours): up to ``tries``
+        times, the robot that waits longest in all (not tried yet) moves just ahead of the robot
+        whose trajectory ends its longest wait, and what that changes is re-planned and
+        re-scheduled as in a re-ordering; the move stays when the sum of arrival times drops,
+        else everything is put back as it was. Returns how many moves stayed.
+
+        Measured at 100 robots (sum of arrivals / free, md's own plan, CPU under load 6-8): 8 tries
+        warehouse-10-20-10-2-2 1.059 -> 1.037 (6 moves kept, +0.4 s), warehouse-20-40-10-2-2 1.014
+        -> 1.011, warehouse-10-20-10-2-1 1.131 -> 1.112; 12 tries 1.033 / 1.009 / 1.101 for about
+        twice the extra time. Without route choice again for the robots a move makes wait longer:
+        1.042 / 1.010 / 1.118 at 12 tries; with it for every robot below the moved one: 1.037 /
+        - / 1.085 at 1.5-2x the time. A robot moved to the front instead ruined the plans as often
+        as it helped (full re-plans: up to 1.133)."""
+        kept, tried = 0, set()
+        total = self._arrivals()
+        for _ in range(tries):
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            waits = {x: w for x, w in self._waits().items() if x not in tried}
+            if not waits:
+                break
+            x = max(waits, key=lambda y: waits[y])
+            if waits[x] <= self.planner.detour_min:
+                break
+            tried.add(x)
+            ahead_of = self._waits_for(x)
+            if ahead_of is None or ahead_of < self.fixed:
+                continue
+            state = self._checkpoint()
+            # the moved robot has a new rank: its route choice is tried again, and so is the route
+            # choice of every robot the move makes wait longer
+            self.detour_tries.pop(x, None)
+            self.waits_before = self._waits()
+            try:
+                self._repair(self._move_ahead(x, self.rank[ahead_of]))
+                better = self._arrivals() < total - 1e-6
+            except PlanningError:
+                better = False
+            self.waits_before = {}
+            if better:
+                total = self._arrivals()
+                kept += 1
+            else:
+                self._rollback(state)
+        return kept
+
+    def _waits(self) -> dict[int, float]:
+        """Each robot's waits in all (s), of those that are not fixed and move."""
+        return {x: float(self.sched.arr[x][-1] - self.route_of(x)[1][-1])
+                for x in range(self.fixed, len(self.robots)) if len(self.sched.arr[x]) > 1}
+
+    def _arrivals(self) -> float:
+        """Sum of the robots' arrival times as scheduled."""
+        return float(sum(a[-1] for a in self.sched.arr if len(a) > 1))
+
+    def drive(self) -> float:
+        """Sum of the robots' times to drive their routes without waiting."""
+        return float(sum(self.route_of(x)[1][-1] for x in range(len(self.robots))))
+
+    def _waits_for(self, x: int) -> int | None:
+        """The higher robot whose trajectory ends x's longest wait: of the constraints on the
+        stretch from that wait on, the one x clears by the least margin."""
+        arr, dep = self.sched.arr[x], self.sched.dep[x]
+        higher = [i for i in self.model.neighbours(x) if self.rank[i] < self.rank[x]]
+        if not higher or len(arr) < 2:
+            return None
+        k = int(np.argmax(dep[:-1] - arr[:-1]))
+        (g_key, g_lo, g_hi, g_own), (f_key, f_lo, f_hi, f_own) = self.sched._hold_constraints(x, higher)
+        span = 6   # vertices after the wait in which the binding constraint is looked for
+        g = (g_key >= k) & (g_key < k + span)
+        f = (f_key > k) & (f_key <= k + span)
+        slack = np.concatenate([dep[g_key[g]] - g_hi[g], arr[f_key[f]] - f_hi[f]])
+        owner = np.concatenate([g_own[g], f_own[f]])
+        ok = slack >= -1e-6
+        if not ok.any():
+            return None
+        return int(owner[ok][np.argmin(slack[ok])])
+
+    def _checkpoint(self) -> tuple:
+        return (list(self.order), dict(self.rank), list(self.paths), list(self.times),
+                {x: {o: list(d) for o, d in by.items()} for x, by in self.must.items()}, dict(self.hints),
+                dict(self.detour_tries), self.reorders, self.reroutes, self.detoured,
+                self.model.checkpoint(), self.sched.checkpoint())
+
+    def _rollback(self, state: tuple) -> None:
+        (order, rank, paths, times, must, hints, detour_tries, self.reorders, self.reroutes, self.detoured,
+         model, sched) = state
+        self.order[:] = order
+        self.rank = dict(rank)
+        self.paths[:], self.times[:] = paths, times
+        self.must.clear()
+        self.must.update(must)
+        self.hints, self.detour_tries = dict(hints), dict(detour_tries)
+        self.model.rollback(model)
+        self.sched.rollback(sched)
 
     def _detour(self, x: int) -> bool:
         """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
@@ -631,6 +787,9 @@ class _Session:
             return False
         me, sched = self.robots[x], self.sched
         changed = False
+        before = self.waits_before.pop(x, None)
+        if before is not None and float(sched.arr[x][-1] - self.route_of(x)[1][-1]) > before + self.planner.detour_min:
+            self.detour_tries.pop(x, None)   # an improvement move made x wait longer: its route choice again
         # at most ``detours`` tries per robot in a session: a re-ordering re-schedules everyone
         # below, and trying the same detours again rarely pays
         while self.detour_tries.get(x, 0) < self.planner.detours:
