@@ -417,7 +417,7 @@ class TimedRefiner(LNSStats):
         self.lb = fields[grow, np.asarray(starts, dtype=np.int32)].astype(np.float64) * self.dur
         self.gen = 0
         self.size = max(2, min(int(size), n))
-        self.weight = 1.2
+        self.weight = 1.0     # (plain A*: measured 3 seeds at 400 robots, ~0.004 lower SoC/free than 1.2)
         self.limit = 20 * len(nb)
         self.strategy = np.ones(2)
         self.stats = np.zeros(5, dtype=np.int64)   # iterations, accepted, expansions, over limit, failed
