@@ -169,15 +169,16 @@ class CrowdPlanner(Planner):
                 starts, search.goals, durations, search.fields, search.grow, graph.nb, graph.deg, graph.n,
                 self.seed, release=crowd_sipp.RELEASE, cpu_s=0.5 + len(robots) / 1000)
             if timed_first is not None:
+                t_first = time.perf_counter() - t_start
                 if progress:
                     progress(1, 3, "refinement (timed LNS)")
                 budget = self.timed_refine_s if self.timed_refine_s is not None else \
                     max(0.2, TIMED_BUDGET_S - (time.process_time() - c_start))
                 timing, stats = _timed_rounds(timed_first, deadline, budget, starts, search, graph, durations,
                                               centres, radii, res, accels, self.margin, self.seed)
-                info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
-                        "search_s": round(time.perf_counter() - t_start, 3), **stats}
-                return self._finish(timing, centres, starts, robots, res, t_start, info, progress)
+                timed_info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
+                              "search_s": round(t_first, 3), **stats}
+                return self._finish(timing, centres, starts, robots, res, t_start, timed_info, progress)
         configs = None
         if self.first in ("auto", "discrete") and not hopeless:
             configs = prioritized_first(graph, search.fields, search.grow, starts, search.goals, durations,

@@ -444,7 +444,7 @@ class TimedRefiner(LNSStats):
     @classmethod
     def from_scratch(cls, starts, goals, durations, fields, grow, nb, deg, ncell: int, seed: int = 0,
                      size: int = 4, release: float = 1.0, tries: int = 3, hold: float = 3.0,
-                     cpu_s: float = float("inf"), give_up: int = 20) -> tuple["TimedRefiner | None", bool]:
+                     cpu_s: float = float("inf"), give_up: int = 20) -> tuple[TimedRefiner | None, bool]:
         """The first timed plan by prioritized safe-interval planning (:func:`prioritized`): robots
         with the shortest time alone first, each at its own speed against the ones before it and the
         start cells of the ones after it (held ``hold`` x its time per cell). As in the discrete
