@@ -79,14 +79,7 @@ def test_a_crowd_on_a_shelf_floor_gets_a_valid_timed_first_plan_unless_robots_ra
     valid by the checker, as is the plan after its timed LNS; with acceleration limits the discrete
     pipeline plans (the safe intervals are at constant top speed)."""
     rows = ["." * 23] + [".." + "@@@@@@@@@@" + "." + "@@@@@@@@@@"] * 2 + ["." * 23]
-    rows = rows * 3 + ["." * 23]
-    grid = GridMap.from_rows(rows)
-    free = [(c, r) for r in range(len(rows)) for c in range(23) if rows[r][c] == "."]
-    rng = np.random.default_rng(1)
-    pick = rng.permutation(len(free))
-    n = 20
-    robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(0.7, 1.0)),
-                        grid.centre(*free[pick[k]]), grid.centre(*free[pick[n + k]])) for k in range(n)]
+    grid, robots, _free, _pick = _crowd(rows * 3 + ["." * 23], 20, seed=1, slowest=0.7)
     first = CrowdPlanner(timed_refine_s=0).plan(grid, robots)
     refined = CrowdPlanner(timed_refine_s=0.2).plan(grid, robots)
     for plan in (first, refined):
@@ -94,6 +87,19 @@ def test_a_crowd_on_a_shelf_floor_gets_a_valid_timed_first_plan_unless_robots_ra
     assert _soc(refined) <= _soc(first) + 1e-6
     ramps = [RobotSpec(r.id, r.radius, r.max_speed, r.start, r.goal, max_accel=0.5) for r in robots]
     assert CrowdPlanner(timed_refine_s=0).plan(grid, ramps).info["first_plan"] != "timed"
+
+
+def _crowd(rows: list[str], n: int, seed: int, slowest: float):
+    """n robots (radius 0.35-0.45 m, ``slowest``-1.0 m/s) from distinct random free cells of ``rows``
+    to distinct others; also the free cells and their random order (the cells after the first 2n are
+    spare)."""
+    grid = GridMap.from_rows(rows)
+    free = [(c, r) for r in range(len(rows)) for c in range(len(rows[0])) if rows[r][c] == "."]
+    rng = np.random.default_rng(seed)
+    pick = rng.permutation(len(free))
+    robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(slowest, 1.0)),
+                        grid.centre(*free[pick[k]]), grid.centre(*free[pick[n + k]])) for k in range(n)]
+    return grid, robots, free, pick
 
 
 def _joined(before: TimedPath, leg: TimedPath, t0: float) -> TimedPath:
@@ -108,13 +114,8 @@ def test_a_burst_of_new_legs_in_a_crowd_is_planned_on_the_lattice_and_checked():
     intervals against the exact cell holdings of the robots still driving), and the whole fleet -
     driven paths, the parked part before t0 and the new legs - passes the checker."""
     rows = ["..........", ".@@..@@...", "..........", "..........", "...@@..@@.", ".........."]
-    grid = GridMap.from_rows(rows)
-    free = [(c, r) for r in range(len(rows)) for c in range(10) if rows[r][c] == "."]
-    rng = np.random.default_rng(0)
-    pick = rng.permutation(len(free))
     n = 12
-    robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(0.6, 1.0)),
-                        grid.centre(*free[pick[k]]), grid.centre(*free[pick[n + k]])) for k in range(n)]
+    grid, robots, free, pick = _crowd(rows, n, seed=0, slowest=0.6)
     planner = CrowdPlanner(refine_s=0.2, timed_refine_s=0.1)
     plan = planner.plan(grid, robots)
     assert check_plan(grid, robots, plan) == []
