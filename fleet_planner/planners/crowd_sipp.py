@@ -35,9 +35,10 @@ from .crowd_st import add_member, delayed_at_random, downhill, group_cost, pick_
 
 INF = np.inf
 #: how long after the start of its move out of a cell a robot lets it go, in its time per cell, where
-#: the precedence pass re-times the result (measured on bench_dense, 400 robots on
-#: warehouse-10-20-10-2-1, 3 seeds: SoC/free 1.246 at 1 (on arrival in the next cell) -> 1.230 at
-#: 0.3, 1.236 at 0.5): a follower may start into a cell well before its leader has arrived in the
+#: the precedence pass re-times the result (measured on bench_dense's 400 robots on
+#: warehouse-10-20-10-2-1, 3 seeds, discrete pipeline with 0.8 s of discrete and 0.5 s of timed LNS:
+#: SoC/free 1.246 at 1 (on arrival in the next cell) -> 1.231 at 0.3; the timed first plan plans
+#: with it too): a follower may start into a cell well before its leader has arrived in the
 #: next one (the timing's closed forms: at once behind a leader of the same speed in the same
 #: direction, after 0-0.42 of the leader's move at a corner for radius sums <= 0.92 cell), so planning
 #: with release 1 keeps trains of robots two cells apart where the timing lets them drive one apart.
