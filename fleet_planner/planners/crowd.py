@@ -163,17 +163,22 @@ class CrowdPlanner(Planner):
         hopeless = False
         if self.first == "auto" and at_top_speed:
             # speed-aware from the start: each robot planned at its own speed (no fast robot queued behind a
-            # slow one by a plan of unit steps); measured on bench_dense, warehouse-10-20-10-2-1 400 robots
-            # (3 seeds): SoC/free 1.243 -> ~1.21 at the same CPU; warehouse-20-40-10-2-2 2000: 1.245 -> 1.116
+            # slow one by a plan of unit steps); measured on bench_dense (3 seeds, loaded machine), warehouse-10-20-
+            # 10-2-1 400 robots: SoC/free 1.242 -> 1.201 at the same CPU (~1.9 s); 20-40-10-2-2 2000: 1.243 -> 1.116
+            # and 13.3 -> 9.8 s; 100 robots: 1.061 either way
             timed_first, hopeless = TimedRefiner.from_scratch(
                 starts, search.goals, durations, search.fields, search.grow, graph.nb, graph.deg, graph.n,
                 self.seed, release=crowd_sipp.RELEASE, cpu_s=0.5 + len(robots) / 1000)
-            if timed_first is not None:
+            if timed_first is None:
+                # (the discrete pipeline's budget below as without the attempt: at 1000 robots on
+                # warehouse-10-20-10-2-1 the attempt fails after ~0.9 s, and LaCAM's plan needs its LNS time)
+                c_start = time.process_time()
+            else:
                 t_first = time.perf_counter() - t_start
                 if progress:
                     progress(1, 3, "refinement (timed LNS)")
                 budget = self.timed_refine_s if self.timed_refine_s is not None else \
-                    max(0.2, TIMED_BUDGET_S - (time.process_time() - c_start))
+                    max(0.2, TIMED_BUDGET_S * min(1.0, 0.25 + len(robots) / 500) - (time.process_time() - c_start))
                 timing, stats = _timed_rounds(timed_first, deadline, budget, starts, search, graph, durations,
                                               centres, radii, res, accels, self.margin, self.seed)
                 timed_info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
@@ -275,8 +280,9 @@ class CrowdPlanner(Planner):
         return PriorPlanner().plan_incremental(grid, robots, fixed, t0)
 
 
-#: CPU seconds of a whole plan (first plan and timed LNS) after a timed first plan, unless
-#: ``timed_refine_s`` says otherwise (measured at 100 robots: the LNS stops on its patience after ~0.5 s)
+#: CPU seconds of a whole plan (first plan and timed LNS) after a timed first plan from 375 robots on,
+#: less below (0.25 + N / 500 of it: at 100 robots SoC/free is reached after ~0.5 s), unless
+#: ``timed_refine_s`` says otherwise
 TIMED_BUDGET_S = 1.6
 #: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
 #: re-planned ones move up, which gives the next round room)
