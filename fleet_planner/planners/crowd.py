@@ -164,7 +164,7 @@ class CrowdPlanner(Planner):
         if self.first == "auto" and at_top_speed:
             # speed-aware from the start: each robot planned at its own speed (no fast robot queued behind a
             # slow one by a plan of unit steps); measured on bench_dense (3 seeds, loaded machine), warehouse-10-20-
-            # 10-2-1 400 robots: SoC/free 1.242 -> 1.201 at the same CPU (~1.9 s); 20-40-10-2-2 2000: 1.243 -> 1.116
+            # 10-2-1 400 robots: SoC/free 1.242 -> 1.20 at the same CPU (1.8-2.0 s); 20-40-10-2-2 2000: 1.243 -> 1.116
             # and 13.3 -> 9.8 s; 100 robots: 1.061 either way
             timed_first, hopeless = TimedRefiner.from_scratch(
                 starts, search.goals, durations, search.fields, search.grow, graph.nb, graph.deg, graph.n,
@@ -283,7 +283,7 @@ class CrowdPlanner(Planner):
 #: CPU seconds of a whole plan (first plan and timed LNS) after a timed first plan from 375 robots on,
 #: less below (0.25 + N / 500 of it: at 100 robots SoC/free is reached after ~0.5 s), unless
 #: ``timed_refine_s`` says otherwise
-TIMED_BUDGET_S = 1.6
+TIMED_BUDGET_S = 1.5
 #: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
 #: re-planned ones move up, which gives the next round room)
 TIMED_ROUNDS = 3
