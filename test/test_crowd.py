@@ -228,7 +228,7 @@ def crowds(draw):
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(case=crowds(), first=st.sampled_from(["auto", "lacam"]))
+@given(case=crowds(), first=st.sampled_from(["auto", "discrete", "lacam"]))
 def test_every_crowd_plan_is_valid(case, first):
     """Dense random crowds (2-12 discs of mixed radii and speeds, some with acceleration limits, on a
     quarter to half of the free cells, goals a random permutation, so robots must pass each other):
@@ -292,7 +292,7 @@ def test_the_prioritized_first_plan_keeps_the_rules_and_gives_way_to_lacam_where
     def weighted(c):
         return float(weights @ arrival_steps(c, search.goals))
     assert weighted(configs) <= weighted(lacam)
-    plan = CrowdPlanner().plan(grid, robots)
+    plan = CrowdPlanner(first="discrete").plan(grid, robots)
     assert plan.info["first_plan"] == "prioritized" and check_plan(grid, robots, plan) == []
 
     pocket = GridMap.from_rows(POCKET)

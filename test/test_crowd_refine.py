@@ -37,18 +37,20 @@ def _soc(plan: Plan) -> float:
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(case=crowds())
-def test_the_timed_refinement_is_valid_and_never_worse(case):
-    """Same discrete plan (no discrete LNS, so both runs start alike): with the timed LNS the plan is
-    valid by the checker and its sum of arrivals is no larger than the precedence timing's alone."""
+@given(case=crowds(), first=st.sampled_from(["auto", "discrete"]))
+def test_the_timed_refinement_is_valid_and_never_worse(case, first):
+    """Same first plan (timed, or discrete without the discrete LNS, so both runs start alike): with
+    the timed LNS the plan is valid by the checker and its sum of arrivals is no larger than the
+    precedence timing's of the first plan alone."""
     grid, robots = case
     if len(robots) < 2:
         return
     try:
-        plain = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0).plan(grid, robots)
+        plain = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0, first=first).plan(grid, robots)
     except Exception:   # noqa: BLE001 - unreachable goals: not this test's business
         return
-    refined = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0.05).plan(grid, robots)
+    refined = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0.05, first=first).plan(grid, robots)
+    assert refined.info["first_plan"] == plain.info["first_plan"]
     assert check_plan(grid, robots, refined) == []
     assert _soc(refined) <= _soc(plain) + 1e-6
 
@@ -61,10 +63,43 @@ def test_fast_robots_are_not_kept_behind_a_slow_one():
     robots = [RobotSpec("slow", 0.4, 0.5, (2.5, 0.5), (9.5, 0.5)),
               RobotSpec("f1", 0.4, 1.0, (1.5, 0.5), (8.5, 0.5)),
               RobotSpec("f2", 0.4, 1.0, (0.5, 0.5), (7.5, 0.5))]
-    plain = CrowdPlanner(refine_s=0, timed_refine_s=0).plan(grid, robots)
-    refined = CrowdPlanner(refine_s=0, timed_refine_s=0.2).plan(grid, robots)
+    plain = CrowdPlanner(refine_s=0, timed_refine_s=0, first="discrete").plan(grid, robots)
+    refined = CrowdPlanner(refine_s=0, timed_refine_s=0.2, first="discrete").plan(grid, robots)
     assert check_plan(grid, robots, refined) == []
     assert _soc(refined) < _soc(plain) - 1.0, (_soc(plain), _soc(refined))
+    # the timed first plan drives each robot at its own speed from the start: no LNS needed
+    timed = CrowdPlanner(timed_refine_s=0).plan(grid, robots)
+    assert timed.info["first_plan"] == "timed" and check_plan(grid, robots, timed) == []
+    assert _soc(timed) < _soc(plain) - 1.0, (_soc(plain), _soc(timed))
+
+
+def test_a_crowd_on_a_shelf_floor_gets_a_valid_timed_first_plan_unless_robots_ramp():
+    """20 robots of mixed speeds among 1-cell shelf aisles: the timed first plan (prioritized
+    safe-interval search at each robot's own speed, re-timed by precedence) is the one used and is
+    valid by the checker, as is the plan after its timed LNS; with acceleration limits the discrete
+    pipeline plans (the safe intervals are at constant top speed)."""
+    rows = ["." * 23] + [".." + "@@@@@@@@@@" + "." + "@@@@@@@@@@"] * 2 + ["." * 23]
+    grid, robots, _free, _pick = _crowd(rows * 3 + ["." * 23], 20, seed=1, slowest=0.7)
+    first = CrowdPlanner(timed_refine_s=0).plan(grid, robots)
+    refined = CrowdPlanner(timed_refine_s=0.2).plan(grid, robots)
+    for plan in (first, refined):
+        assert plan.info["first_plan"] == "timed" and check_plan(grid, robots, plan) == []
+    assert _soc(refined) <= _soc(first) + 1e-6
+    ramps = [RobotSpec(r.id, r.radius, r.max_speed, r.start, r.goal, max_accel=0.5) for r in robots]
+    assert CrowdPlanner(timed_refine_s=0).plan(grid, ramps).info["first_plan"] != "timed"
+
+
+def _crowd(rows: list[str], n: int, seed: int, slowest: float):
+    """n robots (radius 0.35-0.45 m, ``slowest``-1.0 m/s) from distinct random free cells of ``rows``
+    to distinct others; also the free cells and their random order (the cells after the first 2n are
+    spare)."""
+    grid = GridMap.from_rows(rows)
+    free = [(c, r) for r in range(len(rows)) for c in range(len(rows[0])) if rows[r][c] == "."]
+    rng = np.random.default_rng(seed)
+    pick = rng.permutation(len(free))
+    robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(slowest, 1.0)),
+                        grid.centre(*free[pick[k]]), grid.centre(*free[pick[n + k]])) for k in range(n)]
+    return grid, robots, free, pick
 
 
 def _joined(before: TimedPath, leg: TimedPath, t0: float) -> TimedPath:
@@ -79,13 +114,8 @@ def test_a_burst_of_new_legs_in_a_crowd_is_planned_on_the_lattice_and_checked():
     intervals against the exact cell holdings of the robots still driving), and the whole fleet -
     driven paths, the parked part before t0 and the new legs - passes the checker."""
     rows = ["..........", ".@@..@@...", "..........", "..........", "...@@..@@.", ".........."]
-    grid = GridMap.from_rows(rows)
-    free = [(c, r) for r in range(len(rows)) for c in range(10) if rows[r][c] == "."]
-    rng = np.random.default_rng(0)
-    pick = rng.permutation(len(free))
     n = 12
-    robots = [RobotSpec(f"r{k}", float(rng.uniform(0.35, 0.45)), float(rng.uniform(0.6, 1.0)),
-                        grid.centre(*free[pick[k]]), grid.centre(*free[pick[n + k]])) for k in range(n)]
+    grid, robots, free, pick = _crowd(rows, n, seed=0, slowest=0.6)
     planner = CrowdPlanner(refine_s=0.2, timed_refine_s=0.1)
     plan = planner.plan(grid, robots)
     assert check_plan(grid, robots, plan) == []

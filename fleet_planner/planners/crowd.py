@@ -5,6 +5,13 @@ Prioritized planning (md, PRIOR) fails by construction where robots must step as
 in 1-cell aisles. This planner searches the space of configurations instead and makes the result
 safe for discs in continuous time:
 
+0. **A timed first plan** where every robot drives at constant top speed: prioritized safe-interval
+   planning at each robot's own speed on the cell graph under the timing's holding rule
+   (:meth:`.crowd_sipp.TimedRefiner.from_scratch`), refined by the timed LNS of step 2b and re-timed
+   by step 3's precedence pass; steps 1-2 are then skipped (plan info ``first_plan: "timed"``). A
+   plan of unit steps makes every robot move one cell per step, so timed at mixed speeds the fast
+   ones queue behind the slow ones (~0.10 of SoC/free at 400 robots); this plan never does. Where
+   it fails (or with acceleration limits), the discrete pipeline below plans.
 1. **A first plan**: prioritized planning on the same graph under the same rules where it
    succeeds (:func:`.crowd_lns.prioritized_first`: a far shorter first plan than LaCAM's), else
    the **configuration search** (:mod:`.crowd_pibt`): LaCAM (Okumura, "LaCAM: Search-Based Algorithm
@@ -77,9 +84,14 @@ class CrowdPlanner(Planner):
     distinct cells keep the cell step, >= r_i + r_j); ``timed_refine_s``: CPU seconds of the
     speed-aware refinement of the timed plan (:mod:`.crowd_sipp`; None: 0.5 s up to 500 robots, else 0;
     it runs only where no robot has ``max_accel``: its safe intervals are at constant top speed).
-    ``first``: the first discrete plan: "auto" tries prioritized planning (:func:`.crowd_lns.prioritized_first`,
-    at most 0.5 s + 1 ms per robot of CPU) and lets the configuration search plan when it fails, "lacam"
-    always the configuration search (the plan's info says which: ``first_plan``).
+    ``first``: the first plan: "auto" tries the timed prioritized plan (module docstring, step 0; only
+    without ``max_accel``; its timed LNS then gets what is left of :data:`TIMED_BUDGET_S` CPU seconds
+    unless ``timed_refine_s`` is given, and ``refine_s`` is not used), then discrete prioritized
+    planning (:func:`.crowd_lns.prioritized_first`; skipped when the timed one failed for more than one
+    robot in 20: it fails there too), each at most 0.5 s + 1 ms per robot of CPU, and lets the
+    configuration search plan when both fail; "discrete" starts with the discrete prioritized plan;
+    "lacam" always the configuration search (the plan's info says which: ``first_plan`` "timed",
+    "prioritized" or "lacam").
     ``cutoff`` (None: off): a sum of arrival times (s) to beat; when the robots' hop distances on
     the grid graph at top speed (a lower bound of this solver's sum of arrivals: every plan moves
     along the graph's edges, one cell step each, at most at top speed) already sum to at least it,
@@ -104,8 +116,8 @@ class CrowdPlanner(Planner):
         if timed_refine_s is not None and not timed_refine_s >= 0:
             raise ValueError(f"timed_refine_s: must be >= 0 (got {timed_refine_s!r})")
         self.timed_refine_s = None if timed_refine_s is None else float(timed_refine_s)
-        if first not in ("auto", "lacam"):
-            raise ValueError(f"first: 'auto' or 'lacam' (got {first!r})")
+        if first not in ("auto", "discrete", "lacam"):
+            raise ValueError(f"first: 'auto', 'discrete' or 'lacam' (got {first!r})")
         self.first = first
         if cutoff is not None and not (isinstance(cutoff, (int, float)) and math.isfinite(cutoff)):
             raise ValueError(f"cutoff: must be a finite number or None (got {cutoff!r})")
@@ -137,15 +149,43 @@ class CrowdPlanner(Planner):
         if cut:
             raise PlanningError({robots[i].id: "its goal cannot be reached from its start on the grid graph "
                                  "of cells its disc fits on" for i in cut})
-        res = grid.resolution
-        durations = np.array([res / r.max_speed for r in robots])
+        durations = np.array([grid.resolution / r.max_speed for r in robots])
         if self.cutoff is not None:
             bound = float(search.lower_bounds() @ durations)
             if bound >= self.cutoff:
                 raise PlanningError({r.id: f"dense solver: its lower bound {bound:.1f} s on the sum of arrivals "
                                      f"is not below the cutoff {self.cutoff:.1f} s" for r in robots})
+        res = grid.resolution
+        centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
+        radii = [r.radius for r in robots]
+        accels = [r.max_accel for r in robots]
+        at_top_speed = all(a is None for a in accels)
+        hopeless = False
+        if self.first == "auto" and at_top_speed:
+            # speed-aware from the start: each robot planned at its own speed (no fast robot queued behind a
+            # slow one by a plan of unit steps); measured on bench_dense (3 seeds, loaded machine), warehouse-10-20-
+            # 10-2-1 400 robots: SoC/free 1.242 -> 1.20 at the same CPU (1.8-2.0 s); 20-40-10-2-2 2000: 1.243 -> 1.116
+            # and 13.3 -> 9.8 s; 100 robots: 1.061 either way
+            timed_first, hopeless = TimedRefiner.from_scratch(
+                starts, search.goals, durations, search.fields, search.grow, graph.nb, graph.deg, graph.n,
+                self.seed, release=crowd_sipp.RELEASE, cpu_s=0.5 + len(robots) / 1000)
+            if timed_first is None:
+                # (the discrete pipeline's budget below as without the attempt: at 1000 robots on
+                # warehouse-10-20-10-2-1 the attempt fails after ~0.9 s, and LaCAM's plan needs its LNS time)
+                c_start = time.process_time()
+            else:
+                t_first = time.perf_counter() - t_start
+                if progress:
+                    progress(1, 3, "refinement (timed LNS)")
+                budget = self.timed_refine_s if self.timed_refine_s is not None else \
+                    max(0.2, TIMED_BUDGET_S * min(1.0, 0.25 + len(robots) / 500) - (time.process_time() - c_start))
+                timing, stats = _timed_rounds(timed_first, deadline, budget, starts, search, graph, durations,
+                                              centres, radii, res, accels, self.margin, self.seed)
+                timed_info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
+                              "search_s": round(t_first, 3), **stats}
+                return self._finish(timing, centres, starts, robots, res, t_start, timed_info, progress)
         configs = None
-        if self.first == "auto":
+        if self.first in ("auto", "discrete") and not hopeless:
             configs = prioritized_first(graph, search.fields, search.grow, starts, search.goals, durations,
                                         cpu_s=0.5 + len(robots) / 1000)
         first = "prioritized" if configs is not None else "lacam"
@@ -176,33 +216,28 @@ class CrowdPlanner(Planner):
             info.update(lns_iterations=refiner.iterations, lns_accepted=refiner.accepted)
         if progress:
             progress(2, 3, "timing by precedence")
-        centres = np.column_stack([(graph.cols + 0.5) * res, (graph.rows + 0.5) * res])
-        radii = [r.radius for r in robots]
-        accels = [r.max_accel for r in robots]
         timing = time_moves(remove_loops(configs), durations, centres, radii, res, accels, self.margin)
         # (measured on bench_dense: 400 robots SoC/free 1.341 -> ~1.29; at 1000 and 2000 no gain: there the
         # discrete plan's own delays dominate)
         timed_s = self.timed_refine_s if self.timed_refine_s is not None else 0.5 if len(robots) <= 500 else 0.0
-        if timed_s > 0 and len(robots) > 1 and all(a is None for a in accels):
+        if timed_s > 0 and len(robots) > 1 and at_top_speed:
             # speed-aware: each robot re-planned at its own speed against the others' timed cells
-            # in two rounds, re-timed by the precedence pass in between: robots that no longer wait for
-            # the re-planned ones move up, which gives the second round room (measured: ~0.01 SoC/free)
-            iterations = accepted = 0
-            for k in range(2):
-                refiner2 = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow,
-                                        graph.nb, graph.deg, graph.n, self.seed + k)
-                refiner2.run(deadline, cpu_s=timed_s / 2)
-                iterations, accepted = iterations + refiner2.iterations, accepted + refiner2.accepted
-                if refiner2.accepted:
-                    robot, key, src, dst = refiner2.moves()
-                    timing = time_move_list(np.asarray(starts), robot, key, src, dst, durations, centres, radii,
-                                            res, accels, self.margin)
-            info.update(timed_lns_iterations=iterations, timed_lns_accepted=accepted)
+            timed = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
+                                 graph.deg, graph.n, self.seed, release=crowd_sipp.RELEASE)
+            timing, stats = _timed_rounds(timed, deadline, timed_s, starts, search, graph, durations, centres,
+                                          radii, res, accels, self.margin, self.seed, timing)
+            info.update(stats)
+        info.update(steps=int(configs.shape[0] - 1))
+        return self._finish(timing, centres, starts, robots, res, t_start, info, progress)
+
+    def _finish(self, timing, centres, starts, robots, res, t_start, info, progress) -> Plan:
+        """The timed paths (and the network) of ``timing``."""
+        radii = [r.radius for r in robots]
         paths = timed_paths(timing, centres, starts, [r.id for r in robots], radii)
         net = network(timing, [r.id for r in robots], res) if self.with_network else None
         if progress:
             progress(3, 3, "done")
-        info.update(steps=int(configs.shape[0] - 1), precedences=len(timing.visits))
+        info.update(precedences=len(timing.visits))
         return Plan(self.name, paths, time.perf_counter() - t_start, info, net)
 
     def plan_incremental(self, grid: GridMap, robots: Sequence[RobotSpec], fixed: Sequence[TimedPath],
@@ -243,6 +278,51 @@ class CrowdPlanner(Planner):
                     return inc.plan_legs(graph, robots, cells[0], cells[1], holdings, float(t0), self.seed)
         self.last_incremental = "prior"
         return PriorPlanner().plan_incremental(grid, robots, fixed, t0)
+
+
+#: CPU seconds of a whole plan (first plan and timed LNS) after a timed first plan from 375 robots on,
+#: less below (0.25 + N / 500 of it: at 100 robots SoC/free is reached after ~0.5 s), unless
+#: ``timed_refine_s`` says otherwise
+TIMED_BUDGET_S = 1.5
+#: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
+#: re-planned ones move up, which gives the next round room)
+TIMED_ROUNDS = 3
+
+
+def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, search, graph, durations, centres,
+                  radii, res, accels, margin, seed, timing=None):
+    """The timed LNS in :data:`TIMED_ROUNDS` rounds of ``cpu_s`` in all, each started from the
+    precedence pass's timing of the last; returns the best timing re-timed (the refiner's own times
+    use its release model, the precedence pass the exact rules: the sum of arrivals is judged after
+    re-timing, so the result is never worse than ``timing``) and the LNS counts for the plan's info."""
+    starts = np.asarray(starts)
+
+    def retimed(r: TimedRefiner):
+        robot, key, src, dst = r.moves()
+        return time_move_list(starts, robot, key, src, dst, durations, centres, radii, res, accels, margin)
+
+    def total(t) -> float:
+        arrival = np.zeros(len(starts))
+        np.maximum.at(arrival, t.robot, t.end)
+        return float(arrival.sum())
+
+    if timing is None:
+        timing = retimed(refiner)
+    best, best_sum = timing, total(timing)
+    iterations = accepted = 0
+    for k in range(TIMED_ROUNDS):
+        if k > 0:
+            refiner = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
+                                   graph.deg, graph.n, seed + k, release=crowd_sipp.RELEASE)
+        refiner.run(deadline, cpu_s=cpu_s / TIMED_ROUNDS)
+        iterations, accepted = iterations + refiner.iterations, accepted + refiner.accepted
+        if not refiner.accepted:
+            break
+        timing = retimed(refiner)
+        now = total(timing)
+        if now < best_sum - 1e-9:
+            best, best_sum = timing, now
+    return best, {"timed_lns_iterations": iterations, "timed_lns_accepted": accepted}
 
 
 def _check_radii(grid: GridMap, robots: Sequence[RobotSpec]) -> None:

@@ -123,7 +123,7 @@ def _sequential(graph, order, starts, goals, dur, fields, grow, holdings, L, K):
         gen += 1
         ln = sipp_k.sipp(i, int(starts[i]), int(goals[i]), float(dur[i]), fields[grow[i]], h_lo, h_hi, h_n, graph.nb,
                          graph.deg, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf,
-                         1.0, 50 * ncell, out_cell, out_dep, stats)
+                         1.0, 50 * ncell, out_cell, out_dep, stats, float(dur[i]))
         if ln < 0:
             failed.append(i)
             sipp_k._put(int(starts[i]), i, 0.0, np.inf, h_who, h_lo, h_hi, h_n)   # it stays where it is
