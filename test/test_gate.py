@@ -117,6 +117,26 @@ def test_a_new_leg_that_passes_first_grows_the_record_of_the_robot_already_drivi
     assert links[0].entry < 5.0 - 2 * R < 5.0 + 2 * R < max(lk.exit for lk in links)
 
 
+def test_a_robot_re_planned_keeps_its_old_paths_way_ahead_live_until_it_reports_the_new_leg():
+    # the 22-robot run under load (issue 9): legs and records reached robots 4-14 s of simulated time
+    # after they were planned; a robot re-planned drove on along its old path that long (up to 9.8 m),
+    # while the legs planned for others meanwhile took it as standing where it last reported: no link
+    # on that stretch, only the safety net between them
+    book = GateBook()
+    a, b = robot("a", 0.0, 5.0), robot("b", 12.0, 0.0)
+    book.on_leg(a, 1, straight("a", (0.0, 5.0), (20.0, 5.0), 0.0), [a, b], 0.0)
+    a.status = RobotStatus.from_dict({**said("a", 1, 2.0).to_dict(), "x": 2.0, "y": 5.0, "vx": 1.0, "stamp": 2.0})
+    book.on_leg(a, 2, straight("a", (3.0, 5.0), (3.0, 15.0), 3.0), [a, b], 2.0)  # re-planned: north at x = 3
+    pb = straight("b", (12.0, 0.0), (12.0, 10.0), 3.0)          # b crosses a's old way at x = 12 by t = 8
+    mine = book.on_leg(b, 3, pb, [a, b], 2.0)[0]
+    assert {(lk.robot, lk.path_id) for lk in links_of(mine)} == {("a", 1)} and mine.watch == {"a": 2}
+    entry = gate_limit(mine, 3, {"a": said("a", 1, 2.0)})
+    assert entry < 5.0 - 2 * R                                     # b waits short of a's old way ...
+    assert gate_limit(mine, 3, {"a": said("a", 1, 11.0)}) == entry  # ... while a still drives it towards b
+    assert gate_limit(mine, 3, {"a": said("a", 1, 13.0)}) == math.inf  # ... until a is past,
+    assert gate_limit(mine, 3, {"a": said("a", 2, 0.0)}) == math.inf   # or reports its new leg
+
+
 def test_a_robot_that_may_already_be_in_the_region_passes_first_whatever_the_plan_says():
     book = GateBook()
     a, b = robot("a", 0.0, 5.0), robot("b", 5.0, 0.0)

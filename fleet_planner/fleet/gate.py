@@ -310,8 +310,13 @@ class GateBook:
                 reach = max(done, min(arc_at(p, now + self.reach_s), done + o.kind.max_speed * since, cap))
                 if pid == latest:
                     theirs = sample(p, done, step=self.sample_m)
-                elif on_it:  # the path it drives until it takes its latest one: only near where it is
-                    theirs = sample(p, done, reach, step=self.sample_m)
+                elif on_it:
+                    # the path it drives until it takes its latest one: all of its way on, not only
+                    # what it may drive within reach_s. It drives on until the new leg or its record
+                    # reaches it, however late that is (the 22-robot run under load: 4-14 s of
+                    # simulated time, up to 9.8 m driven on, no link on that stretch); the links stop
+                    # holding once it reports the later path (``watch``)
+                    theirs = sample(p, done, step=self.sample_m)
                 else:
                     continue
                 clear = r.radius + o.radius + self.pad_m
