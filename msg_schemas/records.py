@@ -432,8 +432,8 @@ _STATUS_FLOATS = {"x": (-math.inf, math.inf), "y": (-math.inf, math.inf), "yaw":
                   "progress": (0.0, 1.0), "stamp": (-math.inf, math.inf), "radius": (0.0, math.inf),
                   "lateness_s": (0.0, math.inf), "travelled_m": (0.0, math.inf)}
 #: fields whose values of a type skip their check: ids (ints in [0, INT_MAX]) and booleans
-_STATUS_TYPED = {"path_id": "path_id", "rejected_path_id": "path_id", "gate_seq": "path_id", "manual": "bool", "estop": "bool",
-                 "loaded": "bool"}
+_STATUS_TYPED = {"path_id": "path_id", "rejected_path_id": "path_id", "gate_seq": "path_id", "manual": "bool",
+                 "estop": "bool", "loaded": "bool"}
 _STATUS_CHECKS: list[tuple[str, Check, str, float, float, bool, str]] = []
 _STATUS_STRINGS: dict[tuple[str, str], str] = {}   # (field, string) -> what its check returned
 _MAX_STATUS_STRINGS = 10_000

@@ -152,8 +152,9 @@ def gate_limit(record: GateRecord | None, path_id: int | None, statuses: Mapping
     if record is None or path_id is None or record.path_id != path_id:
         return 0.0
     watch = record.watch or {}
-    return min((lk.entry for lk in links_of(record) if lk not in skip and not (lk.ack is not None and lk.entry < travelled)
-                and not satisfied(lk, statuses, watch)), default=math.inf)
+    return min((lk.entry for lk in links_of(record) if lk not in skip
+                and not (lk.ack is not None and lk.entry < travelled) and not satisfied(lk, statuses, watch)),
+               default=math.inf)
 
 
 def too_late(record: GateRecord, travelled: float, seen: Container[Link]) -> set[Link]:
