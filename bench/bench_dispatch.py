@@ -31,11 +31,14 @@ from fleet_planner.fleet.placement import parking_spots, place_robots  # noqa: E
 from fleet_planner.fleet.sim import SimFleet  # noqa: E402
 from fleet_planner.robots import load_kinds  # noqa: E402
 from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
-from fleet_planner.ros.demo.timeuse import time_use  # noqa: E402
+from fleet_planner.ros.demo.timeuse import sites_of, time_use  # noqa: E402
 from fleet_planner.warehouse import config_path, load_warehouse  # noqa: E402
 
 POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "batch": DispatchPolicy(sites=False), "staged": STAGED,
-            "staged-no-queue": DispatchPolicy(staging=True, charge_below=0.6, leave_charger_at=0.95)}
+            "staged-no-queue": DispatchPolicy(staging=True, charge_below=0.6, leave_charger_at=0.95),
+            "queue": DispatchPolicy(queue=True), "queue-picked": DispatchPolicy(queue=True, site_hold="picked"),
+            "queue-soon": DispatchPolicy(queue=True, site_hold="soon"), "picked": DispatchPolicy(site_hold="picked"),
+            "soon": DispatchPolicy(site_hold="soon")}
 
 
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
@@ -111,10 +114,11 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
     done_t = [e.stamp for e in events if e.event == "done"]
     span = (max(done_t) - first) if done_t else None
     out = {"n": n, "jobs": len(jobs), "done": len(done_t), "span": span,
-           "per_h": 3600.0 * len(done_t) / span if span else 0.0, "gap": gap, "cpu": time.process_time() - cpu0}
+           "per_h": 3600.0 * len(done_t) / span if span else 0.0, "gap": gap, "cpu": time.process_time() - cpu0,
+           "events": events, "task": jobs}
     if span:
         chutes = {s.name: s.pose for s in wh.stations_of("chute")}
-        out["use"] = time_use(modes, events, jobs, kinds, tracks, chutes, first, first + span)
+        out["use"] = time_use(modes, events, jobs, kinds, tracks, chutes, first, first + span, sites=sites_of(wh))
     return out
 
 

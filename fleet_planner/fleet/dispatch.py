@@ -40,6 +40,11 @@ STAGING_BAND_M = 1.6
 _NEVER = 1e12
 
 
+#: how long a job holds its storing site for the dispatcher (policy ``sites``): until done; until
+#: picked; until done, or picked and done before a robot given a job there now could get there
+SITE_HOLDS = ("done", "picked", "soon")
+
+
 @dataclass(frozen=True)
 class DispatchPolicy:
     """How the dispatcher chooses (the manager's :attr:`~.manager.FleetManager.policy`).
@@ -66,10 +71,13 @@ class DispatchPolicy:
     staging: bool = False
     queue: bool = False
     sites: bool = True
+    site_hold: str = "done"
     charge_below: float = 1.0
     leave_charger_at: float = 1.0
 
     def __post_init__(self) -> None:
+        if self.site_hold not in SITE_HOLDS:
+            raise ValueError(f"site_hold: one of {', '.join(SITE_HOLDS)} (got {self.site_hold!r})")
         for name in ("charge_below", "leave_charger_at"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
