@@ -19,7 +19,8 @@ def _run(second_place: str, sites: dict[str, str] | None):
     """rA does J1 (chute_1 -> B01) over [0, 100); rB stands idle all along while J2 (chute_2 ->
     ``second_place``) is queued until rB takes it at 100."""
     jobs = [Task(id="J1", pick="chute_1", place="B01-01"), Task(id="J2", pick="chute_2", place=second_place)]
-    events = [TaskEvent(task_id="J1", event="accepted", stamp=0.0), TaskEvent(task_id="J2", event="accepted", stamp=0.0),
+    events = [TaskEvent(task_id="J1", event="accepted", stamp=0.0),
+              TaskEvent(task_id="J2", event="accepted", stamp=0.0),
               TaskEvent(task_id="J1", event="assigned", stamp=0.0, robot_id="rA"),
               TaskEvent(task_id="J1", event="picked", stamp=40.0, robot_id="rA"),
               TaskEvent(task_id="J1", event="done", stamp=100.0, robot_id="rA"),
