@@ -63,10 +63,11 @@ class DispatchPolicy:
     a staging spot once charged this far.
 
     Default (ours, measured with ``bench/bench_dispatch.py --robots 30 --jobs 100 --interval 1.2``,
-    jobs per simulated hour, job seeds 1 / 2): the queue and site_hold "soon" 341 / 293; before, batch
+    jobs per simulated hour, job seeds 1 / 2): the queue and site_hold "soon" 355 / 285; before, batch
     and sites held until done 264-279 / -, the queue with that 300 / 242, with "picked" 321 / -: with
     the chutes pipelined the busiest storing site (9-12 of 100 jobs) held from assignment to done
-    (~130 s a job) set the span. Earlier: batch alone 224 / 273 (seed 3), the nearest robot per job
+    (~130 s a job) set the span; the demo's nine robots (``--robots 0``, seeds 1-4) 147 / 183 / 178 / 163,
+    were 128 / 135 / 143 / 160. Earlier: batch alone 224 / 273 (seed 3), the nearest robot per job
     231; staging for idle robots (``staged-no-queue``) 282 / 284 (97 of 100 with seed 2) and
     :data:`STAGED` 277: with 17 staging spots the north aisle jammed (ROS run); idle robots are not
     staged by default. A queued robot once stood by its chute for ever (93 of 100 jobs, with
