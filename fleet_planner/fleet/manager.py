@@ -716,13 +716,20 @@ class FleetManager:
         for chute, r in waiting.items():
             if self._out_of_time():
                 return
-            if not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
-                job = self.jobs[r.job] if r.job is not None else None
-                occupant = self._occupant(job.pick.pose, r.radius, exclude=r) if job is not None else None
-                if job is not None and (occupant is None or self._leaving(occupant, job.pick.pose)):
+            job = self.jobs.get(r.job) if r.job is not None else None
+            if job is None:
+                continue
+            occupant = self._occupant(job.pick.pose, r.radius, exclude=r)
+            if occupant is not None and occupant.immobile:
+                # a robot stopped for good on the chute: nobody picks there; the job goes back to the queue
+                r.job, job.state, job.robot = None, "queued", None
+                self._record(job, "requeued", now)
+                d.notes.append(f"job {job.task.id} is queued again: {occupant.id} stands on {chute} for good")
+            elif not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
+                if occupant is None or self._leaving(occupant, job.pick.pose):
                     self._plan_leg(r, Target("pick", job.pick.name, job.pick.pose), now, d)
-                elif occupant is not None and occupant.free:
-                    self._send_away(occupant, now, d)   # (else it stood there for ever: nobody else moves it)
+                elif occupant.free:
+                    self._send_away(occupant, now, d)   # (sooner than its idle time would send it)
         free = {r.id: r for r in self.robots.values() if self._available(r, now)} if queued else {}
         if not free:
             return
@@ -756,6 +763,9 @@ class FleetManager:
         for chute, spot in self.queue_spot.items():
             if chute in waiting or not self._reserved(self.work_stops[chute]):
                 continue
+            blocker = self._occupant(self.work_stops[chute], max(r.radius for r in free.values()))
+            if blocker is not None and blocker.immobile:
+                continue   # a robot stopped on it for good (offline, out of battery): nobody waits for it
             occupant = self._occupant(self.staging[spot], max(r.radius for r in free.values()))
             if occupant is None or occupant.id in free:
                 open_spot[chute] = spot
