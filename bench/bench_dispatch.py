@@ -31,11 +31,16 @@ from fleet_planner.fleet.placement import parking_spots, place_robots  # noqa: E
 from fleet_planner.fleet.sim import SimFleet  # noqa: E402
 from fleet_planner.robots import load_kinds  # noqa: E402
 from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
-from fleet_planner.ros.demo.timeuse import time_use  # noqa: E402
+from fleet_planner.ros.demo.timeuse import sites_of, time_use  # noqa: E402
 from fleet_planner.warehouse import config_path, load_warehouse  # noqa: E402
 
-POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "batch": DispatchPolicy(sites=False), "staged": STAGED,
-            "staged-no-queue": DispatchPolicy(staging=True, charge_below=0.6, leave_charger_at=0.95)}
+#: "new" is the default; "s18" the default before the chute queue (sites held until done)
+POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "s18": DispatchPolicy(queue=False, site_hold="done"),
+            "batch": DispatchPolicy(queue=False, sites=False, site_hold="done"), "staged": STAGED,
+            "staged-no-queue": DispatchPolicy(staging=True, queue=False, site_hold="done", charge_below=0.6,
+                                              leave_charger_at=0.95),
+            "queue": DispatchPolicy(site_hold="done"), "queue-picked": DispatchPolicy(site_hold="picked"),
+            "soon": DispatchPolicy(queue=False)}
 
 
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
@@ -111,10 +116,11 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
     done_t = [e.stamp for e in events if e.event == "done"]
     span = (max(done_t) - first) if done_t else None
     out = {"n": n, "jobs": len(jobs), "done": len(done_t), "span": span,
-           "per_h": 3600.0 * len(done_t) / span if span else 0.0, "gap": gap, "cpu": time.process_time() - cpu0}
+           "per_h": 3600.0 * len(done_t) / span if span else 0.0, "gap": gap, "cpu": time.process_time() - cpu0,
+           "events": events, "task": jobs}
     if span:
         chutes = {s.name: s.pose for s in wh.stations_of("chute")}
-        out["use"] = time_use(modes, events, jobs, kinds, tracks, chutes, first, first + span)
+        out["use"] = time_use(modes, events, jobs, kinds, tracks, chutes, first, first + span, sites=sites_of(wh))
     return out
 
 
@@ -122,7 +128,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     p.add_argument("--robots", type=int, nargs="+", default=[9, 30],
                    help="fleet sizes (robots placed as fleet-demo --robots N places them; 0: the demo's default fleet)")
-    p.add_argument("--policies", nargs="+", default=["legacy", "new"], choices=sorted(POLICIES))
+    p.add_argument("--policies", nargs="+", default=["s18", "new"], choices=sorted(POLICIES))
     p.add_argument("--jobs", type=int, help="jobs (default: the demo's, 20/9 per robot)")
     p.add_argument("--interval", type=float, help="simulated s between jobs (default: the demo's, 36/N)")
     p.add_argument("--limit", type=float, default=4000.0, help="simulated s at most (default 4000)")

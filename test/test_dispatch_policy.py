@@ -182,3 +182,31 @@ def test_the_next_job_at_a_taken_chute_goes_to_a_robot_that_waits_by_it():
     fm.on_status(status("r3", "cargo", 1.25, 6.75), 0.5)
     fm.submit(Task(id="J3", pick="chute_1", place="B03-01"), 0.5)
     assert not [e for e in fm.step(1.0).events if e.event == "assigned"]
+
+
+@pytest.mark.parametrize("hold", ["soon", "done"])
+def test_a_picked_job_about_to_place_frees_its_site_for_the_next_job_with_site_hold_soon(hold):
+    fm = FleetManager(WH, KINDS, DispatchParams(idle_s=5.0))
+    fm.step_budget_s = 60.0
+    fm.policy = DispatchPolicy(site_hold=hold)
+
+    def carrying(x, y, t):
+        return RobotStatus(id="r1", kind="manipulator", x=x, y=y, yaw=0.0, vx=0.0, vy=0.0, battery=1.0,
+                           mode="driving", progress=0.5, stamp=t, radius=KINDS["manipulator"].radius,
+                           task_id="J1", loaded=True)
+
+    fm.on_status(status("r1", "manipulator", 6.25, 3.75), 0.0)
+    fm.submit(Task(id="J1", pick="chute_1", place="B01-01"), 0.0)
+    assert [e.robot_id for e in fm.step(0.5).events if e.event == "assigned"] == ["r1"]
+    fm.on_status(carrying(12.75, 3.75, 1.0), 1.0)   # picked, and 8.5 m of way from B01
+    assert [e.event for e in fm.step(1.0).events] == ["picked"]
+    fm.on_status(carrying(12.75, 3.75, 1.5), 1.5)
+    fm.on_status(status("r2", "manipulator", 12.75, 11.75, stamp=1.5), 1.5)
+    fm.submit(Task(id="J2", pick="chute_2", place="B01-02"), 1.5)   # the same storing site
+    # r1 needs 8.5 m at 0.72 m/s and a 12 s place (24 s); a robot given J2 now could be at B01 after
+    # a 12 s pick and 4 m from chute_1 (17.6 s): J2 waits, with either hold
+    assert not [e for e in fm.step(1.5).events if e.event == "assigned"]
+    fm.on_status(carrying(4.75, 6.25, 2.0), 2.0)   # r1 at B01: its place (12 s) ends before anyone else can come
+    fm.on_status(status("r2", "manipulator", 12.75, 11.75, stamp=2.0), 2.0)
+    assigned = [(e.task_id, e.robot_id) for e in fm.step(2.0).events if e.event == "assigned"]
+    assert assigned == ([("J2", "r2")] if hold == "soon" else [])   # (control: "done" holds it until J1 is done)

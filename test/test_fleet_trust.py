@@ -119,3 +119,17 @@ def test_a_robot_that_dies_in_the_middle_of_a_pick_counts_no_pick_and_its_job_is
     assert "picked" not in [e.event for e in sim.events if e.task_id == "J1"]
     assert sim.fm.jobs["J1"].state == "queued" and not sim.fm.jobs["J1"].picked  # the goods are still at the chute
     assert any("J1 is queued again" in n for n in sim.notes)
+
+
+def test_a_robot_waiting_for_a_chute_where_the_picker_died_is_let_go_and_its_job_queued_again():
+    sim = Sim(four_robots(), offline_timeout_s=2.0)
+    sim.submit(task("J1", "chute_2", "B04-01"))
+    sim.submit(task("J2", "chute_2", "B03-01"))   # the next job there: a robot waits by the chute (policy queue)
+    assert sim.run_until(lambda: any(a.model.mode == "picking" for a in sim.agents.values()))
+    first = next(rid for rid, a in sim.agents.items() if a.model.mode == "picking")
+    waiter = sim.fm.jobs["J2"].robot
+    assert waiter is not None and waiter != first
+    sim.dead.add(first)  # it dies on the chute
+    sim.run_until(lambda: False, limit=30)
+    assert sim.fm.jobs["J2"].state == "queued" and sim.fm.robots[waiter].job is None   # not waiting for ever
+    assert any("J2 is queued again" in n for n in sim.notes)

@@ -7,7 +7,10 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
+from fleet_planner.fleet import DispatchParams
+from fleet_planner.ros.demo.bringup import CLOCK_LEAD_GRACE_S, clock_lead_grace, planner_param
 from fleet_planner.ros.sim_clock import SimClock
+from fleet_planner.warehouse import config_path
 from msg_schemas import topics
 
 
@@ -56,3 +59,35 @@ def test_without_a_lead_the_clock_is_never_held(ros_context):
         executor.shutdown()
         clock.destroy_node()
         robots.destroy_node()
+
+
+def _silence_after_status(ros_context, name: str, grace: float, silent_s: float) -> float:
+    """Simulated seconds by which a clock at 20x, held 0.5 s ahead of the robots with ``grace``,
+    runs past the last status of a simulator that then stays silent ``silent_s`` wall seconds."""
+    clock = SimClock(name, context=ros_context, parameter_overrides=[
+        Parameter("rate", value=20.0), Parameter("max_lead_s", value=0.5), Parameter("lead_grace_s", value=grace)])
+    robots = rclpy.create_node(f"{name}_robots", context=ros_context)
+    pub = robots.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(clock)
+    executor.add_node(robots)
+    try:
+        _spin(executor, 0.3, lambda: pub.publish(String(data='{"id":"r1","stamp":0.2}')))
+        _spin(executor, silent_s)   # the simulator starved: no status at all
+        return clock.now_ns / 1e9 - 0.2
+    finally:
+        executor.shutdown()
+        clock.destroy_node()
+        robots.destroy_node()
+
+
+def test_the_process_fleets_clock_waits_out_a_starved_simulator_so_no_robot_looks_offline(ros_context):
+    # the demo's clock (bringup.start_processes): a fleet-sim starved 1.5 wall s (30 simulated s at
+    # 20x) stays within the planner's offline timeout of its last status: the clock waited for it
+    timeout = planner_param(config_path("planner_params.yaml"), "offline_timeout_s", -1.0)
+    assert timeout == DispatchParams().offline_timeout_s == 3.0
+    grace = clock_lead_grace(timeout)
+    assert grace >= timeout and grace >= CLOCK_LEAD_GRACE_S and clock_lead_grace(60.0) == 60.0
+    assert _silence_after_status(ros_context, "clock_grace_test", grace, 1.5) < timeout
+    # control: the clock's own default wait (1 wall s) runs on and the planner would count the robots offline
+    assert _silence_after_status(ros_context, "clock_short_grace_test", 1.0, 1.5) > timeout

@@ -40,36 +40,51 @@ STAGING_BAND_M = 1.6
 _NEVER = 1e12
 
 
+#: how long a job holds its storing site for the dispatcher (policy ``sites``): until done; until
+#: picked; until done, or picked and done before a robot given a job there now could get there
+SITE_HOLDS = ("done", "picked", "soon")
+
+
 @dataclass(frozen=True)
 class DispatchPolicy:
     """How the dispatcher chooses (the manager's :attr:`~.manager.FleetManager.policy`).
 
     ``batch``: pair free robots and jobs by the smallest sum of estimated arrival times (else each
     job in turn takes the nearest robot, the old rule); ``staging``: idle robots wait at staging
-    spots near the chutes rather than at chargers; ``queue`` (with ``batch`` and ``staging``): while
-    a chute is taken, the next job there goes to a robot that waits on the chute's staging spot and
-    drives the last metres the moment the chute is free (one robot waiting per chute);
-    ``sites``: a chute's next job is the first whose storing site no active job (nor one chosen
-    before it in the round) goes to; ``charge_below``: an idle robot goes to a charger rather than
-    a staging spot only below this battery (1.0: always, the old rule); ``leave_charger_at``: an
-    idle robot at a charger leaves for a staging spot once charged this far.
+    spots near the chutes rather than at chargers; ``queue`` (with ``batch``): while a chute is
+    taken, the next job there goes to a robot that waits on the chute's waiting spot (a staging spot
+    in the recess beside it, :func:`queue_spots`) and drives the last metres as soon as the robot
+    that picked there drives off (one robot waiting per chute); ``sites``: a chute's next job is the
+    first whose storing site no active job (nor one chosen before it in the round) goes to, a job
+    holding its site (``site_hold``, :data:`SITE_HOLDS`) until done, until picked, or ("soon") until
+    done or picked and about to place before a robot given a job there now could get there;
+    ``charge_below``: an idle robot goes to a charger rather than a staging spot only below this
+    battery (1.0: always, the old rule); ``leave_charger_at``: an idle robot at a charger leaves for
+    a staging spot once charged this far.
 
-    Default: batch assignment and one job per site (measured, ``bench/bench_dispatch.py --robots 30
-    --jobs 100``: batch alone 224 / 273 jobs per simulated hour with job seeds 1 / 3, with sites 279 /
-    304; before that the nearest robot per job 231). Staging without the queue (``staged-no-queue``
-    in the bench) measured 282 / 284, and 97 of 100 with seed 2; :data:`STAGED` (staging, queue,
-    charging below 0.6) 277 with seed 1 (before the site rule: 264). Neither is the default: with 17
-    staging spots the north aisle jammed (ROS run), and one per chute with the queue once stopped at
-    93 of 100 jobs (a robot waiting by a chute never released; not found)."""
+    Default (ours, measured with ``bench/bench_dispatch.py --robots 30 --jobs 100 --interval 1.2``,
+    jobs per simulated hour, job seeds 1 / 2): the queue and site_hold "soon" 355 / 285; before, batch
+    and sites held until done 264-279 / -, the queue with that 300 / 242, with "picked" 321 / -: with
+    the chutes pipelined the busiest storing site (9-12 of 100 jobs) held from assignment to done
+    (~130 s a job) set the span; the demo's nine robots (``--robots 0``, seeds 1-4) 147 / 183 / 178 / 163,
+    were 128 / 135 / 143 / 160. Earlier: batch alone 224 / 273 (seed 3), the nearest robot per job
+    231; staging for idle robots (``staged-no-queue``) 282 / 284 (97 of 100 with seed 2) and
+    :data:`STAGED` 277: with 17 staging spots the north aisle jammed (ROS run); idle robots are not
+    staged by default. A queued robot once stood by its chute for ever (93 of 100 jobs, with
+    staging; not reproduced): two possible causes are mended, the queue's jobs went without the
+    site rule, and nothing sent a free robot standing on the chute off from there."""
 
     batch: bool = True
     staging: bool = False
-    queue: bool = False
+    queue: bool = True
     sites: bool = True
+    site_hold: str = "soon"
     charge_below: float = 1.0
     leave_charger_at: float = 1.0
 
     def __post_init__(self) -> None:
+        if self.site_hold not in SITE_HOLDS:
+            raise ValueError(f"site_hold: one of {', '.join(SITE_HOLDS)} (got {self.site_hold!r})")
         for name in ("charge_below", "leave_charger_at"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
@@ -79,7 +94,8 @@ class DispatchPolicy:
 #: idle robots wait by the chutes, the next job of a taken chute waits on its spot (not the default: see above)
 STAGED = DispatchPolicy(staging=True, queue=True, charge_below=0.6, leave_charger_at=0.95)
 #: the old rules: the nearest robot for each job in turn, idle robots charge
-LEGACY = DispatchPolicy(batch=False, staging=False, queue=False, sites=False, charge_below=1.0, leave_charger_at=1.0)
+LEGACY = DispatchPolicy(batch=False, staging=False, queue=False, sites=False, site_hold="done", charge_below=1.0,
+                        leave_charger_at=1.0)
 
 
 class TravelTimes:

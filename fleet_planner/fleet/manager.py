@@ -132,6 +132,7 @@ class FleetManager:
         self.staging = {f"staging_{i + 1}": p for i, p in enumerate(staging_spots(warehouse, largest))}
         #: chute -> the staging spot where the robot with its next job waits (policy ``queue``)
         self.queue_spot = queue_spots({s.name: s.pose for s in warehouse.stations_of("chute")}, self.staging)
+        self._soonest: dict[str, float] = {}   # storing site -> _soonest_at
         self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
@@ -782,10 +783,20 @@ class FleetManager:
         for chute, r in waiting.items():
             if self._out_of_time():
                 return
-            if not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
-                job = self.jobs[r.job] if r.job is not None else None
-                if job is not None and self._occupant(job.pick.pose, r.radius, exclude=r) is None:
+            job = self.jobs.get(r.job) if r.job is not None else None
+            if job is None:
+                continue
+            occupant = self._occupant(job.pick.pose, r.radius, exclude=r)
+            if occupant is not None and occupant.immobile:
+                # a robot stopped for good on the chute: nobody picks there; the job goes back to the queue
+                r.job, job.state, job.robot = None, "queued", None
+                self._record(job, "requeued", now)
+                d.notes.append(f"job {job.task.id} is queued again: {occupant.id} stands on {chute} for good")
+            elif not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
+                if occupant is None or self._leaving(occupant, job.pick.pose):
                     self._plan_leg(r, Target("pick", job.pick.name, job.pick.pose), now, d)
+                elif occupant.free:
+                    self._send_away(occupant, now, d)   # (sooner than its idle time would send it)
         free = {r.id: r for r in self.robots.values() if self._available(r, now)} if queued else {}
         if not free:
             return
@@ -799,29 +810,36 @@ class FleetManager:
                     for r in free.values()]
 
         sites = self.policy.sites
+        site_of = (lambda jid: self.jobs[jid].place.name) if sites else None
+
+        def taken() -> set[str]:
+            return self._taken_sites() if sites else set()
+
         pairs = assign(cands(), jobs, able, self.travel.length,
                        busy=lambda chute: chute in waiting or self._reserved(self.work_stops[chute]),
-                       site_of=(lambda jid: self.jobs[jid].place.name) if sites else None,
-                       taken_sites={j.place.name for j in self.jobs.values() if j.state == "active"} if sites else ())
+                       site_of=site_of, taken_sites=taken())
         for rid, jid, _ in pairs:
             if self._out_of_time():
                 return
             if self._try_assign(free[rid], self.jobs[jid], now, d):
                 del free[rid]
-        if not (self.policy.queue and self.policy.staging and free):
+        if not (self.policy.queue and free):
             return
         # taken chutes with nobody waiting for them yet: the next job's robot waits on the chute's spot
         open_spot = {}
         for chute, spot in self.queue_spot.items():
             if chute in waiting or not self._reserved(self.work_stops[chute]):
                 continue
+            blocker = self._occupant(self.work_stops[chute], max(r.radius for r in free.values()))
+            if blocker is not None and blocker.immobile:
+                continue   # a robot stopped on it for good (offline, out of battery): nobody waits for it
             occupant = self._occupant(self.staging[spot], max(r.radius for r in free.values()))
             if occupant is None or occupant.id in free:
                 open_spot[chute] = spot
         if not open_spot:
             return
         pairs = assign(cands(), [(j, c) for j, c in jobs if c in open_spot and self.jobs[j].state == "queued"],
-                       able, self.travel.length)
+                       able, self.travel.length, site_of=site_of, taken_sites=taken())
         for rid, jid, _ in pairs:
             if self._out_of_time():
                 return
@@ -837,6 +855,45 @@ class FleetManager:
             r.job = job.task.id
             d.events.append(_event(job.task.id, "assigned", now, r.id))
             d.notes.append(f"robot {r.id} waits at {spot} for {job.pick.name} (job {job.task.id})")
+
+    def _leaving(self, o: FleetRobot, pose: Point) -> bool:
+        """``o`` stands at ``pose`` but drives off: it has the goods of its job and a leg it took that
+        ends elsewhere (the next robot's leg there is timed behind it; no need to wait until it is off)."""
+        job = self.jobs.get(o.job) if o.job is not None else None
+        return (job is not None and job.picked and o.leg is not None and not o.immobile
+                and o.status.path_id == o.leg.path_id
+                and math.dist(tuple(o.leg.path.waypoints[-1, :2]), pose) > o.radius + AT_STATION_M)
+
+    def _taken_sites(self) -> set[str]:
+        """Storing sites no new job may go to yet (policy ``sites``): those of active jobs, but with
+        ``site_hold`` "picked" only of jobs not yet picked, with "soon" also of picked jobs whose robot
+        will not have placed before a robot given a job there now could get there (its way there and
+        the place at its kind's speed, against the quickest pick and the shortest way from a chute)."""
+        hold = self.policy.site_hold
+        out: set[str] = set()
+        for j in self.jobs.values():
+            site = j.place.name
+            if j.state != "active" or site in out:
+                continue
+            r = self.robots.get(j.robot) if j.robot is not None else None
+            if hold == "done" or not j.picked or r is None:
+                out.add(site)
+            elif hold == "soon":
+                way = float(self.travel.length(site, np.array([r.pos]))[0])
+                left = way / (r.kind.max_speed * self.params.speed_factor) + r.kind.action_s("place")
+                if left > self._soonest_at(site):
+                    out.add(site)
+        return out
+
+    def _soonest_at(self, site: str) -> float:
+        """Simulated s at least before a robot given a job for ``site`` now can be there with the goods."""
+        out = self._soonest.get(site)
+        if out is None:
+            chutes = np.array([s.pose for s in self.warehouse.stations_of("chute")], dtype=float).reshape(-1, 2)
+            fastest = max(k.max_speed for k in self.kinds.values()) * self.params.speed_factor
+            way = float(np.min(self.travel.length(site, chutes))) if len(chutes) else 0.0
+            out = self._soonest[site] = way / fastest + min(k.action_s("pick") for k in self.kinds.values())
+        return out
 
     def _waiting_for_chutes(self) -> dict[str, FleetRobot]:
         """Chute -> the robot whose job is there but that is not yet bound for it (it waits by it)."""

@@ -136,10 +136,12 @@ def main(args: list[str] | None = None) -> None:
     parser.add_argument("--max-lead", type=float, default=0.0,
                         help="simulated seconds the clock may run ahead of the newest robot status (default 0: "
                              "never held)")
+    parser.add_argument("--lead-grace", type=float, default=1.0,
+                        help="wall seconds without any robot status after which a held clock runs on (default 1)")
     opts = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     overrides = [Parameter("rate", value=opts.rate), Parameter("step_s", value=opts.step),
                  Parameter("start_s", value=opts.start), Parameter("catch_up_s", value=opts.catch_up),
-                 Parameter("max_lead_s", value=opts.max_lead)]
+                 Parameter("max_lead_s", value=opts.max_lead), Parameter("lead_grace_s", value=opts.lead_grace)]
     run_node(lambda: SimClock(parameter_overrides=overrides), argv, prog="sim_clock")
 
 

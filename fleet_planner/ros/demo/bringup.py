@@ -22,7 +22,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from fleet_planner.fleet import FleetMember
+from fleet_planner.fleet import DispatchParams, FleetMember
 from fleet_planner.robots import RobotKind
 from fleet_planner.ros.demo.monitor import FleetMonitor
 from fleet_planner.ros.fleet_sim import FleetSimNode
@@ -96,6 +96,32 @@ def agent_params(m: FleetMember) -> list[Parameter]:
 #: the process fleet's clock: simulated s of lost ticks made up, and how far it may run ahead of the
 #: newest robot status (a starved fleet-sim holds it; 5 status periods)
 CLOCK_CATCH_UP_S, CLOCK_MAX_LEAD_S = 1.0, 0.5
+#: wall seconds at least that the process fleet's clock waits for a starved fleet-sim before it runs on
+#: unheld (a loaded machine starves it for seconds; the clock's own default, 1 s, was 3 simulated s at 3x:
+#: the planner's offline timeout, and a whole fleet went offline at once)
+CLOCK_LEAD_GRACE_S = 10.0
+
+
+def clock_lead_grace(offline_timeout_s: float) -> float:
+    """Wall seconds the process fleet's clock waits for a starved robot simulator: at least the
+    planner's ``offline_timeout_s`` (simulated s), so that holding the clock never makes a robot look
+    offline sooner than on a real-time clock (while held no simulated time passes; after the wait it
+    runs at the rate, and the planner counts the silence from there), and at least
+    :data:`CLOCK_LEAD_GRACE_S`."""
+    return max(CLOCK_LEAD_GRACE_S, float(offline_timeout_s))
+
+
+def _ros_parameters(params_file: Path) -> dict:
+    """The first ros__parameters table of a planner parameters file (empty if none)."""
+    data = yaml.safe_load(Path(params_file).read_text()) or {}
+    return next((v["ros__parameters"] for v in data.values()
+                 if isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict)), {})
+
+
+def planner_param(params_file: Path, name: str, default: float) -> float:
+    """A number of a planner ros__parameters file (``default`` when it is not there)."""
+    value = _ros_parameters(params_file).get(name)
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else default
 # -------------------------------------------------------------------------------------------------
 def node_command(script: str, module: str) -> list[str]:
     """How to start a node as a process: the console script beside this Python, else ``-m module``."""
@@ -118,7 +144,9 @@ def start_processes(members: Sequence[FleetMember], rate: float, params_file: Pa
         common += ["-p", f"kinds_file:={kinds_file}"]
     sim = ["-p", "use_sim_time:=true"]
     # the clock makes up ticks lost to a busy machine and waits for a starved robot simulator (sim_clock.py)
-    clock = ["--catch-up", str(CLOCK_CATCH_UP_S), "--max-lead", str(CLOCK_MAX_LEAD_S)]
+    clock = ["--catch-up", str(CLOCK_CATCH_UP_S), "--max-lead", str(CLOCK_MAX_LEAD_S),
+             "--lead-grace", str(clock_lead_grace(planner_param(params_file, "offline_timeout_s",
+                                                                DispatchParams().offline_timeout_s)))]
     commands = {"sim_clock": [sys.executable, "-m", "fleet_planner.ros.sim_clock", "--rate", str(rate)] + clock,
                 "planner": _profiled("planner", node_command("planner", "fleet_planner.ros.planner_node"))
                 + ["--ros-args", "--params-file", str(params_file)] + sim + common
@@ -191,9 +219,7 @@ def stop_processes(procs: Sequence[subprocess.Popen], grace: float = 5.0) -> Non
 
 def parking_of(params_file: Path) -> list[tuple[float, float]]:
     """The parking spots of a planner ros__parameters file (what the planner of a process fleet uses)."""
-    data = yaml.safe_load(Path(params_file).read_text()) or {}
-    flat: list[float] = next((v["ros__parameters"].get("parking", []) for v in data.values()
-                              if isinstance(v, dict) and isinstance(v.get("ros__parameters"), dict)), [])
+    flat: list[float] = _ros_parameters(params_file).get("parking", [])
     return [(flat[i], flat[i + 1]) for i in range(0, len(flat) - 1, 2)]
 
 

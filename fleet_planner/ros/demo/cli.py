@@ -212,10 +212,10 @@ def main(args: list[str] | None = None) -> None:
             if spans:
                 lines += usage_lines(used, *spans)
             if opts.time_use and summary.completion_s:
-                from fleet_planner.ros.demo.timeuse import time_use
+                from fleet_planner.ros.demo.timeuse import sites_of, time_use
                 chutes = {s.name: s.pose for s in warehouse.stations_of("chute")}
                 lines += time_use(monitor.modes, monitor.events, jobs, kinds, monitor.tracks, chutes, summary.start,
-                                  summary.start + summary.completion_s).lines()
+                                  summary.start + summary.completion_s, sites=sites_of(warehouse)).lines()
             gap, robot, person, t = monitor.obstacle_separation()
             if robot is not None and t is not None:
                 lines.append(f"closest approach to an obstacle: {gap:+.3f} m beyond the sum of radii ({robot} and "

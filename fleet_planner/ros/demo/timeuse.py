@@ -11,9 +11,11 @@ simulated seconds; a sample falls into one category of :data:`CATEGORIES`:
   :data:`~.monitor.LATE_S` behind its schedule: its gate or its safety net stops it), standing with
   a job (``idle``: its leg has not started, or was refused, or it waits for the next);
 * without a job: driving (to a charger or parking spot), charging or idle - each split by whether
-  a job it could do was queued (accepted, not yet assigned) at a chute nobody was bound for
-  ("a job was free": the dispatcher's loss), only at chutes another robot was bound for ("its
-  chute was busy": the station's queue), or none ("nothing to do").
+  a job it could do was queued (accepted, not yet assigned) at a chute nobody was bound for and
+  for a storing site no other job was under way to ("a job was free": the dispatcher's loss), only
+  such jobs whose site another job was under way to ("its site was taken": the dispatcher's rule of
+  one job per site, fleet/dispatch.py; counted only when ``sites`` are given), only at chutes
+  another robot was bound for ("its chute was busy": the station's queue), or none ("nothing to do").
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import numpy as np
 
 from fleet_planner.fleet.state import can_do
 from fleet_planner.robots import RobotKind
+from fleet_planner.warehouse import Warehouse
 from msg_schemas.records import Task, TaskEvent
 
 #: the categories, in the order they are printed
@@ -31,10 +34,10 @@ CATEGORIES = (
     "job: driving to the chute", "job: picking", "job: driving to the storing site", "job: placing",
     "job: held on its schedule", "job: held back late (gate, safety net)", "job: standing (leg not started)",
     "no job: driving (to a charger or parking)", "no job: charging, a job was free",
-    "no job: charging, its chute was busy", "no job: charging, nothing to do",
-    "no job: idle, a job was free", "no job: idle, its chute was busy", "no job: idle, nothing to do",
+    "no job: charging, its site was taken", "no job: charging, its chute was busy", "no job: charging, nothing to do",
+    "no job: idle, a job was free", "no job: idle, its site was taken", "no job: idle, its chute was busy",
+    "no job: idle, nothing to do",
 )
-_FREE = ("free", "busy", "none")
 
 
 @dataclass
@@ -62,10 +65,12 @@ class TimeUse:
 
 def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], jobs: Sequence[Task],
              kinds: Mapping[str, RobotKind], tracks: Mapping[str, Sequence[tuple[float, float, float]]],
-             chutes: Mapping[str, tuple[float, float]], t0: float, t1: float, dt: float = 0.5) -> TimeUse:
+             chutes: Mapping[str, tuple[float, float]], t0: float, t1: float, dt: float = 0.5,
+             sites: Mapping[str, str] | None = None) -> TimeUse:
     """``modes``: per robot its (stamp, mode, late, task_id, loaded, kind) records in any order
     (:attr:`~.monitor.FleetMonitor.modes`); ``events`` the task events heard; ``tracks`` per robot
-    (x, y, stamp); ``chutes`` the chutes' poses by name; ``[t0, t1]`` the span (simulated s)."""
+    (x, y, stamp); ``chutes`` the chutes' poses by name; ``[t0, t1]`` the span (simulated s);
+    ``sites``: the storing site of each address tag (:func:`sites_of`), to tell "its site was taken"."""
     ts = np.arange(t0, t1, dt) if t1 > t0 else np.zeros(0)
     index = {j.id: k for k, j in enumerate(jobs)}
     first: dict[tuple[str, str], float] = {}
@@ -95,6 +100,15 @@ def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], 
     for c in range(len(chute_names)):
         busy[:, c] = bound[:, chute_of == c].any(axis=1)
     chute_busy = busy[:, chute_of] if n_jobs else np.zeros((len(ts), 0), dtype=bool)
+    # a job's site is taken while another job for the same site is under way (assigned, not ended)
+    site_taken = np.zeros((len(ts), n_jobs), dtype=bool)
+    if sites is not None and n_jobs:
+        active = (assigned[None, :] <= ts[:, None]) & (ts[:, None] < ended[None, :])
+        site_names = sorted({sites.get(j.place, j.place) for j in jobs})
+        site_of = np.array([site_names.index(sites.get(j.place, j.place)) for j in jobs], dtype=int)
+        for c in range(len(site_names)):
+            mask = site_of == c
+            site_taken[:, mask] = active[:, mask].any(axis=1)[:, None]
     seconds = dict.fromkeys(CATEGORIES, 0.0)
     for rid, log in modes.items():
         if not log:
@@ -104,7 +118,9 @@ def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], 
         k = np.searchsorted(stamps, ts, side="right") - 1
         kind = kinds.get(log[-1][5])
         able = np.array([kind is not None and can_do(kind, j) for j in jobs], dtype=bool)
-        free_job = (queued & ~chute_busy & able[None, :]).any(axis=1) if n_jobs else np.zeros(len(ts), bool)
+        open_chute = queued & ~chute_busy & able[None, :]
+        free_job = (open_chute & ~site_taken).any(axis=1) if n_jobs else np.zeros(len(ts), bool)
+        site_job = (open_chute & site_taken).any(axis=1) if n_jobs else np.zeros(len(ts), bool)
         busy_job = (queued & chute_busy & able[None, :]).any(axis=1) if n_jobs else np.zeros(len(ts), bool)
         mine = [i for t, i in index.items() if robot_of.get(t) == rid]
         for s, ki in enumerate(k):
@@ -124,7 +140,8 @@ def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], 
                 else:
                     name = "job: standing (leg not started)"
             else:
-                why = "a job was free" if free_job[s] else "its chute was busy" if busy_job[s] else "nothing to do"
+                why = ("a job was free" if free_job[s] else "its site was taken" if site_job[s]
+                       else "its chute was busy" if busy_job[s] else "nothing to do")
                 if mode in ("driving", "waiting"):
                     name = "no job: driving (to a charger or parking)"
                 elif mode == "charging":
@@ -148,8 +165,13 @@ def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], 
         values = values[np.isfinite(values)]
         return float(values.mean()) if len(values) else 0.0
 
-    return TimeUse(seconds, float(t1 - t0), len(modes), mean(assigned - accepted), mean((picked - assigned)[done]),
-                   mean((ended - picked)[done]), float(np.mean(approach)) if approach else 0.0)
+    return TimeUse(seconds, float(t1 - t0), len(modes), mean(assigned - accepted), mean(picked[done] - assigned[done]),
+                   mean(ended[done] - picked[done]), float(np.mean(approach)) if approach else 0.0)
 
 
-__all__ = ["CATEGORIES", "TimeUse", "time_use"]
+def sites_of(warehouse: Warehouse) -> dict[str, str]:
+    """The storing site (station name) of each address tag of ``warehouse``."""
+    return {tag: s.name for s in warehouse.stations_of("storage") for tag in s.tags}
+
+
+__all__ = ["CATEGORIES", "TimeUse", "sites_of", "time_use"]
