@@ -64,7 +64,8 @@ def load(path: Path):
     fleet = run.fleet
     for rid in fleet.ids:
         c = fleet.controller(rid)
-        fresh = BehaviorController(c.grid, c.id, c.radius, c.max_speed, c.position, c.params, finders={c.radius: c.finder})
+        fresh = BehaviorController(c.grid, c.id, c.radius, c.max_speed, c.position, c.params,
+                                   finders={c.radius: c.finder})
         for k, v in vars(fresh).items():
             c.__dict__.setdefault(k, v)
     return run
