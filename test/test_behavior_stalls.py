@@ -171,8 +171,6 @@ def test_a_robot_leaving_its_station_replans_round_a_waiting_robot_pinned_in_its
     re-plans round it. Control (the paper's rule only): r6 stays blocked."""
     from fleet_planner.behavior.controller import BehaviorController
 
-    # the queued robots do not slide out along the wall (a later breaker that also frees r6 here)
-    monkeypatch.setattr(BehaviorController, "_slide_out", lambda self, dock, step: [])
     fleet = _leaving_blocked_by_the_queue()
     _until_r6_arrives(fleet, 120.0)
     assert fleet.arrived("r6") and fleet.controller("r6").replans >= 1
@@ -180,54 +178,6 @@ def test_a_robot_leaving_its_station_replans_round_a_waiting_robot_pinned_in_its
     control = _leaving_blocked_by_the_queue()
     _until_r6_arrives(control, 120.0)
     assert not control.arrived("r6") and control.controller("r6").blocked_since is not None
-
-
-def _pinned_beside_a_chute() -> BehaviorFleet:
-    """The 200-robot stress run's chute_16 (`large2x`, t = 300-1250 s, cut out of a snapshot):
-    robot d drives into its station (Dock) just above a chute's pillar; robot w, bound up the
-    cross aisle, stands between d and the pillar, on the station's disc, and parked robots close
-    it in on the other sides. w cannot leave d's channel sideways (the pillar) or ahead of d (the
-    pillar, and nearer the station), and d stands 0.74 m from w, so w's way round d is too narrow
-    for the safety layer."""
-    grid = GridMap.from_rows(["@@@@@@@@@@@@@@@@@@@@@@@@",
-                              ".........@@@..........@@",
-                              ".........@@@..........@@",
-                              "........................",
-                              "........................",
-                              "........................",
-                              "........................",
-                              "........................",
-                              "@@@@@@.....@@@@@@@@@@@@@",
-                              "@@@@@@.....@@@@@@@@@@@@@",
-                              "@@@@@@.....@@@@@@@@@@@@@",
-                              "@@@@@@.....@@@@@@@@@@@@@"], 0.5)
-    radius = 0.354
-    parked = [(4.25, 2.25), (3.78, 3.4), (3.31, 1.31), (7.14, 3.48), (7.68, 1.28), (8.17, 2.73)]
-    specs = [RobotSpec("d", radius, 1.0, (5.89, 2.53), (5.89, 2.53)),
-             RobotSpec("w", radius, 1.0, (5.57, 1.86), (5.57, 1.86))]
-    specs += [RobotSpec(f"p{k}", radius, 1.0, p, p) for k, p in enumerate(parked)]
-    fleet = BehaviorFleet(grid, specs)
-    fleet.assign("d", (5.25, 2.25), station="chute_16")
-    fleet.assign("w", (4.25, 5.25))
-    return fleet
-
-
-def test_a_docking_robot_makes_room_for_a_robot_pinned_in_its_way(monkeypatch):
-    """Others give way to a Dock robot (IV.B.5); one pinned against a wall in its channel cannot
-    until the Dock robot backs off from it (ours, ``BehaviorController._make_room``), then it slides
-    out along the wall and both arrive. Control (no making room): both stay where they are."""
-    from fleet_planner.behavior.controller import BehaviorController
-
-    fleet = _pinned_beside_a_chute()
-    assert _drive(fleet, limit_s=60.0) >= 0.0
-    assert fleet.arrived("d") and fleet.arrived("w"), fleet.behaviors()
-    assert fleet.controller("d").holds is not None
-
-    monkeypatch.setattr(BehaviorController, "_make_room", lambda self, me, sensed: None)
-    control = _pinned_beside_a_chute()
-    _drive(control, limit_s=120.0)
-    assert not control.arrived("d") and not control.arrived("w")
-    assert np.allclose(control.controller("d").position, (5.89, 2.53), atol=0.05)
 
 
 def _one_wave_face_to_face() -> BehaviorFleet:

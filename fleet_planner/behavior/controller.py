@@ -29,7 +29,6 @@ B = Behavior
 _COS_STRAIGHT = math.cos(math.radians(10.0))  # a path bending less than this at a waypoint goes on straight
 _PROGRESS = 0.05  # m: coming this much closer to the goal (straight line) is progress (stats)
 _ESCAPE_HOLD_S = 3.0  # s: an escaped robot stands in its less crowded place at least this long
-_ROOM_S = 4.0  # s: a Dock robot stalled by a robot in its way backs off from it this long (see _make_room)
 
 
 def _xy(p: np.ndarray) -> tuple[float, float]:
@@ -112,8 +111,6 @@ class BehaviorController:
         self.escape_end = -math.inf           # the escape ends then at the latest
         self.escape_hold = -math.inf          # standing in the less crowded place at least until then
         self.escape_ready = -math.inf         # no new escape before this time
-        self.room_for: str | None = None      # Dock: the robot in its way it backs off from (see _make_room) ...
-        self.room_until = -math.inf           # ... until then
         self.deadlocks = self.replans = self.replan_failures = self.yields = self.escapes = 0
 
     # -- public ---------------------------------------------------------------------------
@@ -399,23 +396,6 @@ class BehaviorController:
         if rival is None and self._leaving() and self._stalled() and any(
                 self._does_not_give_way(o) and in_critical_area(me, o, self.params) for o in sensed):
             self._replan(sensed)
-        elif rival is None and not self._leaving() and self._stalled() and self.time >= self.room_until:
-            self._make_room(me, sensed)
-
-    def _make_room(self, me: RobotView, sensed: list[RobotView]) -> None:
-        """Interpretation (ours, issue 13): "the other robots will automatically give way" to a
-        Dock robot (IV.B.5), but a robot standing between the Dock robot and a wall may have no
-        room to: measured, a robot waiting beside a chute, pressed against the chute's pillar
-        with the Dock robot 0.74 m away, blocked that chute (and the main aisle queued behind it)
-        for 960 s of the 200-robot stress run. A Dock robot driving into its station that the
-        safety layer has stopped for ``blocked_timeout`` backs off from the robot in its way for
-        ``_ROOM_S`` (by up to ``keep_gap``), then drives on; that robot slides out of its channel
-        meanwhile (:meth:`_give_way_to_dock`)."""
-        blocker = min((o for o in sensed if in_critical_area(me, o, self.params)),
-                      key=lambda o: math.dist(o.position, self.pos), default=None)
-        if blocker is not None:
-            self.room_for, self.room_until = blocker.id, self.time + _ROOM_S
-            self.blocked_since = None
 
     @staticmethod
     def _does_not_give_way(other: RobotView) -> bool:
@@ -945,14 +925,10 @@ class BehaviorController:
         step = speed * dt
         b = self.behavior
         partner = next((o for o in sensed if o.id == self.partner), None) if self.partner is not None else None
-        if b is B.DOCK and self.time < self.room_until:     # making room for a robot in its way (_make_room)
-            blocker = next((o for o in sensed if o.id == self.room_for), None)
-            return [] if blocker is None else self._back_off([blocker], step / 2)
         if b in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK) or (b in (B.AVOID, B.EXCHANGE) and partner is None):
             return [self._along_path(step), self._along_path(step / 2)]
         if b in (B.AVOID, B.EXCHANGE) and partner is not None:
-            # no side to pass on: an Avoid of a Dock robot (Algorithm 1 case 2) gives way like a wait
-            return self._pass_motions(partner, step) or self._give_way_to_dock(sensed, step)
+            return self._pass_motions(partner, step)
         if b is B.WAIT_FOR_GO_THROUGH and partner is not None and partner.direction is not None:
             leave = self._leave_channel(partner, step)
             if leave is not None:
@@ -968,12 +944,10 @@ class BehaviorController:
         return give_way + self._back_off(others, step / 2)
 
     def _give_way_to_dock(self, sensed: Sequence[RobotView], step: float) -> list[tuple[np.ndarray, int]]:
-        """Motions out of the way of a travelling Dock robot whose critical area I stand in:
-        sideways out of its channel, ahead of it along its way, then along a wall
-        (:meth:`_slide_out`)."""
+        """Motions out of the way of a travelling Dock robot whose critical area I stand in."""
         me = None
         for o in sensed:
-            if (o.behavior is not B.DOCK or o.direction is None or o.next_waypoint is None
+            if (o.behavior is not B.DOCK or o.direction is None
                     or math.dist(o.position, self.pos) > self.params.give_way_reach):
                 continue
             me = self.view() if me is None else me
@@ -982,24 +956,8 @@ class BehaviorController:
             out = self._leave_channel(o, step) or []
             du = np.asarray(o.direction)
             out.append((self.pos + du * step / 2, -1))     # ahead of it, along its way
-            return out + self._slide_out(o, step / 2)
+            return out
         return []
-
-    def _slide_out(self, dock: RobotView, step: float) -> list[tuple[np.ndarray, int]]:
-        """Steps of ``step`` in any of eight directions that take me farther from the Dock robot's
-        channel (the segment to its next waypoint), farthest first (ours, see :meth:`_make_room`):
-        pressed against a wall, a robot may leave the channel only along the wall."""
-        assert dock.next_waypoint is not None
-        a = np.asarray(dock.position)
-        ab = np.asarray(dock.next_waypoint) - a
-
-        def off_channel(q: np.ndarray) -> float:
-            t = min(max(float((q - a) @ ab) / max(float(ab @ ab), EPS), 0.0), 1.0)
-            return math.dist(q, a + t * ab)
-
-        here = off_channel(self.pos)
-        fan = [self.pos + step * np.array([math.cos(k * math.pi / 4), math.sin(k * math.pi / 4)]) for k in range(8)]
-        return [(q, -1) for q in sorted((q for q in fan if off_channel(q) > here + EPS), key=lambda q: -off_channel(q))]
 
     def _pass_motions(self, partner: RobotView, step: float) -> list[tuple[np.ndarray, int]]:
         """Avoid / Exchange: step aside towards the chosen side (at most ``step``), driving on with
