@@ -57,7 +57,18 @@ def load(path: Path):
     import pickle
 
     _pickle_locks()
-    return pickle.loads(path.read_bytes())
+    run = pickle.loads(path.read_bytes())
+    # a snapshot taken by older code: its controllers get the attributes added since, as a new robot has them
+    from fleet_planner.behavior import BehaviorController
+
+    fleet = run.fleet
+    for rid in fleet.ids:
+        c = fleet.controller(rid)
+        fresh = BehaviorController(c.grid, c.id, c.radius, c.max_speed, c.position, c.params,
+                                   finders={c.radius: c.finder})
+        for k, v in vars(fresh).items():
+            c.__dict__.setdefault(k, v)
+    return run
 
 
 def report(run, near: bool = False, quiet: bool = False) -> collections.Counter:
@@ -237,7 +248,8 @@ def main() -> None:
                    help="every this many simulated seconds, a one-line summary of the stuck robots")
     p.add_argument("--snapshot-every", type=float, default=0.0,
                    help="every this many simulated seconds, pickle the run to --snapshot (to study a jam)")
-    p.add_argument("--snapshot", type=Path, default=Path("out/diag_behavior.pkl"))
+    p.add_argument("--snapshot", default="out/diag_behavior.pkl",
+                   help="the snapshot file; a '{t}' in it is replaced by the simulated time (keeps every snapshot)")
     p.add_argument("--resume", type=Path, default=None, help="go on from a snapshot (the map options are ignored)")
     p.add_argument("--budget", action="store_true",
                    help="where the driving robots' time goes (behaviour, moving/standing, place) and detours")
@@ -302,8 +314,9 @@ def main() -> None:
                 sys.stdout.flush()
             if a.snapshot_every > 0 and t >= next_snap:
                 next_snap += a.snapshot_every
-                a.snapshot.parent.mkdir(parents=True, exist_ok=True)
-                save(run, a.snapshot)
+                snap = Path(a.snapshot.replace("{t}", f"{t:.0f}"))
+                snap.parent.mkdir(parents=True, exist_ok=True)
+                save(run, snap)
         res = run._result(run.rules.ctime if run.rules.ctime is not None else run.fleet.time, stop)
     if profiler is not None:
         profiler.disable()

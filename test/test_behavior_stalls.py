@@ -178,3 +178,36 @@ def test_a_robot_leaving_its_station_replans_round_a_waiting_robot_pinned_in_its
     control = _leaving_blocked_by_the_queue()
     _until_r6_arrives(control, 120.0)
     assert not control.arrived("r6") and control.controller("r6").blocked_since is not None
+
+
+def _one_wave_face_to_face() -> BehaviorFleet:
+    """Two robots of one retreat wave face each other in a one-cell aisle (a parallel aisle is the
+    way round): each waits for the other to give way, as retreating robots do. Retreats that do
+    not time out and no escapes, so only the wait cycle's re-plan can break it."""
+    grid = GridMap.from_rows(["@@@@@@@@@@@@", "............", ".@@@@@@@@@@.", "............", "@@@@@@@@@@@@"])
+    robots = [RobotSpec("a", 0.35, 0.8, (4.5, 1.5), (11.5, 1.5)), RobotSpec("b", 0.35, 0.8, (6.5, 1.5), (0.5, 1.5))]
+    fleet = BehaviorFleet(grid, robots, BehaviorParams(retreat_timeout=600.0, escape_after=0.0))
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+        robot = fleet.controller(r.id)
+        robot.retreat, robot.retreat_at = (0.0, "a"), 0.0
+    return fleet
+
+
+def test_a_wait_cycle_of_retreating_robots_turns_one_of_them(monkeypatch):
+    """A retreating robot does not re-plan on a wait cycle (the others give way to it); when every
+    robot of the cycle retreats, the one of the youngest wave (ties: larger id) re-plans behind a
+    virtual wall (ours, ``BehaviorController._turns_in_retreat_cycle``): b turns, both arrive.
+    Control: the cycle is found again and again and nobody turns."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _one_wave_face_to_face()
+    assert _drive(fleet, limit_s=60.0) >= 0.0
+    assert fleet.arrived("a") and fleet.arrived("b"), fleet.behaviors()
+    assert fleet.controller("b").replans == 1 and fleet.controller("a").replans == 0
+
+    monkeypatch.setattr(BehaviorController, "_turns_in_retreat_cycle", lambda self, msg, sensed: False)
+    control = _one_wave_face_to_face()
+    _drive(control, limit_s=120.0)
+    assert not control.arrived("a") and not control.arrived("b")
+    assert control.stats().deadlocks > 10 and control.stats().replans == 0

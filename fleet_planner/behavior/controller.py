@@ -214,7 +214,10 @@ class BehaviorController:
         deadlock, forward = on_wait_message(self.view(), msg)
         if deadlock:
             self.deadlocks += 1
-            if self.retreat is None:   # a retreating robot is given way to (see _yield_to_retreat)
+            # a retreating robot is given way to (see _yield_to_retreat), so another robot of the
+            # cycle re-plans; a cycle of retreating robots only: see _turns_in_retreat_cycle
+            if self.retreat is None or self._turns_in_retreat_cycle(msg, sensed):
+                self.retreat = None
                 self._replan(sensed)
         if forward is None:
             return None
@@ -446,6 +449,21 @@ class BehaviorController:
         if self._frame() is None:
             return False
         return not any(self._side_is_free(other, side, sensed) for side in (-1, 1))
+
+    def _turns_in_retreat_cycle(self, msg: WaitMessage, sensed: Sequence[RobotView]) -> bool:
+        """Interpretation (ours, issue 13): a wait cycle whose robots all retreat (two waves met,
+        or two robots of one wave face each other) has nobody to re-plan, since retreating robots
+        do not: only ``retreat_timeout`` (30 s) ended it (seen in the 200-robot stress run on
+        `large2x`, where a cross aisle meets a rack aisle, with robots queued behind). Then the
+        robot of the youngest wave re-plans (ties: the larger id) and leaves the wave, the others
+        keep waiting; the order is total, so exactly one of the cycle turns."""
+        assert self.retreat is not None
+        views = {o.id: o for o in sensed}
+        others = [views.get(i) for i in msg.waiting if i != self.id]
+        if any(o is None or o.retreat is None for o in others):
+            return False
+        mine = (self.retreat, id_key(self.id))
+        return all(mine > (o.retreat, id_key(o.id)) for o in others if o is not None and o.retreat is not None)
 
     def _end_retreat(self, in_front: list[RobotView]) -> None:
         """A retreat ends when the robot's front area is free of robots coming at it, or after
