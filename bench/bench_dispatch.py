@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import yaml  # noqa: E402
 
 from fleet_planner.fleet import DispatchParams, FleetManager, load_fleet  # noqa: E402
-from fleet_planner.fleet.dispatch import LEGACY, STAGED, DispatchPolicy  # noqa: E402
+from fleet_planner.fleet.dispatch import LEGACY, PIPELINED, STAGED, DispatchPolicy  # noqa: E402
 from fleet_planner.fleet.placement import parking_spots, place_robots  # noqa: E402
 from fleet_planner.fleet.sim import SimFleet  # noqa: E402
 from fleet_planner.robots import load_kinds  # noqa: E402
@@ -34,8 +34,8 @@ from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
 from fleet_planner.ros.demo.timeuse import sites_of, time_use  # noqa: E402
 from fleet_planner.warehouse import config_path, load_warehouse  # noqa: E402
 
-#: "new" is the default; "s18" the default before the chute queue (sites held until done)
-POLICIES = {"legacy": LEGACY, "new": DispatchPolicy(), "s18": DispatchPolicy(queue=False, site_hold="done"),
+#: "s18" is the default (sites held until done, no chute queue); "new" the pipelined chutes (PIPELINED, opt-in)
+POLICIES = {"legacy": LEGACY, "new": PIPELINED, "s18": DispatchPolicy(),
             "batch": DispatchPolicy(queue=False, sites=False, site_hold="done"), "staged": STAGED,
             "staged-no-queue": DispatchPolicy(staging=True, queue=False, site_hold="done", charge_below=0.6,
                                               leave_charger_at=0.95),

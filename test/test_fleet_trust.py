@@ -6,6 +6,7 @@ import pytest
 from test_dispatch import CHARGERS, FAST, WH, Sim, four_robots, manager, status, task
 
 from fleet_planner.fleet import FleetManager, RobotAgent
+from fleet_planner.fleet.dispatch import PIPELINED
 from fleet_planner.robots import RobotModel
 from msg_schemas.records import RobotStatus, TaskEvent
 
@@ -123,6 +124,7 @@ def test_a_robot_that_dies_in_the_middle_of_a_pick_counts_no_pick_and_its_job_is
 
 def test_a_robot_waiting_for_a_chute_where_the_picker_died_is_let_go_and_its_job_queued_again():
     sim = Sim(four_robots(), offline_timeout_s=2.0)
+    sim.fm.policy = PIPELINED
     sim.submit(task("J1", "chute_2", "B04-01"))
     sim.submit(task("J2", "chute_2", "B03-01"))   # the next job there: a robot waits by the chute (policy queue)
     assert sim.run_until(lambda: any(a.model.mode == "picking" for a in sim.agents.values()))
