@@ -1,6 +1,7 @@
 """The simulated clock held by a lagging robot simulator (``max_lead_s``) and making up lost ticks
 (``catch_up_s``): sim_clock.py as the demo's process mode runs it."""
 import time
+from contextlib import contextmanager
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -22,15 +23,28 @@ def _spin(executor, seconds: float, every=None) -> None:
             every()
 
 
-def test_a_lagging_robot_simulator_holds_the_clock_and_a_silent_one_does_not(ros_context):
-    clock = SimClock("clock_lead_test", context=ros_context, parameter_overrides=[
-        Parameter("rate", value=20.0), Parameter("max_lead_s", value=0.5), Parameter("lead_grace_s", value=0.5)])
-    robots = rclpy.create_node("lagging_robots", context=ros_context)
+@contextmanager
+def _clock_and_robots(ros_context, name: str, robots_name: str, **params):
+    """A SimClock ``name`` with ``params`` and a node publishing robot statuses, on one executor:
+    (clock, status publisher, executor); both nodes destroyed afterwards."""
+    clock = SimClock(name, context=ros_context,
+                     parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+    robots = rclpy.create_node(robots_name, context=ros_context)
     pub = robots.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(clock)
     executor.add_node(robots)
     try:
+        yield clock, pub, executor
+    finally:
+        executor.shutdown()
+        clock.destroy_node()
+        robots.destroy_node()
+
+
+def test_a_lagging_robot_simulator_holds_the_clock_and_a_silent_one_does_not(ros_context):
+    with _clock_and_robots(ros_context, "clock_lead_test", "lagging_robots",
+                           rate=20.0, max_lead_s=0.5, lead_grace_s=0.5) as (clock, pub, executor):
         # a simulator stuck at t = 0.2 s: the clock stops 0.5 s ahead of it (20x: 1 s wall would be 20 s)
         stuck = '{"id":"r1","stamp":0.2}'
         _spin(executor, 1.0, lambda: pub.publish(String(data=stuck)))
@@ -39,46 +53,22 @@ def test_a_lagging_robot_simulator_holds_the_clock_and_a_silent_one_does_not(ros
         # silent for longer than lead_grace_s (no robots, or none left): the clock runs on
         _spin(executor, 1.2)
         assert clock.now_ns / 1e9 > 3.0
-    finally:
-        executor.shutdown()
-        clock.destroy_node()
-        robots.destroy_node()
 
 
 def test_without_a_lead_the_clock_is_never_held(ros_context):
-    clock = SimClock("clock_free_test", context=ros_context, parameter_overrides=[Parameter("rate", value=20.0)])
-    robots = rclpy.create_node("old_robots", context=ros_context)
-    pub = robots.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(clock)
-    executor.add_node(robots)
-    try:
+    with _clock_and_robots(ros_context, "clock_free_test", "old_robots", rate=20.0) as (clock, pub, executor):
         _spin(executor, 0.5, lambda: pub.publish(String(data='{"id":"r1","stamp":0.0}')))
         assert clock.held == 0 and clock.now_ns / 1e9 > 2.0
-    finally:
-        executor.shutdown()
-        clock.destroy_node()
-        robots.destroy_node()
 
 
 def _silence_after_status(ros_context, name: str, grace: float, silent_s: float) -> float:
     """Simulated seconds by which a clock at 20x, held 0.5 s ahead of the robots with ``grace``,
     runs past the last status of a simulator that then stays silent ``silent_s`` wall seconds."""
-    clock = SimClock(name, context=ros_context, parameter_overrides=[
-        Parameter("rate", value=20.0), Parameter("max_lead_s", value=0.5), Parameter("lead_grace_s", value=grace)])
-    robots = rclpy.create_node(f"{name}_robots", context=ros_context)
-    pub = robots.create_publisher(String, topics.ROBOT_STATUS, topics.ROBOT_STATUS_QOS)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(clock)
-    executor.add_node(robots)
-    try:
+    with _clock_and_robots(ros_context, name, f"{name}_robots",
+                           rate=20.0, max_lead_s=0.5, lead_grace_s=grace) as (clock, pub, executor):
         _spin(executor, 0.3, lambda: pub.publish(String(data='{"id":"r1","stamp":0.2}')))
         _spin(executor, silent_s)   # the simulator starved: no status at all
         return clock.now_ns / 1e9 - 0.2
-    finally:
-        executor.shutdown()
-        clock.destroy_node()
-        robots.destroy_node()
 
 
 def test_the_process_fleets_clock_waits_out_a_starved_simulator_so_no_robot_looks_offline(ros_context):
