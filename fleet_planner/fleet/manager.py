@@ -404,13 +404,18 @@ class FleetManager:
         now if the store did not know it yet: announced once) it heads for the storing site,
         else for the chute; a robot whose status says it placed the goods of a job that was on it
         (``placed_task_id``: while the planner was down) finishes that job, once. A queued job
-        the robot still names (queued again while nobody heard from it) goes back to it."""
+        the robot still names (queued again while nobody heard from it) goes back to it; so does one
+        it picked or placed while nobody heard from it, even if another robot got it meanwhile (that
+        one has not picked it: it is released, never a second pick)."""
         st = r.status
         if r.job is not None or not r.online or r.immobile or (st.task_id is None and st.placed_task_id is None):
             return
         placed = self.jobs.get(st.placed_task_id) if st.placed_task_id is not None else None
-        if (placed is not None and placed.state == "active" and placed.robot == r.id and st.task_id != placed.task.id
-                and st.loaded is not True and not self._held(placed)):
+        if (placed is not None and st.task_id != placed.task.id and st.loaded is not True
+                and (placed.state == "active" and placed.robot == r.id and not self._held(placed)
+                     or self._unpicked_elsewhere(placed, r))):
+            if placed.robot != r.id and not self._take_back(placed, r, now, d):
+                return
             r.job = placed.task.id
             if ((placed.picked or self._action_done(r, Target("pick", placed.pick.name, placed.pick.pose), now, d))
                     and self._action_done(r, Target("place", placed.place.name, placed.place.pose), now, d)):
@@ -419,7 +424,12 @@ class FleetManager:
                 r.job, r.target, r.replan = None, None, False   # (the store failed: tried again next step)
             return
         job = self.jobs.get(st.task_id) if st.task_id is not None else None
-        if job is None or self._held(job) or not (job.state == "queued" or job.state == "active" and job.robot == r.id):
+        if job is None:
+            return
+        if st.loaded is True and self._unpicked_elsewhere(job, r):
+            if not self._take_back(job, r, now, d):   # it carries the goods: the job is its
+                return
+        elif self._held(job) or not (job.state == "queued" or job.state == "active" and job.robot == r.id):
             return
         if job.picked and st.loaded is False:
             return  # it says the goods are not on board: the job waits for its word (or fails, _orphans)
@@ -429,7 +439,9 @@ class FleetManager:
             d.events.append(_event(job.task.id, "assigned", now, r.id))
         r.job = job.task.id
         if st.loaded and not job.picked:  # picked while the planner was down
-            self._action_done(r, Target("pick", job.pick.name, job.pick.pose), now, d)
+            if not self._action_done(r, Target("pick", job.pick.name, job.pick.pose), now, d):
+                r.job = None   # (the store failed: tried again next step)
+                return
         else:
             target = (Target("place", job.place.name, job.place.pose) if job.picked
                       else Target("pick", job.pick.name, job.pick.pose))
@@ -437,6 +449,26 @@ class FleetManager:
             r.target, r.replan = target, st.mode != ACTING[target.purpose]
         d.notes.append(f"robot {r.id} is on job {job.task.id} again: on to {r.target.name if r.target else '?'}"
                        f"{' with the goods' if job.picked else ''}")
+
+    def _unpicked_elsewhere(self, job: Job, r: FleetRobot) -> bool:
+        """``job`` is open, not picked as far as the planner knows, and queued or on another robot."""
+        return (not job.picked and (job.state == "queued" or job.state == "active" and job.robot != r.id))
+
+    def _take_back(self, job: Job, r: FleetRobot, now: float, d: Decisions) -> bool:
+        """``r`` says it has the goods of ``job`` (or placed them) while nobody heard from it: the job is
+        its again (``assigned``); a robot that got it meanwhile drops it before picking. False if
+        the store cannot take it (nothing changed)."""
+        other = self.robots.get(job.robot) if job.state == "active" and job.robot is not None else None
+        if not self._commit(job, "assigned", now, d, state="active", robot=r.id):
+            return False
+        d.events.append(_event(job.task.id, "assigned", now, r.id))
+        if other is not None and other.job == job.task.id:
+            other.job, other.target, other.replan, other.arrived_at, other.saw_action = None, None, False, None, False
+            other.idle_since = now
+            d.notes.append(f"robot {other.id} drops job {job.task.id}: robot {r.id} has its goods")
+            if other.on_leg and other.online and not other.immobile:
+                self._hold(other, now, d)   # not on to the chute: it stands, and is sent on from there
+        return True
 
     def _held(self, job: Job) -> bool:
         """Some robot here has ``job``."""
