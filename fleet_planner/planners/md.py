@@ -148,7 +148,10 @@ class MDPlanner(Planner):
     ``crowded`` (default on): an instance crowded for prioritized planning (many starts and goals in
     aisles too narrow for two robots to pass, or very many robots: :mod:`.md_crowd`) goes to the
     dense solver first, with the whole budget, before any path is planned; md plans only if the dense
-    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when the sum of
+    solver refuses; so does a *busy* one (fewer starts and goals in one-lane aisles, but enough that md's
+    plan would lose the comparison below: :data:`~.md_crowd.LANE_LOAD_BUSY`), with small refinement
+    budgets, unless ``compare_above`` is None. ``compare_above`` (default 1.05; None: never): from 10
+    robots, when the sum of
     arrival times of md's first plan exceeds this multiple of its routes driven alone (its robots
     wait a lot), the dense solver plans too, with small refinement budgets (:data:`COMPARE_REFINE_S`)
     within what is left of the time budget, and the plan with the lower sum of arrival times is
@@ -234,10 +237,16 @@ class MDPlanner(Planner):
         # md v2's two uses of the dense solver; the paper's methods (holds "none", boxes) plan alone
         v2 = self.fallback is not None and self.holds == "anywhere"
         if v2 and self.crowded:
-            why = crowding(grid, robots, self.margin).crowded()
-            if why is not None:   # md would fail or run out of time here: the dense solver plans first
+            crowd = crowding(grid, robots, self.margin)
+            why, options = crowd.crowded(), {}
+            if why is None and self.compare_above is not None:
+                # md's plan would lose the comparison: the dense solver plans first, with small budgets
+                why = crowd.busy()
+                budget = md_crowd.BUSY_REFINE_S * len(robots) / 100
+                options = {"refine_s": budget, "timed_refine_s": budget}
+            if why is not None:   # md would fail, run out of time or lose: the dense solver plans first
                 try:
-                    return self._dense(grid, robots, t_start, deadline, 0, f"crowded: {why}")
+                    return self._dense(grid, robots, t_start, deadline, 0, f"crowded: {why}", **options)
                 except PlanningError:
                     pass   # e.g. robots off cell centres: md tries with what is left
         try:
