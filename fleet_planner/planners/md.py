@@ -558,6 +558,8 @@ class _Session:
         #: goal they are
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {} if must is None else must
         self.reorders = self.reroutes = self.detoured = 0
+        #: robots' starts, goals and radii as arrays (:meth:`_parked`), made at first use
+        self._ends: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.detour_tries: dict[int, int] = {}
         #: during an improvement move: each robot's wait before it (a robot that comes to wait
         #: longer tries its route choice again)
@@ -567,6 +569,20 @@ class _Session:
 
     def keep_out(self, x: int, y: int) -> float:
         return self.robots[x].radius + self.robots[y].radius + self.margin
+
+    def _parked(self, x: int) -> tuple[np.ndarray, np.ndarray]:
+        """The discs x keeps off first (measured fact 1), as rows (x, y, keep-out) in robot order:
+        the starts of the robots below x, the goals of those above it."""
+        if self._ends is None:
+            self._ends = (np.array([r.start for r in self.robots], dtype=float).reshape(-1, 2),
+                          np.array([r.goal for r in self.robots], dtype=float).reshape(-1, 2),
+                          np.array([r.radius for r in self.robots], dtype=float))
+        starts, goals, radii = self._ends
+        rank = np.empty(len(self.robots), dtype=np.int64)
+        rank[np.asarray(self.order, dtype=np.int64)] = np.arange(len(self.robots))
+        keep = (radii[x] + radii) + self.margin
+        below, above = rank > rank[x], rank < rank[x]
+        return (np.column_stack([starts[below], keep[below]]), np.column_stack([goals[above], keep[above]]))
 
     def route(self, progress: Progress | None = None) -> None:
         """Safe paths for every robot that is not fixed, then the collision model and scheduler."""
@@ -612,13 +628,10 @@ class _Session:
         goals; else goals only; else none. Discs that x was found to block (``must``) are kept in
         those attempts; when they are too many to avoid together, as many as possible are kept,
         those of ``partner`` (the robot of the conflict being resolved) first."""
-        me, rank = self.robots[x], self.rank
-        starts = [(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
-                  if y != x and rank[y] > rank[x]]
-        goals = [(self.robots[y].goal, self.keep_out(x, y)) for y in range(len(self.robots))
-                 if y != x and rank[y] < rank[x]]
+        me = self.robots[x]
+        starts, goals = self._parked(x)
         by_owner = self.must.get(x, {})
-        must = [d for discs in by_owner.values() for d in discs]
+        must = _disc_rows([d for discs in by_owner.values() for d in discs])
         rounded = self.finder.get(me.radius)
 
         def find(avoid):
@@ -628,9 +641,11 @@ class _Session:
             return path
 
         hint = self.hints.pop(x, None)
-        if hint is not None and _keeps_off(hint, starts + goals + must, me.start, me.goal):
+        if hint is not None and _keeps_off(hint, np.vstack([starts, goals, must]), me.start, me.goal):
             return hint
-        for avoid in ([starts + goals + must, goals + must, must] if must else [starts + goals, goals]):
+        tries = ([np.vstack([starts, goals, must]), np.vstack([goals, must]), must] if len(must)
+                 else [np.vstack([starts, goals]), goals])
+        for avoid in tries:
             path = find(avoid)
             if path is not None:
                 return path
@@ -824,13 +839,9 @@ class _Session:
             ahead = [p for p in old_path[v + 1:v + 4] if np.hypot(*(ends - p).T).min() > reach + me.radius]
             if not ahead:
                 return changed
-            rank = self.rank
-            avoid = ([(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
-                      if y != x and rank[y] > rank[x]]
-                     + [(self.robots[y].goal, self.keep_out(x, y)) for y in range(len(self.robots))
-                        if y != x and rank[y] < rank[x]]
-                     + [d for discs in self.must.get(x, {}).values() for d in discs]
-                     + [((float(p[0]), float(p[1])), reach) for p in ahead])
+            must = [d for discs in self.must.get(x, {}).values() for d in discs]
+            avoid = np.vstack([*self._parked(x), _disc_rows(must),
+                               _disc_rows([((float(p[0]), float(p[1])), reach) for p in ahead])])
             path = self.finder.get(me.radius).find(me.start, me.goal, avoid=avoid)
             if path is None:
                 return changed
@@ -1091,13 +1102,17 @@ def _top_speed(path: np.ndarray, times: np.ndarray) -> float:
     return float(np.max(np.hypot(*np.diff(path, axis=0).T) / np.maximum(np.diff(times), 1e-12)))
 
 
-def _keeps_off(path: np.ndarray, discs: list, start, goal) -> bool:
-    """True if the polyline keeps off every disc (centre, keep-out), except discs containing the
+def _disc_rows(discs: list) -> np.ndarray:
+    """Discs (centre, keep-out) as an (n, 3) array of rows (x, y, keep-out)."""
+    return np.array([(c[0], c[1], k) for c, k in discs], dtype=float).reshape(-1, 3)
+
+
+def _keeps_off(path: np.ndarray, discs: np.ndarray, start, goal) -> bool:
+    """True if the polyline keeps off every disc (rows x, y, keep-out), except discs containing the
     start or the goal, which no path can avoid (the path finder ignores them too)."""
-    if not discs:
+    if not len(discs):
         return True
-    c = np.array([d[0] for d in discs], dtype=float)
-    r = np.array([d[1] for d in discs], dtype=float)
+    c, r = discs[:, :2], discs[:, 2]
     ends = np.array([start, goal], dtype=float)
     unavoidable = (np.hypot(*(c[:, None, :] - ends[None, :, :]).transpose(2, 0, 1)) < r[:, None]).any(1)
     return polyline_keeps_off(path, c[~unavoidable], r[~unavoidable])
