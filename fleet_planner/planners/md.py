@@ -1035,11 +1035,11 @@ def _subdivide(path: np.ndarray, step: float) -> np.ndarray:
     pts = np.asarray(path, dtype=float).reshape(-1, 2)
     if len(pts) < 2:
         return pts
-    out = [pts[:1]]
-    for a, b in zip(pts[:-1], pts[1:]):
-        k = max(1, math.ceil(float(np.hypot(*(b - a))) / step - 1e-9))
-        out.append(a + (b - a) * (np.arange(1, k + 1) / k)[:, None])
-    return np.vstack(out)
+    d = pts[1:] - pts[:-1]
+    k = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / step - 1e-9).astype(np.int64))
+    seg = np.repeat(np.arange(len(d)), k)   # the segment of each new vertex, and its step along it
+    step_no = np.arange(len(seg)) - np.repeat(np.cumsum(k) - k, k) + 1
+    return np.vstack([pts[:1], pts[:-1][seg] + d[seg] * (step_no / k[seg])[:, None]])
 
 
 def _held_path(robot_id: str, radius: float, points: np.ndarray, arr: np.ndarray, dep: np.ndarray) -> TimedPath:
