@@ -160,6 +160,11 @@ class CollisionModel:
         """Per-segment-pair pieces of the regions of x < y: rows indexed by the ``P_*`` columns."""
         return self._pieces.get((min(x, y), max(x, y)), _NO_PIECES)
 
+    def pieces_with(self, x: int, others: Iterable[int]) -> list[np.ndarray]:
+        """:meth:`pieces` of x with each of ``others``, in that order (one pass)."""
+        get = self._pieces.get
+        return [get((y, x) if y < x else (x, y), _NO_PIECES) for y in others]
+
     def neighbours(self, x: int) -> Iterable[int]:
         """Robots that have at least one collision region with x."""
         return self._adj.get(x, ())

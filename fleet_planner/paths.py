@@ -122,12 +122,13 @@ class PathFinder:
         self._results_lock = threading.Lock()
 
     # -- public -------------------------------------------------------------------------------
-    def find(self, start: Point, goal: Point, avoid: Sequence[Disc] = (),
+    def find(self, start: Point, goal: Point, avoid: Sequence[Disc] | np.ndarray = (),
              blocked_cells: Iterable[tuple[int, int]] = (), *, smooth: bool = True) -> np.ndarray | None:
         """A polyline ``(n, 2)`` from exactly ``start`` to exactly ``goal``, or None if there is none.
 
-        ``avoid``: discs ``(centre, keep_out)`` the robot's centre must stay strictly outside; a disc
-        that contains ``start`` or ``goal`` is ignored, since it cannot be avoided.
+        ``avoid``: discs ``(centre, keep_out)`` the robot's centre must stay strictly outside (or an
+        ``(n, 3)`` array of rows ``(x, y, keep_out)``); a disc that contains ``start`` or ``goal`` is
+        ignored, since it cannot be avoided.
         ``blocked_cells``: extra ``(col, row)`` cells treated as walls (cells off the map are
         walls already and are skipped).
         ``smooth=False`` returns the grid path itself (start, the cells where it turns, goal), to
@@ -327,14 +328,19 @@ def _point(name: str, p) -> np.ndarray:
     return arr
 
 
-def _discs(avoid: Sequence[Disc]) -> np.ndarray:
-    """``avoid`` as an ``(n, 3)`` array of (x, y, keep_out)."""
+def _discs(avoid: Sequence[Disc] | np.ndarray) -> np.ndarray:
+    """``avoid`` as an ``(n, 3)`` array of (x, y, keep_out) (given as such an array, or as pairs)."""
     if not len(avoid):
         return np.zeros((0, 3))
-    try:
-        arr = np.array([(c[0], c[1], k) for c, k in avoid], dtype=float)
-    except (TypeError, ValueError, IndexError) as exc:
-        raise ValueError(f"avoid: expected ((x, y), keep_out) pairs ({exc})") from exc
+    if isinstance(avoid, np.ndarray):
+        if avoid.ndim != 2 or avoid.shape[1] != 3:
+            raise ValueError(f"avoid: expected an (n, 3) array of (x, y, keep_out) rows, got shape {avoid.shape}")
+        arr = np.asarray(avoid, dtype=float)
+    else:
+        try:
+            arr = np.array([(c[0], c[1], k) for c, k in avoid], dtype=float)
+        except (TypeError, ValueError, IndexError) as exc:
+            raise ValueError(f"avoid: expected ((x, y), keep_out) pairs ({exc})") from exc
     if not np.all(np.isfinite(arr)) or np.any(arr[:, 2] < 0):
         raise ValueError("avoid: centres must be finite and keep-out radii finite and >= 0")
     return arr

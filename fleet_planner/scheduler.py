@@ -311,7 +311,7 @@ class DelayScheduler:
         i holding at a segment end is j's range near that point (a zero-speed piece); j standing /
         i moving is the window in which i's segment passes within reach of j's vertex; j standing
         / i holding is i's hold interval when the two points are within reach."""
-        tables = [self._facing(i, j) for i in higher]
+        tables = self._facing_all(j, higher)
         sizes = [len(t) for t in tables]
         P = np.vstack(tables)   # every row as seen from j: i in the x columns, j in the y columns
         who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
@@ -330,6 +330,19 @@ class DelayScheduler:
         G = g_key, g_lo, g_hi, g_own
         F = f_key, f_lo, f_hi, f_own
         return G, F
+
+    def _facing_all(self, j: int, higher: list[int]) -> list[np.ndarray]:
+        """:meth:`_facing` for each robot of ``higher`` against j (one pass: this runs for every
+        robot scheduled, over all its higher neighbours)."""
+        swapped = self._swapped
+        out = []
+        for i, raw in zip(higher, self.model.pieces_with(j, higher)):
+            if i < j:
+                out.append(raw)
+                continue
+            got = swapped.get((i, j))
+            out.append(got[1] if got is not None and got[0] is raw else self._facing(i, j))
+        return out
 
     def _facing(self, i: int, j: int) -> np.ndarray:
         """The pieces of the pair (i, j) with i in the x columns and j in the y columns (the model

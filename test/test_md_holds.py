@@ -449,6 +449,9 @@ def test_the_compiled_hold_constraints_are_the_numpy_ones(monkeypatch, seed):
         return got
 
     monkeypatch.setattr(DelayScheduler, "_hold_constraints", both)
+    from fleet_planner.planners import md
+
+    monkeypatch.setattr(md, "IMPROVE_ABOVE", 0.0)   # the improvement search runs however little the robots wait
     inst = bench_md.generated_instance(25, seed)
     # (a generous budget: the kernels may compile inside the first plan)
     plan = get_planner("md", compare_above=None, time_limit=600.0).plan(inst.grid, inst.robots)

@@ -94,6 +94,46 @@ def test_two_wide_aisles_are_not_lanes_and_many_robots_are_crowded():
     assert "800 robots" in many.crowded() and many.crowded(robots=801) is None
 
 
+def test_a_busy_instance_goes_to_the_dense_solver_with_small_budgets(monkeypatch):
+    """Below the crowded load but from LANE_LOAD_BUSY starts and goals per one-lane aisle, md's plan would
+    lose the comparison: the dense solver plans first, before md plans a path, its refinements
+    bounded by BUSY_REFINE_S; with compare_above=None (no comparison) md plans itself. Control: just
+    below the threshold, md plans first."""
+    from fleet_planner.planners import md_crowd
+    from fleet_planner.planners.md import MDPlanner
+
+    # the MovingAI 1-cell-aisle warehouse's measures at 100 robots (busy) and at 50 (md's)
+    assert md_crowd.Crowding(robots=100, aisles=390, in_lanes=95).busy() is not None
+    assert md_crowd.Crowding(robots=50, aisles=390, in_lanes=53).busy() is None
+    assert md_crowd.Crowding(robots=100, aisles=0, in_lanes=0).busy() is None   # no lanes: never busy
+    robots = _robots(12, 0)
+    load = md_crowd.crowding(COMB, robots, 0.02).lane_load
+    monkeypatch.setattr(md_crowd, "LANE_LOAD", load + 1)   # not crowded
+    calls = []
+
+    def dense(self, grid, robots, t_start, deadline, attempts, why, **options):
+        calls.append((why, options))
+        raise PlanningError({"r0": "stub"})
+
+    monkeypatch.setattr(MDPlanner, "_dense", dense)
+
+    def first_call(busy_from: float, **kw):
+        monkeypatch.setattr(md_crowd, "LANE_LOAD_BUSY", busy_from)
+        calls.clear()
+        try:
+            get_planner("md", time_limit=1.0, **kw).plan(COMB, robots)
+        except PlanningError:
+            pass
+        return calls[0] if calls else (None, {})
+
+    why, options = first_call(load)
+    assert why.startswith("crowded:") and "the dense plan would win" in why
+    assert options == {"refine_s": pytest.approx(md_crowd.BUSY_REFINE_S * 0.12)} | {
+        "timed_refine_s": pytest.approx(md_crowd.BUSY_REFINE_S * 0.12)}
+    assert not str(first_call(load, compare_above=None)[0]).startswith("crowded:")   # md plans itself
+    assert not str(first_call(load + 0.01)[0]).startswith("crowded:")                # control
+
+
 def test_md_keeps_the_dense_plan_only_when_it_is_better(monkeypatch):
     """compare_above=1 (and no minimum fleet): the dense solver plans too on the 6-robot comb;
     whichever plan comes back has the lower sum of arrival times of the two, and it is valid."""

@@ -145,6 +145,13 @@ def test_avoid_discs_are_respected_and_forced_around():
     path = PathFinder(grid, 0.4).find(start, goal, avoid=avoid)
     assert_valid(path, grid, 0.4, start, goal, avoid)
     assert polyline_length(path) > 11.0 + 0.1  # had to leave the straight line
+    # the same discs as an (n, 3) array of rows (x, y, keep-out): the same answer; a wrong shape names avoid
+    rows = np.array([(c[0], c[1], k) for c, k in avoid])
+    assert np.array_equal(PathFinder(grid, 0.4).find(start, goal, avoid=rows), path)
+    assert np.array_equal(PathFinder(grid, 0.4).find(start, goal, avoid=rows[:1]),
+                          PathFinder(grid, 0.4).find(start, goal, avoid=avoid[:1]))
+    with pytest.raises(ValueError, match="avoid"):
+        PathFinder(grid, 0.4).find(start, goal, avoid=rows[:, :2])
 
 
 @pytest.mark.parametrize("radius", [0.4, 0.6])

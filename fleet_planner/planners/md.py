@@ -57,6 +57,12 @@ IMPROVE_TRIES = 8
 #: plan (measured at 100 robots: the search lowers md's sum by 0.3-2.1%; warehouse-10-20-10-2-1:
 #: dense 6% below md's first plan, md's after the search still 4.6% above it)
 IMPROVE_GAIN = 0.04
+#: ... nor when md's first plan's sum of arrivals is within this share of its routes driven alone: the
+#: search can gain at most that and costs about as much CPU as the plan (measured at 100 robots, 3 seeds,
+#: sum of arrivals / free before -> after the search: warehouse-20-40-10-2-2 waits 0.8% and 1.1% of the
+#: drive: 1.0090 -> 1.0057 and 1.0116 -> 1.0053 for 0.30 and 0.37 s CPU; at 2.2%: 1.0232 -> 1.0066 in 0.19
+#: s; warehouse-10-20-10-2-2 waits 4.7-6.2%: 1.053-1.066 -> 1.025-1.043 in 0.17-0.28 s)
+IMPROVE_ABOVE = 0.015
 #: the dense solver's two refinement budgets (CPU s per 100 robots each) when md compares plans
 #: (measured with 0.2: 100 robots on warehouse-10-20-10-2-1, SoC/free 1.0627 against 1.0617 with the
 #: dense solver's defaults, 0.6-0.9 s less CPU; 200 robots on it and on warehouse-10-20-10-2-2: 1.1003 /
@@ -148,7 +154,10 @@ class MDPlanner(Planner):
     ``crowded`` (default on): an instance crowded for prioritized planning (many starts and goals in
     aisles too narrow for two robots to pass, or very many robots: :mod:`.md_crowd`) goes to the
     dense solver first, with the whole budget, before any path is planned; md plans only if the dense
-    solver refuses. ``compare_above`` (default 1.05; None: never): from 10 robots, when the sum of
+    solver refuses; so does a *busy* one (fewer starts and goals in one-lane aisles, but enough that md's
+    plan would lose the comparison below: :data:`~.md_crowd.LANE_LOAD_BUSY`), with small refinement
+    budgets, unless ``compare_above`` is None. ``compare_above`` (default 1.05; None: never): from 10
+    robots, when the sum of
     arrival times of md's first plan exceeds this multiple of its routes driven alone (its robots
     wait a lot), the dense solver plans too, with small refinement budgets (:data:`COMPARE_REFINE_S`)
     within what is left of the time budget, and the plan with the lower sum of arrival times is
@@ -159,7 +168,8 @@ class MDPlanner(Planner):
     fleet manager re-plans later). ``improve`` (default :data:`IMPROVE_TRIES` with holds, else 0;
     one-shot plans only): moves of a large-neighbourhood search over priorities after a plan is
     found (the robot that waits longest goes just ahead of the robot it waits for; kept when the
-    sum of arrival times drops; ours, not the paper's), within the time budget."""
+    sum of arrival times drops; ours, not the paper's), within the time budget, when md's first plan's
+    robots wait more than :data:`IMPROVE_ABOVE` of their routes' driving time in all."""
 
     name = "md"
 
@@ -234,10 +244,16 @@ class MDPlanner(Planner):
         # md v2's two uses of the dense solver; the paper's methods (holds "none", boxes) plan alone
         v2 = self.fallback is not None and self.holds == "anywhere"
         if v2 and self.crowded:
-            why = crowding(grid, robots, self.margin).crowded()
-            if why is not None:   # md would fail or run out of time here: the dense solver plans first
+            crowd = crowding(grid, robots, self.margin)
+            why, options = crowd.crowded(), {}
+            if why is None and self.compare_above is not None:
+                # md's plan would lose the comparison: the dense solver plans first, with small budgets
+                why = crowd.busy()
+                budget = md_crowd.BUSY_REFINE_S * len(robots) / 100
+                options = {"refine_s": budget, "timed_refine_s": budget}
+            if why is not None:   # md would fail, run out of time or lose: the dense solver plans first
                 try:
-                    return self._dense(grid, robots, t_start, deadline, 0, f"crowded: {why}")
+                    return self._dense(grid, robots, t_start, deadline, 0, f"crowded: {why}", **options)
                 except PlanningError:
                     pass   # e.g. robots off cell centres: md tries with what is left
         try:
@@ -261,7 +277,8 @@ class MDPlanner(Planner):
                 other = None
         theirs = math.inf if other is None else sum_of_arrivals(other)
         improved = 0
-        if self.improve and theirs >= (1 - IMPROVE_GAIN) * first:   # else the search cannot catch up
+        # (unless the dense plan is far better: the search cannot catch up; or md's robots hardly wait)
+        if self.improve and theirs >= (1 - IMPROVE_GAIN) * first and first > (1 + IMPROVE_ABOVE) * drive:
             improved = session.improve(self.improve, deadline)
         plan = self._plan_of(session, search, improved, t_start)
         ours = sum_of_arrivals(plan)
@@ -541,6 +558,8 @@ class _Session:
         #: goal they are
         self.must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] = {} if must is None else must
         self.reorders = self.reroutes = self.detoured = 0
+        #: robots' starts, goals and radii as arrays (:meth:`_parked`), made at first use
+        self._ends: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.detour_tries: dict[int, int] = {}
         #: during an improvement move: each robot's wait before it (a robot that comes to wait
         #: longer tries its route choice again)
@@ -550,6 +569,20 @@ class _Session:
 
     def keep_out(self, x: int, y: int) -> float:
         return self.robots[x].radius + self.robots[y].radius + self.margin
+
+    def _parked(self, x: int) -> tuple[np.ndarray, np.ndarray]:
+        """The discs x keeps off first (measured fact 1), as rows (x, y, keep-out) in robot order:
+        the starts of the robots below x, the goals of those above it."""
+        if self._ends is None:
+            self._ends = (np.array([r.start for r in self.robots], dtype=float).reshape(-1, 2),
+                          np.array([r.goal for r in self.robots], dtype=float).reshape(-1, 2),
+                          np.array([r.radius for r in self.robots], dtype=float))
+        starts, goals, radii = self._ends
+        rank = np.empty(len(self.robots), dtype=np.int64)
+        rank[np.asarray(self.order, dtype=np.int64)] = np.arange(len(self.robots))
+        keep = (radii[x] + radii) + self.margin
+        below, above = rank > rank[x], rank < rank[x]
+        return (np.column_stack([starts[below], keep[below]]), np.column_stack([goals[above], keep[above]]))
 
     def route(self, progress: Progress | None = None) -> None:
         """Safe paths for every robot that is not fixed, then the collision model and scheduler."""
@@ -595,13 +628,10 @@ class _Session:
         goals; else goals only; else none. Discs that x was found to block (``must``) are kept in
         those attempts; when they are too many to avoid together, as many as possible are kept,
         those of ``partner`` (the robot of the conflict being resolved) first."""
-        me, rank = self.robots[x], self.rank
-        starts = [(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
-                  if y != x and rank[y] > rank[x]]
-        goals = [(self.robots[y].goal, self.keep_out(x, y)) for y in range(len(self.robots))
-                 if y != x and rank[y] < rank[x]]
+        me = self.robots[x]
+        starts, goals = self._parked(x)
         by_owner = self.must.get(x, {})
-        must = [d for discs in by_owner.values() for d in discs]
+        must = _disc_rows([d for discs in by_owner.values() for d in discs])
         rounded = self.finder.get(me.radius)
 
         def find(avoid):
@@ -611,9 +641,11 @@ class _Session:
             return path
 
         hint = self.hints.pop(x, None)
-        if hint is not None and _keeps_off(hint, starts + goals + must, me.start, me.goal):
+        if hint is not None and _keeps_off(hint, np.vstack([starts, goals, must]), me.start, me.goal):
             return hint
-        for avoid in ([starts + goals + must, goals + must, must] if must else [starts + goals, goals]):
+        tries = ([np.vstack([starts, goals, must]), np.vstack([goals, must]), must] if len(must)
+                 else [np.vstack([starts, goals]), goals])
+        for avoid in tries:
             path = find(avoid)
             if path is not None:
                 return path
@@ -807,13 +839,9 @@ class _Session:
             ahead = [p for p in old_path[v + 1:v + 4] if np.hypot(*(ends - p).T).min() > reach + me.radius]
             if not ahead:
                 return changed
-            rank = self.rank
-            avoid = ([(self.robots[y].start, self.keep_out(x, y)) for y in range(len(self.robots))
-                      if y != x and rank[y] > rank[x]]
-                     + [(self.robots[y].goal, self.keep_out(x, y)) for y in range(len(self.robots))
-                        if y != x and rank[y] < rank[x]]
-                     + [d for discs in self.must.get(x, {}).values() for d in discs]
-                     + [((float(p[0]), float(p[1])), reach) for p in ahead])
+            must = [d for discs in self.must.get(x, {}).values() for d in discs]
+            avoid = np.vstack([*self._parked(x), _disc_rows(must),
+                               _disc_rows([((float(p[0]), float(p[1])), reach) for p in ahead])])
             path = self.finder.get(me.radius).find(me.start, me.goal, avoid=avoid)
             if path is None:
                 return changed
@@ -1007,11 +1035,11 @@ def _subdivide(path: np.ndarray, step: float) -> np.ndarray:
     pts = np.asarray(path, dtype=float).reshape(-1, 2)
     if len(pts) < 2:
         return pts
-    out = [pts[:1]]
-    for a, b in zip(pts[:-1], pts[1:]):
-        k = max(1, math.ceil(float(np.hypot(*(b - a))) / step - 1e-9))
-        out.append(a + (b - a) * (np.arange(1, k + 1) / k)[:, None])
-    return np.vstack(out)
+    d = pts[1:] - pts[:-1]
+    k = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / step - 1e-9).astype(np.int64))
+    seg = np.repeat(np.arange(len(d)), k)   # the segment of each new vertex, and its step along it
+    step_no = np.arange(len(seg)) - np.repeat(np.cumsum(k) - k, k) + 1
+    return np.vstack([pts[:1], pts[:-1][seg] + d[seg] * (step_no / k[seg])[:, None]])
 
 
 def _held_path(robot_id: str, radius: float, points: np.ndarray, arr: np.ndarray, dep: np.ndarray) -> TimedPath:
@@ -1074,13 +1102,17 @@ def _top_speed(path: np.ndarray, times: np.ndarray) -> float:
     return float(np.max(np.hypot(*np.diff(path, axis=0).T) / np.maximum(np.diff(times), 1e-12)))
 
 
-def _keeps_off(path: np.ndarray, discs: list, start, goal) -> bool:
-    """True if the polyline keeps off every disc (centre, keep-out), except discs containing the
+def _disc_rows(discs: list) -> np.ndarray:
+    """Discs (centre, keep-out) as an (n, 3) array of rows (x, y, keep-out)."""
+    return np.array([(c[0], c[1], k) for c, k in discs], dtype=float).reshape(-1, 3)
+
+
+def _keeps_off(path: np.ndarray, discs: np.ndarray, start, goal) -> bool:
+    """True if the polyline keeps off every disc (rows x, y, keep-out), except discs containing the
     start or the goal, which no path can avoid (the path finder ignores them too)."""
-    if not discs:
+    if not len(discs):
         return True
-    c = np.array([d[0] for d in discs], dtype=float)
-    r = np.array([d[1] for d in discs], dtype=float)
+    c, r = discs[:, :2], discs[:, 2]
     ends = np.array([start, goal], dtype=float)
     unavoidable = (np.hypot(*(c[:, None, :] - ends[None, :, :]).transpose(2, 0, 1)) < r[:, None]).any(1)
     return polyline_keeps_off(path, c[~unavoidable], r[~unavoidable])

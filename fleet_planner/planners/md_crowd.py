@@ -31,6 +31,17 @@ from ..model import Plan, RobotSpec
 LANE_LOAD = 0.7
 #: robots from which md hands the instance to the dense solver at once
 CROWD_ROBOTS = 400
+#: starts and goals in lanes per aisle from which an instance is busy: md's plan would only lose the
+#: comparison with the dense solver's, so the dense solver plans first, with small refinement budgets
+#: (:data:`BUSY_REFINE_S`). Measured on warehouse-10-20-10-2-1 (SoC/free, md's own plan before the
+#: comparison, the dense plan with 0.05 s refinements): 50 robots (lane load 0.14) md 1.011, dense
+#: 1.054; 55 md 1.020, dense 1.052; 60 (0.162) md's first plan lost to dense 1.050, as at 70 (0.177),
+#: 85 (0.205) and 100 (0.244: md 1.098-1.131 against 1.062). The 2-cell-aisle maps have no lanes.
+LANE_LOAD_BUSY = 0.16
+#: the dense solver's two refinement budgets (CPU s per 100 robots each) on a busy instance (measured
+#: at 100 robots on warehouse-10-20-10-2-1: no refinement 1.0645 in 0.08 s CPU, 0.05 s 1.0617 in 0.18 s,
+#: 0.2 s 1.0611 in 0.36 s, the solver's defaults 1.0608 in 0.75 s)
+BUSY_REFINE_S = 0.05
 #: fewer robots than this are never crowded and md's plan is not compared with the dense solver's:
 #: md is cheap there, and small hand-worked cases stay md's
 MIN_ROBOTS = 10
@@ -62,6 +73,15 @@ class Crowding:
             return (f"{self.in_lanes} starts and goals in {self.aisles} one-lane aisles "
                     f"({self.lane_load:.2f} per aisle, >= {lane_load:g})")
         return None
+
+    def busy(self, lane_load: float | None = None) -> str | None:
+        """Why the dense solver's plan would be the better one (it then plans first, with small
+        refinement budgets), or None (threshold: the module's LANE_LOAD_BUSY unless given)."""
+        lane_load = LANE_LOAD_BUSY if lane_load is None else lane_load
+        if self.robots < MIN_ROBOTS or not self.aisles or self.lane_load < lane_load:
+            return None
+        return (f"{self.in_lanes} starts and goals in {self.aisles} one-lane aisles "
+                f"({self.lane_load:.2f} per aisle, >= {lane_load:g}: the dense plan would win)")
 
 
 def crowding(grid: GridMap, robots: Sequence[RobotSpec], margin: float = 0.0) -> Crowding:
