@@ -10,8 +10,10 @@ safe for discs in continuous time:
    (:meth:`.crowd_sipp.TimedRefiner.from_scratch`), refined by the timed LNS of step 2b and re-timed
    by step 3's precedence pass; steps 1-2 are then skipped (plan info ``first_plan: "timed"``). A
    plan of unit steps makes every robot move one cell per step, so timed at mixed speeds the fast
-   ones queue behind the slow ones (~0.10 of SoC/free at 400 robots); this plan never does. Where
-   it fails (or with acceleration limits), the discrete pipeline below plans.
+   ones queue behind the slow ones (~0.10 of SoC/free at 400 robots); this plan never does. Ours on
+   top: 1-cell corridors are soft one-way lanes (:func:`.crowd_sipp.one_way`), and a robot whose goal
+   robots parked on theirs shut off is planned at once before them (:func:`.crowd_sipp.prioritized`).
+   Where it fails (or with acceleration limits), the discrete pipeline below plans.
 1. **A first plan**: prioritized planning on the same graph under the same rules where it
    succeeds (:func:`.crowd_lns.prioritized_first`: a far shorter first plan than LaCAM's), else
    the **configuration search** (:mod:`.crowd_pibt`): LaCAM (Okumura, "LaCAM: Search-Based Algorithm
