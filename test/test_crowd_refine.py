@@ -149,3 +149,67 @@ def test_legs_around_any_angle_trajectories_go_to_prior():
     assert check_plan(grid, [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), (3.5, 3.5)),
                              RobotSpec("b", 0.4, 1.0, (5.5, 0.5), (0.5, 3.5))],
                       Plan("x", [driven] + legs, 0.0, {})) == []
+
+
+# a ring: two 1-cell corridors, rows 0 and 3 (lanes: even rows east, odd rows west), joined by 2-cell wide ends
+RING = ["." * 9, ".." + "@" * 5 + "..", ".." + "@" * 5 + "..", "." * 9]
+
+
+def test_one_way_lanes_send_robots_round_a_ring_of_corridors_with_its_lanes():
+    """Both ways round the ring are 11 cells: the east-bound robot takes the east lane (row 0), the
+    west-bound one the west lane (row 3) - each alone, so only the lanes decide (control, ``LANE`` 0:
+    the search's tie-break sends one of them the other way)."""
+    from fleet_planner.planners import crowd_pibt, crowd_sipp
+
+    grid = GridMap.from_rows(RING)
+    graph = crowd_pibt.CellGraph(grid, 0.45)
+    wrong = crowd_sipp.one_way(graph.index, graph.rows, graph.cols, graph.nb, graph.deg)
+    corridor = {(c, r) for r in (0, 3) for c in range(2, 7)}
+    for v in range(graph.n):
+        for e in range(graph.deg[v]):
+            w = graph.nb[v, e]
+            here, there = (graph.cols[v], graph.rows[v]), (graph.cols[w], graph.rows[w])
+            dc = there[0] - here[0]
+            against = here[1] == there[1] and (here in corridor or there in corridor) and \
+                dc == (-1 if here[1] == 0 else 1)
+            assert wrong[v, e] == against, (here, there)
+    east = RobotSpec("east", 0.4, 1.0, grid.centre(0, 1), grid.centre(8, 2))
+    west = RobotSpec("west", 0.4, 1.0, grid.centre(8, 1), grid.centre(0, 2))
+    for robot, row in ((east, 0), (west, 3)):
+        plan = CrowdPlanner(timed_refine_s=0).plan(grid, [robot])
+        assert plan.info["first_plan"] == "timed" and check_plan(grid, [robot], plan) == []
+        ys = plan.paths[0].waypoints[:, 1]
+        assert np.any(np.isclose(ys, grid.centre(0, row)[1])), (robot.id, plan.paths[0].waypoints)
+
+
+def test_a_robot_shut_off_by_a_parked_robot_is_repaired_in_the_same_pass(monkeypatch):
+    """A dead-end aisle (row 2, open at column 10): robot "near" parks at column 6 long before robot
+    "deep" from the far corner comes for column 2. Planned shortest first, "deep" finds its goal shut;
+    the repair plans it at once and "near" again after it (one pass of prioritized planning, valid,
+    "near" waits for "deep" to pass); without the repair ("REPAIR" 0, the control) it takes a second
+    pass with "deep" first."""
+    from fleet_planner.planners import crowd_sipp
+
+    rows = ["." * 11, "@" * 10 + ".", "." * 11, "@" * 10 + ".", "." * 11]
+    grid = GridMap.from_rows(rows)
+    robots = [RobotSpec("near", 0.4, 1.0, grid.centre(9, 0), grid.centre(6, 2)),
+              RobotSpec("deep", 0.4, 1.0, grid.centre(0, 4), grid.centre(2, 2))]
+    passes = []
+    plain = crowd_sipp.prioritized
+
+    def counted(*args):
+        passes.append(args[0].tolist())
+        return plain(*args)
+
+    monkeypatch.setattr(crowd_sipp, "prioritized", counted)
+    for repair, expected in ((4, [[0, 1]]), (0, [[0, 1], [1, 0]])):
+        monkeypatch.setattr(crowd_sipp, "REPAIR", repair)
+        passes.clear()
+        plan = CrowdPlanner(timed_refine_s=0).plan(grid, robots)
+        assert passes == expected
+        assert plan.info["first_plan"] == "timed" and check_plan(grid, robots, plan) == []
+        near, deep = plan.paths
+        wp = deep.waypoints
+        passed = [t0 + (x0 - 6.5) / (x0 - x1) * (t1 - t0) for (x0, y0, t0), (x1, y1, t1) in zip(wp[:-1], wp[1:])
+                  if y0 == y1 == 2.5 and x1 < 6.5 <= x0]
+        assert len(passed) == 1 and near.arrival_time > passed[0], (near.waypoints, wp)

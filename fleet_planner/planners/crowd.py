@@ -10,8 +10,10 @@ safe for discs in continuous time:
    (:meth:`.crowd_sipp.TimedRefiner.from_scratch`), refined by the timed LNS of step 2b and re-timed
    by step 3's precedence pass; steps 1-2 are then skipped (plan info ``first_plan: "timed"``). A
    plan of unit steps makes every robot move one cell per step, so timed at mixed speeds the fast
-   ones queue behind the slow ones (~0.10 of SoC/free at 400 robots); this plan never does. Where
-   it fails (or with acceleration limits), the discrete pipeline below plans.
+   ones queue behind the slow ones (~0.10 of SoC/free at 400 robots); this plan never does. Ours on
+   top: 1-cell corridors are soft one-way lanes (:func:`.crowd_sipp.one_way`), and a robot whose goal
+   robots parked on theirs shut off is planned at once before them (:func:`.crowd_sipp.prioritized`).
+   Where it fails (or with acceleration limits), the discrete pipeline below plans.
 1. **A first plan**: prioritized planning on the same graph under the same rules where it
    succeeds (:func:`.crowd_lns.prioritized_first`: a far shorter first plan than LaCAM's), else
    the **configuration search** (:mod:`.crowd_pibt`): LaCAM (Okumura, "LaCAM: Search-Based Algorithm
@@ -166,9 +168,12 @@ class CrowdPlanner(Planner):
             # slow one by a plan of unit steps); measured on bench_dense (3 seeds, loaded machine), warehouse-10-20-
             # 10-2-1 400 robots: SoC/free 1.242 -> 1.20 at the same CPU (1.8-2.0 s); 20-40-10-2-2 2000: 1.243 -> 1.116
             # and 13.3 -> 9.8 s; 100 robots: 1.061 either way
+            wrong = crowd_sipp.one_way(graph.index, graph.rows, graph.cols, graph.nb, graph.deg)
             timed_first, hopeless = TimedRefiner.from_scratch(
                 starts, search.goals, durations, search.fields, search.grow, graph.nb, graph.deg, graph.n,
-                self.seed, release=crowd_sipp.RELEASE, cpu_s=0.5 + len(robots) / 1000)
+                self.seed, release=crowd_sipp.RELEASE, cpu_s=0.5 + len(robots) / 1000,
+                repair=crowd_sipp.REPAIR,
+                wrong=wrong, lane=crowd_sipp.LANE)
             if timed_first is None:
                 # (the discrete pipeline's budget below as without the attempt: at 1000 robots on
                 # warehouse-10-20-10-2-1 the attempt fails after ~0.9 s, and LaCAM's plan needs its LNS time)
@@ -177,6 +182,7 @@ class CrowdPlanner(Planner):
                 t_first = time.perf_counter() - t_start
                 if progress:
                     progress(1, 3, "refinement (timed LNS)")
+                timed_first.lane_lns = crowd_sipp.LANE_LNS
                 budget = self.timed_refine_s if self.timed_refine_s is not None else \
                     max(0.2, TIMED_BUDGET_S * min(1.0, 0.25 + len(robots) / 500) - (time.process_time() - c_start))
                 timing, stats = _timed_rounds(timed_first, deadline, budget, starts, search, graph, durations,
@@ -313,7 +319,8 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
     for k in range(TIMED_ROUNDS):
         if k > 0:
             refiner = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
-                                   graph.deg, graph.n, seed + k, release=crowd_sipp.RELEASE)
+                                   graph.deg, graph.n, seed + k, release=crowd_sipp.RELEASE, wrong=refiner.wrong,
+                                   lane=refiner.lane_lns)
         refiner.run(deadline, cpu_s=cpu_s / TIMED_ROUNDS)
         iterations, accepted = iterations + refiner.iterations, accepted + refiner.accepted
         if not refiner.accepted:

@@ -113,6 +113,8 @@ def _sequential(graph, order, starts, goals, dur, fields, grow, holdings, L, K):
     node_t = np.zeros(ncell * ks)
     node_par = np.zeros(ncell * ks, dtype=np.int64)
     node_closed = np.zeros(ncell * ks, dtype=np.int64)
+    node_p = np.zeros(ncell * ks)
+    no_lanes = np.zeros(graph.nb.shape, dtype=np.uint8)
     out_cell = np.empty(L, dtype=np.int32)
     out_dep = np.empty(L)
     stats = np.zeros(5, dtype=np.int64)
@@ -123,7 +125,8 @@ def _sequential(graph, order, starts, goals, dur, fields, grow, holdings, L, K):
         gen += 1
         ln = sipp_k.sipp(i, int(starts[i]), int(goals[i]), float(dur[i]), fields[grow[i]], h_lo, h_hi, h_n, graph.nb,
                          graph.deg, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf,
-                         1.0, 50 * ncell, out_cell, out_dep, stats, float(dur[i]))
+                         1.0, 50 * ncell, out_cell, out_dep, stats, float(dur[i]), node_p,
+                         no_lanes, 0.0)
         if ln < 0:
             failed.append(i)
             sipp_k._put(int(starts[i]), i, 0.0, np.inf, h_who, h_lo, h_hi, h_n)   # it stays where it is

@@ -45,6 +45,13 @@ INF = np.inf
 #: It must stay > 0: moves into a cell then start strictly after the move out of it, which keeps the
 #: precedences acyclic.
 RELEASE = 0.3
+#: the first plan repairs a robot cut off by at most this many parked robots on the spot
+#: (:func:`prioritized`)
+REPAIR = 4
+#: the extra cost of a move against a 1-cell corridor's lane (:func:`one_way`), in the robot's time per
+#: cell: in the first plan and in the timed LNS
+LANE = 0.5
+LANE_LNS = 0.0
 
 
 @_jit
@@ -126,7 +133,7 @@ def _intervals(c, h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen):
 
 @_jit
 def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t,
-         node_par, node_closed, bound, weight, limit, out_cell, out_dep, stats, rel):
+         node_par, node_closed, bound, weight, limit, out_cell, out_dep, stats, rel, node_p, wrong, lane):
     """Earliest arrival of robot a (``d`` seconds per cell, ``hd`` hop distances to its goal) from
     ``start`` at time 0 at ``goal`` to stay there for ever, against the holdings in the tables (its
     own removed). Weighted A* (``weight`` on the heuristic) over (cell, safe interval) with the
@@ -135,7 +142,12 @@ def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si
     the length of ``out_cell``). ``rel``: how long after the start of its move out of a cell the
     robot lets it go (see :func:`_hold`). The heuristic also knows when the goal is free for good
     (ours, as the discrete search's: a robot that must wait for others to pass its goal finds its
-    waiting place without exploring everything it could reach before)."""
+    waiting place without exploring everything it could reach before).
+
+    ``wrong`` (shaped as ``nb``) and ``lane`` (ours): a move from cell v to its e-th neighbour with
+    ``wrong[v, e]`` costs ``lane`` x ``d`` on top of its time in the search's order (a soft one-way
+    rule, :func:`one_way`; ``node_p``: the extra cost paid so far per node); with ``lane`` 0 the
+    search is plain SIPP."""
     ks = si_lo.shape[1]
     _intervals(start, h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen)
     if si_n[start] == 0 or si_lo[start, 0] > 0.0:
@@ -149,6 +161,7 @@ def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si
     s0 = start * ks
     node_gen[s0] = gen
     node_t[s0] = 0.0
+    node_p[s0] = 0.0
     node_par[s0] = -1
     cap = 1 << 14
     hf = np.empty(cap, dtype=np.float64)
@@ -225,12 +238,14 @@ def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si
                 if arr + hd[w] * d > bound:
                     continue
                 s2 = w * ks + j
-                if node_gen[s2] == gen and node_t[s2] <= arr:
+                p2 = node_p[s] + lane * d * wrong[v, e]
+                if node_gen[s2] == gen and node_t[s2] + node_p[s2] <= arr + p2:
                     continue
                 node_gen[s2] = gen
                 node_t[s2] = arr
+                node_p[s2] = p2
                 node_par[s2] = s
-                key = arr + weight * max(hd[w] * d, busy - arr)
+                key = arr + p2 + weight * max(hd[w] * d, busy - arr)
                 if size >= cap:
                     gf = np.empty(2 * cap, dtype=np.float64)
                     gn = np.empty(2 * cap, dtype=np.int64)
@@ -271,7 +286,7 @@ def _holder(c, t0, t1, h_who, h_lo, h_hi, h_n, mark):
 @_jit
 def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo, h_hi, h_n,
         si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, size, weight, limit,
-        strategy, stats):
+        strategy, stats, node_p, wrong, lane):
     """``iters`` iterations of the timed large neighbourhood search (module docstring); updates the
     tables and ``arrival`` in place, ``strategy`` (the neighbourhoods' weights) and ``stats``
     ([iterations, accepted]); returns the last search stamp."""
@@ -337,7 +352,8 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, rel, goals, fields, grow,
             gen += 1
             ln = sipp(a, p_cell[a, 0], goals[a], dur[a], fields[grow[a]], h_lo, h_hi, h_n, nb, deg, si_lo, si_hi,
                       si_n, si_gen, gen, node_gen, node_t, node_par, node_closed,
-                      lb[a] + room + 1e-9, weight, limit, out_cell, out_dep, stats, rel[a])
+                      lb[a] + room + 1e-9, weight, limit, out_cell, out_dep, stats, rel[a], node_p,
+                      wrong, lane)
             if ln < 0:
                 stats[4] += 1
                 ok = False
@@ -378,9 +394,11 @@ class TimedRefiner(LNSStats):
     the first timed plan itself (prioritized)."""
 
     def __init__(self, timing, starts, goals, durations, fields, grow, nb, deg, ncell: int, seed: int = 0,
-                 size: int = 4, release: float = 1.0):
+                 size: int = 4, release: float = 1.0, wrong: np.ndarray | None = None, lane: float = 0.0):
         n = len(starts)
         self._setup(starts, goals, durations, fields, grow, nb, deg, seed, size, release)
+        if wrong is not None:
+            self.wrong, self.lane_lns = wrong, float(lane)
         first = timing.first
         counts = np.diff(first) + 1
         self.L = int(max(2 * counts.max(initial=1), counts.max(initial=1) + 64))
@@ -418,6 +436,8 @@ class TimedRefiner(LNSStats):
         self.lb = fields[grow, np.asarray(starts, dtype=np.int32)].astype(np.float64) * self.dur
         self.gen = 0
         self.size = max(2, min(int(size), n))
+        self.wrong = np.zeros(np.shape(nb), dtype=np.uint8)
+        self.lane_first = self.lane_lns = 0.0
         self.weight = 1.0     # (plain A*: measured 3 seeds at 400 robots, ~0.004 lower SoC/free than 1.2)
         self.limit = 20 * len(nb)
         self.strategy = np.ones(2)
@@ -441,11 +461,14 @@ class TimedRefiner(LNSStats):
         self.node_t = np.zeros(ncell * ks)
         self.node_par = np.zeros(ncell * ks, dtype=np.int64)
         self.node_closed = np.zeros(ncell * ks, dtype=np.int64)
+        self.node_p = np.zeros(ncell * ks)
 
     @classmethod
     def from_scratch(cls, starts, goals, durations, fields, grow, nb, deg, ncell: int, seed: int = 0,
                      size: int = 4, release: float = 1.0, tries: int = 3, hold: float = 3.0,
-                     cpu_s: float = float("inf"), give_up: int = 20) -> tuple[TimedRefiner | None, bool]:
+                     cpu_s: float = float("inf"), give_up: int = 20,
+                     repair: int = REPAIR, wrong: np.ndarray | None = None,
+                     lane: float = 0.0) -> tuple[TimedRefiner | None, bool]:
         """The first timed plan by prioritized safe-interval planning (:func:`prioritized`): robots
         with the shortest time alone first, each at its own speed against the ones before it and the
         start cells of the ones after it (held ``hold`` x its time per cell). As in the discrete
@@ -455,6 +478,8 @@ class TimedRefiner(LNSStats):
         more than one robot in ``give_up`` failed: prioritized planning of the crowd is hopeless)."""
         self = cls.__new__(cls)
         self._setup(starts, goals, durations, fields, grow, nb, deg, seed, size, release)
+        if wrong is not None:
+            self.wrong, self.lane_first = wrong, float(lane)
         n = self.n
         if n == 0:
             return None, False
@@ -479,7 +504,8 @@ class TimedRefiner(LNSStats):
                                        self.rel, self.goals, fields, grow, nb, deg, self.h_who, self.h_lo, self.h_hi,
                                        self.h_n, self.si_lo, self.si_hi, self.si_n, self.si_gen, self.gen,
                                        self.node_gen, self.node_t, self.node_par, self.node_closed, 1.0,
-                                       4 * ncell, failed, max_failed, self.stats)
+                                       4 * ncell, failed, max_failed, self.stats, self.node_p, repair, self.wrong,
+                                       self.lane_first)
             if nf < 0:              # a cell's holding table overflowed: twice the room, same order
                 K *= 2
                 self._tables(ncell, K)
@@ -516,7 +542,8 @@ class TimedRefiner(LNSStats):
                                self.goals, self.fields, self.grow, self.nb, self.deg, self.h_who, self.h_lo,
                                self.h_hi, self.h_n, self.si_lo, self.si_hi, self.si_n, self.si_gen, self.gen,
                                self.node_gen, self.node_t, self.node_par, self.node_closed, self.size,
-                               self.weight, self.limit, self.strategy, self.stats))
+                               self.weight, self.limit, self.strategy, self.stats, self.node_p,
+                               self.wrong, self.lane_lns))
             if self.iterations == before:
                 return
 
@@ -545,44 +572,175 @@ def _fill(p_cell, p_dep, p_len, end_of, h_who, h_lo, h_hi, h_n):
 
 
 @_jit
+def _sealed_by(a, start, goal, goal_of, planned, nb, deg, seen, queue, out):
+    """The planned robots parked on their goals around robot a's goal that cut it off from its start
+    (ours): a breadth-first search from the goal that does not cross their goal cells, each found one
+    listed in ``out``; returns how many (0 when the start is reached: not sealed, or more than
+    ``len(out)``: too many to re-plan)."""
+    seen[:] = False
+    seen[goal] = True
+    queue[0] = goal
+    head, tail, k = 0, 1, 0
+    while head < tail:
+        v = queue[head]
+        head += 1
+        for e in range(deg[v]):
+            w = nb[v, e]
+            if seen[w]:
+                continue
+            seen[w] = True
+            if w == start:
+                return 0
+            b = goal_of[w]
+            if b != NIL and b != a and planned[b]:
+                if k >= len(out):
+                    return len(out) + 1
+                out[k] = b
+                k += 1
+                continue
+            queue[tail] = w
+            tail += 1
+    return k
+
+
+@_jit
+def _plan_one(a, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo, h_hi, h_n,
+              si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, weight, limit, stats, node_p,
+              out_cell, out_dep, wrong, lane):
+    """Robot a (its holdings already out of the tables) by :func:`sipp`, written to the tables; returns
+    (the search stamp, 1 planned, 0 no path, -1 a cell's holding table is full)."""
+    gen += 1
+    ln = sipp(a, p_cell[a, 0], goals[a], dur[a], fields[grow[a]], h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n,
+              si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf, weight, limit, out_cell, out_dep,
+              stats, rel[a], node_p, wrong, lane)
+    if ln < 0:
+        return gen, 0
+    p_cell[a, :ln] = out_cell[:ln]
+    p_dep[a, :ln] = out_dep[:ln]
+    p_len[a] = ln
+    if not _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n):
+        return gen, -1
+    arrival[a] = _arrival(p_dep, p_len, a, dur[a])
+    return gen, 1
+
+
+@_jit
 def prioritized(order, hold, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo,
                 h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, weight, limit,
-                failed, max_failed, stats):
+                failed, max_failed, stats, node_p, repair, wrong, lane):
     """Prioritized safe-interval planning on empty tables: the robots of ``order`` one after the
     other by :func:`sipp` at their own speeds against the ones before it and the start cells of the
     ones after it (each held ``hold`` x its time per cell). ``p_cell[:, 0]`` holds the starts,
     ``p_len`` ones. A robot without a path is left out of the tables and listed in ``failed``; more
     than ``max_failed`` of them stop the pass. Returns (the last search stamp, the number of failed
-    robots), -1 failed when a cell's holding table is full."""
+    robots), -1 failed when a cell's holding table is full.
+
+    ``repair`` (ours): a robot whose goal is cut off by at most ``repair`` robots parked on their
+    goals (a 1-cell aisle shut on both sides) is planned before them on the spot: they are taken out
+    (back on their starts), it is planned, and they are planned again after it, waiting for it to pass.
+    Without it the robot fails and goes first in the next pass, ahead of everybody, which makes
+    robots wait by their goals for a robot from far away that needed only to pass those few. Repairs
+    count as failures towards ``max_failed`` (then the number returned is ``max_failed + 1``)."""
     n = len(order)
+    ncell = nb.shape[0]
     L = p_cell.shape[1]
     out_cell = np.empty(L, dtype=np.int32)
     out_dep = np.empty(L, dtype=np.float64)
+    goal_of = np.full(ncell, NIL, dtype=np.int32)
+    planned = np.zeros(n, dtype=np.bool_)
+    seen = np.zeros(ncell, dtype=np.bool_)
+    queue = np.empty(ncell, dtype=np.int32)
+    blockers = np.empty(max(repair, 1), dtype=np.int32)
     for q in range(n):
         a = order[q]
         if not _put(p_cell[a, 0], a, 0.0, hold * dur[a], h_who, h_lo, h_hi, h_n):
             return gen, -1
+        goal_of[goals[a]] = a
     nf = 0
+    fixes = 0
     for q in range(n):
         a = order[q]
         _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n)
-        gen += 1
-        ln = sipp(a, p_cell[a, 0], goals[a], dur[a], fields[grow[a]], h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n,
-                  si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf, weight, limit, out_cell, out_dep,
-                  stats, rel[a])
-        if ln < 0:
+        gen, ok = _plan_one(a, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo,
+                            h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed,
+                            weight, limit, stats, node_p, out_cell, out_dep, wrong, lane)
+        if ok < 0:
+            return gen, -1
+        k = 0
+        if ok == 0 and repair > 0:
+            k = _sealed_by(a, p_cell[a, 0], goals[a], goal_of, planned, nb, deg, seen, queue, blockers)
+            if k > repair:
+                k = 0
+        if k > 0:
+            fixes += 1
+            if nf + fixes > max_failed:      # (hopeless as when they fail: at 1000 robots on warehouse-10-20-10-2-1
+                return gen, max_failed + 1    # the repairs overflowed the holding tables after 1 s)
+            for m in range(k):
+                b = blockers[m]
+                _remove(b, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+                p_len[b] = 1
+                planned[b] = False
+                if not _put(p_cell[b, 0], b, 0.0, hold * dur[b], h_who, h_lo, h_hi, h_n):
+                    return gen, -1
+            gen, ok = _plan_one(a, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who,
+                                h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par,
+                                node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane)
+            if ok < 0:
+                return gen, -1
+            for m in range(k):
+                b = blockers[m]
+                _remove(b, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+                gen, okb = _plan_one(b, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who,
+                                     h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par,
+                                     node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane)
+                if okb < 0:
+                    return gen, -1
+                if okb == 0:
+                    failed[nf] = b
+                    nf += 1
+                else:
+                    planned[b] = True
+        if ok == 0:
             failed[nf] = a
             nf += 1
             if nf > max_failed:
                 break
             continue
-        p_cell[a, :ln] = out_cell[:ln]
-        p_dep[a, :ln] = out_dep[:ln]
-        p_len[a] = ln
-        if not _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n):
-            return gen, -1
-        arrival[a] = _arrival(p_dep, p_len, a, dur[a])
+        planned[a] = True
     return gen, nf
+
+
+def one_way(index: np.ndarray, rows: np.ndarray, cols: np.ndarray, nb: np.ndarray, deg: np.ndarray) -> np.ndarray:
+    """Lanes of 1-cell corridors (ours, after the "highways" of Cohen et al., "Improved Solvers for
+    Bounded-Suboptimal Multi-Agent Path Finding", IJCAI 2016, there a cost factor on moves against a
+    chosen direction): a cell whose two sides across a row (column) are blocked lies in a horizontal
+    (vertical) corridor, driven east on even rows and west on odd ones (south on even columns, north on
+    odd ones), so that parallel corridors one shelf apart run opposite ways. Returns ``wrong`` shaped as
+    ``nb``: 1 where the move from a cell to its e-th neighbour goes against the lane of its source or
+    its destination cell. ``index``: (rows, cols) cell index, NIL where there is no cell."""
+    h, w = index.shape
+
+    def cell_at(r, c):
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        out = np.full(r.shape, NIL, dtype=np.int64)
+        out[ok] = index[r[ok], c[ok]]
+        return out
+
+    horizontal = (cell_at(rows - 1, cols) == NIL) & (cell_at(rows + 1, cols) == NIL)
+    vertical = (cell_at(rows, cols - 1) == NIL) & (cell_at(rows, cols + 1) == NIL)
+    east = rows % 2 == 0          # on horizontal corridors: +1 column is the lane's way
+    south = cols % 2 == 0         # on vertical ones: +1 row
+    n = len(rows)
+    src = np.repeat(np.arange(n), nb.shape[1])
+    dst = nb.reshape(-1).astype(np.int64)
+    has = dst != NIL
+    dst_ok = np.where(has, dst, 0)
+    dr, dc = rows[dst_ok] - rows[src], cols[dst_ok] - cols[src]
+    wrong = np.zeros(len(src), dtype=bool)
+    for c in (src, dst_ok):
+        wrong |= horizontal[c] & (dr == 0) & (dc == np.where(east[c], -1, 1))
+        wrong |= vertical[c] & (dc == 0) & (dr == np.where(south[c], -1, 1))
+    return (wrong & has).reshape(nb.shape).astype(np.uint8)
 
 
 _WARM = False
@@ -609,7 +767,8 @@ def warm_up() -> None:
     lns(2, refiner.p_cell, refiner.p_dep, refiner.p_len, refiner.arrival, refiner.lb, refiner.dur, refiner.rel,
         refiner.goals, fields, grow, nb, deg, refiner.h_who, refiner.h_lo, refiner.h_hi, refiner.h_n, refiner.si_lo,
         refiner.si_hi, refiner.si_n, refiner.si_gen, 0, refiner.node_gen, refiner.node_t, refiner.node_par,
-        refiner.node_closed, 2, 1.2, 1000, refiner.strategy, refiner.stats)
+        refiner.node_closed, 2, 1.2, 1000, refiner.strategy, refiner.stats, refiner.node_p,
+        refiner.wrong, 0.0)
     robot, key, src, dst = refiner.moves()
     time_move_list(plan[0], robot, key, src, dst, dur)
     TimedRefiner.from_scratch(plan[0], goals, dur, fields, grow, nb, deg, 6, 0, size=2, release=RELEASE)
