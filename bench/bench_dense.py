@@ -35,7 +35,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 
-from bench_md import RADIUS, SPEED, AloneTimes, generated_instance  # noqa: E402
+from bench_md import RADIUS, SPEED, AloneTimes, add_maps_dir, generated_instance, maps_dir_of  # noqa: E402
 
 from fleet_planner.checker import check_plan  # noqa: E402
 from fleet_planner.grid import GridMap  # noqa: E402
@@ -63,8 +63,7 @@ class Row:
 def _args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("runs", nargs="*", default=DEFAULT_RUNS, help="MAP:N[,N...] (default: %(default)s)")
-    p.add_argument("--maps-dir", type=Path, default=REPO.parent / "shared" / "data" / "maps",
-                   help="MovingAI maps and .scen files (default: %(default)s)")
+    add_maps_dir(p)
     p.add_argument("--planners", default="dense,md,prior", help="comma-separated (default: %(default)s)")
     p.add_argument("--timeout", type=float, default=60.0, help="seconds per run of md and prior (default: %(default)s)")
     p.add_argument("--dense-timeout", type=float, default=300.0,
@@ -74,6 +73,7 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0, help="radii and speeds (default: %(default)s)")
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     args = p.parse_args(argv)
+    args.maps_dir = maps_dir_of(p, args)
     runs = []
     for spec in args.runs:
         name, _, sizes = spec.partition(":")

@@ -88,10 +88,30 @@ class Row:
     notes: str = ""
 
 
+DEFAULT_MAPS = REPO.parent / "shared" / "data" / "maps"
+
+
+def add_maps_dir(p: argparse.ArgumentParser) -> None:
+    """``--maps-dir`` (shared with bench_dense): see :func:`maps_dir_of`."""
+    p.add_argument("--maps-dir", type=Path, default=None,
+                   help=f"MovingAI maps and .scen files (default: {DEFAULT_MAPS}; where that is missing, a "
+                        "generated warehouse stands in)")
+
+
+def maps_dir_of(p: argparse.ArgumentParser, args: argparse.Namespace) -> Path:
+    """The maps directory: ``--maps-dir`` as given, which must exist (a mistyped path must not bench a
+    generated warehouse instead, with only a line on stderr to say so), or the default (which may be
+    missing: the benches then run on a generated warehouse, as the suite does without ../shared)."""
+    if args.maps_dir is None:
+        return DEFAULT_MAPS
+    if not args.maps_dir.is_dir():
+        p.error(f"--maps-dir: {args.maps_dir} is not a directory")
+    return args.maps_dir
+
+
 def _args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--maps-dir", type=Path, default=REPO.parent / "shared" / "data" / "maps",
-                   help="MovingAI maps and .scen files (default: %(default)s)")
+    add_maps_dir(p)
     p.add_argument("--maps", help="comma-separated map names (default: every warehouse-*.map in --maps-dir)")
     p.add_argument("--scen", default="random-1",
                    help="which .scen of each map: <map>-<SCEN>.scen (default: %(default)s)")
@@ -110,6 +130,7 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     p.add_argument("--plot", type=Path, help="also draw time and quality against N to this PNG")
     args = p.parse_args(argv)
+    args.maps_dir = maps_dir_of(p, args)
     if args.suite:
         suite = SUITES[args.suite]
         given = set(argv if argv is not None else sys.argv[1:])

@@ -285,7 +285,8 @@ def test_the_benchmark_refuses_bad_options_naming_them(capsys):
     for argv, message in ((["--time-limit", "-1"], "--time-limit: must be a finite number of seconds > 0"),
                           (["--time-limit", "nan"], "--time-limit: must be"),
                           (["--planners", "md,nope"], "--planners: unknown"), (["--timeout", "0"], "--timeout: must"),
-                          (["--suite", "issue9"], "--suite")):
+                          (["--suite", "issue9"], "--suite"),
+                          (["--maps-dir", "/nonexistent/maps"], "--maps-dir: /nonexistent/maps is not a directory")):
         with pytest.raises(SystemExit) as stop:
             bench_md._args(argv)
         assert stop.value.code == 2

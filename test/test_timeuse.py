@@ -3,6 +3,8 @@ apart by why it had no job - one free for it, one waiting for its storing site (
 rule of one job per site), one waiting for its chute, or nothing to do."""
 from __future__ import annotations
 
+import warnings
+
 import pytest
 
 from fleet_planner.robots import load_kinds
@@ -41,3 +43,18 @@ def test_an_idle_robot_whose_only_job_waits_for_its_storing_site_counts_apart_fr
     for seconds in (_run("B02-01", sites), _run("B01-02", None)):
         assert seconds["no job: idle, a job was free"] == pytest.approx(100.0)
         assert seconds["no job: idle, its site was taken"] == 0.0
+
+
+def test_the_per_job_means_count_only_jobs_whose_steps_happened_and_warn_of_nothing():
+    """J1 is accepted at 0 and assigned at 10; J2 was sent but never heard of (no event): its
+    queue time is unknown, not infinite, and the mean is J1's alone (was: inf - inf, a NumPy warning)."""
+    jobs = [Task(id="J1", pick="chute_1", place="B01-01"), Task(id="J2", pick="chute_2", place="B02-01")]
+    events = [TaskEvent(task_id="J1", event="accepted", stamp=0.0),
+              TaskEvent(task_id="J1", event="assigned", stamp=10.0, robot_id="rA"),
+              TaskEvent(task_id="J1", event="picked", stamp=40.0, robot_id="rA"),
+              TaskEvent(task_id="J1", event="done", stamp=100.0, robot_id="rA")]
+    modes = {"rA": [(0.0, "driving", False, "J1", False, "cargo")]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        use = time_use(modes, events, jobs, KINDS, {"rA": [(5.0, 5.0, 0.0)]}, CHUTES, 0.0, 100.0)
+    assert (use.queued_s, use.to_pick_s, use.to_place_s) == (10.0, 30.0, 60.0)

@@ -161,12 +161,13 @@ def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], 
         approach.append(float(np.hypot(track[k][0] - pose[0], track[k][1] - pose[1])))
     done = np.isfinite(ended) & np.isfinite(picked)
 
-    def mean(values: np.ndarray) -> float:
-        values = values[np.isfinite(values)]
-        return float(values.mean()) if len(values) else 0.0
+    def span(start: np.ndarray, end: np.ndarray) -> float:
+        """The mean of ``end - start`` over the jobs where both happened (0 if none)."""
+        both = np.isfinite(start) & np.isfinite(end)
+        return float((end[both] - start[both]).mean()) if both.any() else 0.0
 
-    return TimeUse(seconds, float(t1 - t0), len(modes), mean(assigned - accepted), mean(picked[done] - assigned[done]),
-                   mean(ended[done] - picked[done]), float(np.mean(approach)) if approach else 0.0)
+    return TimeUse(seconds, float(t1 - t0), len(modes), span(accepted, assigned), span(assigned[done], picked[done]),
+                   span(picked[done], ended[done]), float(np.mean(approach)) if approach else 0.0)
 
 
 def sites_of(warehouse: Warehouse) -> dict[str, str]:
