@@ -293,5 +293,5 @@ def nearest_free(spots: Mapping[str, Point], taken: Callable[[Point], bool], ori
     return best
 
 
-__all__ = ["LEGACY", "PIPELINED", "SERIAL", "STAGED", "Candidate", "DispatchPolicy", "TravelTimes", "assign", "nearest_free",
-           "queue_spots", "staging_spots"]
+__all__ = ["LEGACY", "PIPELINED", "SERIAL", "STAGED", "Candidate", "DispatchPolicy", "TravelTimes", "assign",
+           "nearest_free", "queue_spots", "staging_spots"]
