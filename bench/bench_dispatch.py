@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import yaml  # noqa: E402
 
 from fleet_planner.fleet import DispatchParams, FleetManager, load_fleet  # noqa: E402
-from fleet_planner.fleet.dispatch import LEGACY, PIPELINED, STAGED, DispatchPolicy  # noqa: E402
+from fleet_planner.fleet.dispatch import LEGACY, PIPELINED, SERIAL, STAGED, DispatchPolicy  # noqa: E402
 from fleet_planner.fleet.placement import parking_spots, place_robots  # noqa: E402
 from fleet_planner.fleet.sim import SimFleet  # noqa: E402
 from fleet_planner.robots import load_kinds  # noqa: E402
@@ -34,13 +34,14 @@ from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
 from fleet_planner.ros.demo.timeuse import sites_of, time_use  # noqa: E402
 from fleet_planner.warehouse import config_path, load_warehouse  # noqa: E402
 
-#: "s18" is the default (sites held until done, no chute queue); "new" the pipelined chutes (PIPELINED, opt-in)
-POLICIES = {"legacy": LEGACY, "new": PIPELINED, "s18": DispatchPolicy(),
+#: "new" is the default (PIPELINED: the chute queue, sites held until "soon"); "s18" the session-18 default (SERIAL)
+POLICIES = {"legacy": LEGACY, "new": PIPELINED, "s18": SERIAL,
             "batch": DispatchPolicy(queue=False, sites=False, site_hold="done"), "staged": STAGED,
             "staged-no-queue": DispatchPolicy(staging=True, queue=False, site_hold="done", charge_below=0.6,
                                               leave_charger_at=0.95),
-            "queue": DispatchPolicy(site_hold="done"), "queue-picked": DispatchPolicy(site_hold="picked"),
-            "soon": DispatchPolicy(queue=False)}
+            "queue": DispatchPolicy(queue=True, site_hold="done"),
+            "queue-picked": DispatchPolicy(queue=True, site_hold="picked"),
+            "soon": DispatchPolicy(queue=False, site_hold="soon")}
 
 
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,

@@ -360,6 +360,41 @@ def test_a_free_robot_blocking_the_only_way_is_sent_off_first():
     assert min_separation(sim.driven())[0] >= 0.0
 
 
+@pytest.mark.parametrize("gap", [0.15, 0.06])
+def test_two_robots_stopped_within_the_margin_of_each_other_both_get_on_their_way(gap, monkeypatch):
+    """Two robots, each with somewhere to go past the other, stand ``gap`` apart beyond the sum of
+    radii, inside the planner's margin (0.23 m: as test_obstacles' walkers left two robots held
+    with pipelined dispatch, 0.152 m; 0.06 m is where the safety net stops one). Each gets on its way
+    and neither ever comes nearer to the other than it stood. Control: planned around with their full
+    discs grown by the margin, neither ever gets a leg (each "parks on its goal in the way")."""
+    from fleet_planner.fleet import coordination
+    from fleet_planner.fleet.state import Target
+
+    south, north = (9.48, 7.10), (8.68, 6.57)   # in the middle aisle, where the cross aisle meets it
+    away = (north[0] - south[0], north[1] - south[1])
+    scale = (KINDS["cargo"].radius + KINDS["manipulator_forklift"].radius + gap) / math.hypot(*away)
+    north = (south[0] + away[0] * scale, south[1] + away[1] * scale)
+    goals = {"s": Target("charge", "charger_4", CHARGERS[3]), "n": Target("park", "parking_1", (12.75, 3.0))}
+
+    def run():
+        sim = Sim([("s", "cargo", *south, 1.0), ("n", "manipulator_forklift", *north, 1.0)],
+                  parking=[goals["n"].pose], idle_s=3600.0)
+        sim.run_until(lambda: len(sim.fm.robots) == 2, limit=2)
+        for rid, target in goals.items():
+            sim.fm.robots[rid].target, sim.fm.robots[rid].replan = target, True
+        arrived = sim.run_until(lambda: all(math.dist((sim.agents[r].model.x, sim.agents[r].model.y), g.pose) < 0.05
+                                            for r, g in goals.items()), limit=60)
+        return sim, arrived
+
+    sim, arrived = run()
+    assert arrived, sim.notes
+    assert min_separation(sim.driven())[0] >= gap - 0.01
+    monkeypatch.setattr(coordination, "room_to_leave", lambda other, *args: other)
+    sim, arrived = run()
+    assert not arrived and not any(sim.legs.values())
+    assert any("parks on its goal in the way" in n for n in sim.notes)
+
+
 # -- fleet files ------------------------------------------------------------------------------------------
 def test_the_shipped_demo_fleet_is_mixed_and_fits_the_default_warehouse():
     fleet = load_fleet(None, KINDS, load_warehouse())

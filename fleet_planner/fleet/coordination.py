@@ -139,10 +139,11 @@ class Coordination(ABC):
     @abstractmethod
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
                  planner: Planner, speed: float, fleet: Iterable[FleetRobot],
-                 obstacles: Sequence[TimedPath] = ()) -> TimedPath:
+                 obstacles: Sequence[TimedPath] = (), margin: float = 0.0) -> TimedPath:
         """A leg for ``robot`` from ``start`` at ``t0`` to ``target`` at ``speed`` (``fleet``: every
         robot, ``robot`` included; ``obstacles``: the predicted obstacles as trajectories, see
-        :mod:`.obstacles`); :class:`LegNotPlanned` if there is none now."""
+        :mod:`.obstacles`; ``margin``: what ``planner`` keeps between discs beyond the sum of radii);
+        :class:`LegNotPlanned` if there is none now."""
 
     @abstractmethod
     def is_late(self, robot: FleetRobot, tolerance_s: float) -> bool:
@@ -190,13 +191,15 @@ class CentralCoordination(Coordination):
 
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
                  planner: Planner, speed: float, fleet: Iterable[FleetRobot],
-                 obstacles: Sequence[TimedPath] = ()) -> TimedPath:
+                 obstacles: Sequence[TimedPath] = (), margin: float = 0.0) -> TimedPath:
         """Planned with ``planner`` around the trajectories of all other robots and the obstacles
-        (participants above every robot)."""
+        (participants above every robot); a robot standing so near ``start`` that ``margin`` would
+        forbid every leg is kept at the distance it is at now (:func:`room_to_leave`)."""
         kind = robot.kind
         spec = RobotSpec(robot.id, robot.radius, speed, start, target.pose, kind.name,
                          kind.max_accel if math.isfinite(kind.max_accel) else None)
-        others = [o.trajectory() for o in fleet if o is not robot] + list(obstacles)
+        others = [room_to_leave(o.trajectory(), start, robot.radius, margin, t0) if not o.manual else o.trajectory()
+                  for o in fleet if o is not robot] + list(obstacles)
         try:
             return planner.plan_incremental(grid, [spec], others, t0)[0]
         except PlanningError as exc:
@@ -215,6 +218,36 @@ class CentralCoordination(Coordination):
 
     def driver(self, model: RobotModel, warehouse: Warehouse, params: BehaviorParams, gated: bool = False) -> Driver:
         return CentralDriver(model, gated)
+
+
+#: a robot standing within the planner's margin of a leg's start is planned around as a disc this much
+#: (m) smaller than the distance allows (:func:`room_to_leave`): the leg keeps at least the distance less this
+LEAVE_SLACK_M = 0.005
+
+
+def room_to_leave(other: TimedPath, start: Point, radius: float, margin: float, t0: float) -> TimedPath:
+    """``other`` (a robot's trajectory) as a leg of a robot of ``radius`` from ``start`` at ``t0`` is
+    planned around it: unchanged, unless it stands from ``t0`` on (its last waypoint reached by then)
+    nearer to ``start`` than the sum of radii plus ``margin``: then its disc is shrunk so that ``start``
+    is just outside it grown by the margin, and the leg never comes nearer to it than it is now
+    (less :data:`LEAVE_SLACK_M`). Ours.
+
+    Why: robots stop within the planner's margin of one another (a gate holds one at
+    :data:`~.gate.PAD_M`, the safety net at :data:`NET_MARGIN_M`, a robot driving on until its next
+    re-plan stops it beside one that was just held), and the planner plans no leg whose start lies
+    inside a standing robot's grown disc ("parks on its goal in the way" from the start on). Two
+    robots stopped so, each with somewhere to go, each blocked the other for ever (test_obstacles'
+    walkers with pipelined dispatch: held 0.952 m apart where the planner needed 1.032 m). Around a
+    robot that stands, the margin's lag allowance is not needed either: a robot lagging its leg is
+    on the leg's way, which keeps at least the distance of now from the standing disc."""
+    wp = other.waypoints
+    if wp[-1, 2] > t0 + 1e-9:
+        return other   # it still drives after t0: the planner waits for it to leave the start
+    gap = math.dist(start, (float(wp[-1, 0]), float(wp[-1, 1])))
+    shrunk = gap - radius - margin - LEAVE_SLACK_M
+    if shrunk >= other.radius or shrunk <= 0.0:
+        return other   # clear of the start already; or nearly on it (nothing sensible to keep)
+    return TimedPath(other.robot_id, shrunk, wp[-1:].copy())
 
 
 #: a robot joins a leg that started behind it if it is this close (m) to the leg's way (the leg
@@ -442,7 +475,7 @@ class BehaviorCoordination(Coordination):
 
     def plan_leg(self, robot: FleetRobot, start: Point, target: Target, t0: float, *, grid: GridMap,
                  planner: Planner, speed: float, fleet: Iterable[FleetRobot],
-                 obstacles: Sequence[TimedPath] = ()) -> TimedPath:
+                 obstacles: Sequence[TimedPath] = (), margin: float = 0.0) -> TimedPath:
         """The robot's shortest path on the map, around nobody, timed at ``speed`` from ``t0``. Only
         its goal binds the robot, which plans its own way there."""
         points = self._finder(grid, robot.radius).find(start, target.pose)

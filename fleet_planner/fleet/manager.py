@@ -786,13 +786,13 @@ class FleetManager:
             job = self.jobs.get(r.job) if r.job is not None else None
             if job is None:
                 continue
-            occupant = self._occupant(job.pick.pose, r.radius, exclude=r)
-            if occupant is not None and occupant.immobile:
-                # a robot stopped for good on the chute: nobody picks there; the job goes back to the queue
+            stuck = self._stopped_on(chute, r.radius, exclude=r)
+            if stuck is not None:   # nobody picks there: the job goes back to the queue
                 r.job, job.state, job.robot = None, "queued", None
                 self._record(job, "requeued", now)
-                d.notes.append(f"job {job.task.id} is queued again: {occupant.id} stands on {chute} for good")
+                d.notes.append(f"job {job.task.id} is queued again: {stuck.id} stands on {chute} for good")
             elif not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
+                occupant = self._occupant(job.pick.pose, r.radius, exclude=r)
                 if occupant is None or self._leaving(occupant, job.pick.pose):
                     self._plan_leg(r, Target("pick", job.pick.name, job.pick.pose), now, d)
                 elif occupant.free:
@@ -830,9 +830,8 @@ class FleetManager:
         for chute, spot in self.queue_spot.items():
             if chute in waiting or not self._reserved(self.work_stops[chute]):
                 continue
-            blocker = self._occupant(self.work_stops[chute], max(r.radius for r in free.values()))
-            if blocker is not None and blocker.immobile:
-                continue   # a robot stopped on it for good (offline, out of battery): nobody waits for it
+            if self._stopped_on(chute, max(r.radius for r in free.values())) is not None:
+                continue   # nobody waits for it
             occupant = self._occupant(self.staging[spot], max(r.radius for r in free.values()))
             if occupant is None or occupant.id in free:
                 open_spot[chute] = spot
@@ -855,6 +854,12 @@ class FleetManager:
             r.job = job.task.id
             d.events.append(_event(job.task.id, "assigned", now, r.id))
             d.notes.append(f"robot {r.id} waits at {spot} for {job.pick.name} (job {job.task.id})")
+
+    def _stopped_on(self, chute: str, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:
+        """A robot stopped for good (offline, out of battery) on ``chute``, where a robot of ``radius``
+        would pick (policy ``queue``: nobody waits for such a chute, and a robot waiting for it lets its job go)."""
+        o = self._occupant(self.work_stops[chute], radius, exclude)
+        return o if o is not None and o.immobile else None
 
     def _leaving(self, o: FleetRobot, pose: Point) -> bool:
         """``o`` stands at ``pose`` but drives off: it has the goods of its job and a leg it took that
@@ -1044,7 +1049,8 @@ class FleetManager:
         round the fleet and the obstacles (followed OBSTACLE_LOOKAHEAD horizons); LegNotPlanned if none."""
         return self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
                                       speed=r.kind.max_speed * self.params.speed_factor, fleet=self.robots.values(),
-                                      obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD))
+                                      obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD),
+                                      margin=self.margin)
 
     def _out_of_time(self) -> bool:
         """This step has spent its leg-planning budget (``step_budget_s`` wall seconds)."""
