@@ -196,6 +196,35 @@ def test_a_re_planned_leg_that_starts_in_a_region_another_robot_is_in_is_refused
     assert book.on_leg(a, 3, straight("a", (5.0, 5.0), (10.0, 5.0), 8.0), [a, b], 8.0) is not None  # (taken if asked)
 
 
+def test_a_robot_that_refused_its_leg_stands_and_only_robots_passing_it_keep_waiting_for_it():
+    # the 22-robot run in process mode jammed with the gate of session 20: a re-planned robot's old
+    # way stays live until it reports its new leg; one that refused that leg (it started metres
+    # from it under load) stopped for good on its old path, so robots crossing that path further on
+    # waited for it to pass or to report a leg for ever, while its own new legs were refused, being
+    # "blocked by" their timed legs through its start, which they could not drive
+    book = GateBook()
+    a, b = robot("a", 0.0, 5.0), robot("b", 12.0, 0.0)
+    book.on_leg(a, 1, straight("a", (0.0, 5.0), (20.0, 5.0), 0.0), [a, b], 0.0)
+    a.status = RobotStatus.from_dict({**said("a", 1, 2.0).to_dict(), "x": 2.0, "y": 5.0, "vx": 1.0, "stamp": 2.0})
+    book.on_leg(a, 2, straight("a", (3.0, 5.0), (3.0, 15.0), 3.0), [a, b], 2.0)    # re-planned: north at x = 3
+    mine = book.on_leg(b, 3, straight("b", (12.0, 0.0), (12.0, 10.0), 3.0), [a, b], 2.0)[0]
+    a.status = RobotStatus.from_dict({**a.status.to_dict(), "vx": 0.0, "stamp": 3.0, "rejected_path_id": 2})
+    entry = gate_limit(mine, 3, {"a": a.status})
+    assert entry < 5.0 - 2 * R   # control: b waits at a's old way, and would for ever (a stands at x = 2)
+    records, stuck = book.halted(a, [a, b], 3.0)
+    assert [r.robot_id for r in records] == ["b"] and stuck == []
+    assert gate_limit(records[0], 3, {"a": a.status}) == math.inf   # b goes
+    # new legs: one crossing a's old way ahead gets no link on it, one passing where it stands waits
+    # until it reports a later leg (it does not leave on its path), not for a's ack
+    c, e = robot("c", 8.0, 0.0), robot("e", 2.0, 0.0)
+    out = book.on_leg(c, 4, straight("c", (8.0, 0.0), (8.0, 10.0), 3.0), [a, b, c], 3.0)
+    assert not any(lk.robot == "a" for lk in links_of(out[0]))
+    out = book.on_leg(e, 5, straight("e", (2.0, 0.0), (2.0, 10.0), 3.0), [a, b, c, e], 3.0)
+    assert [r.robot_id for r in out] == ["e"]                                          # a's record does not grow
+    assert {(lk.robot, lk.path_id, lk.exit, lk.ack) for lk in links_of(out[0])} == {("a", 1, None, None)}
+    assert gate_limit(out[0], 5, {"a": a.status}) < 5.0 - 2 * R
+
+
 def test_a_robot_following_another_down_an_aisle_gets_a_staircase_of_links():
     book = GateBook()
     a, b = robot("a", 2.0, 5.0), robot("b", 0.0, 5.0)

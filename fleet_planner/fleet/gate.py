@@ -163,6 +163,13 @@ def too_late(record: GateRecord, travelled: float, seen: Container[Link]) -> set
     return {lk for lk in links_of(record) if lk not in seen and lk.region is not None and travelled > lk.region}
 
 
+def stands(o: FleetRobot) -> bool:
+    """Whether ``o``'s status says it refused its latest leg (``rejected_path_id``) and stands where it
+    is on the path it names, until a later leg comes (RobotAgent.on_path, CentralDriver.refused)."""
+    st = o.status
+    return st.rejected_path_id is not None and st.path_id is not None and st.rejected_path_id > st.path_id
+
+
 def blockers(record: GateRecord | None, statuses: Mapping[str, RobotStatus], before: float) -> list[str]:
     """The robots whose links, not yet satisfied, stop the robot before ``before`` m."""
     if record is None:
@@ -294,8 +301,12 @@ class GateBook:
     def _live(self, o: FleetRobot) -> dict[int, TimedPath]:
         paths = self.paths.get(o.id, {})
         if paths:
-            latest = max(paths)
-            paths = {pid: p for pid, p in paths.items() if pid == latest or pid == o.status.path_id}
+            st = o.status
+            if stands(o):   # the legs it refused (and any before them) it never takes
+                assert st.rejected_path_id is not None
+                paths = {pid: p for pid, p in paths.items() if pid == st.path_id or pid > st.rejected_path_id}
+            latest = max(paths, default=None)
+            paths = {pid: p for pid, p in paths.items() if pid == latest or pid == st.path_id}
             self.paths[o.id] = paths
         return paths
 
@@ -340,7 +351,13 @@ class GateBook:
                 since = max(0.0, now - o.status.stamp) + self.reach_s
                 cap = self._held_at(o, pid, done, heard)
                 reach = max(done, min(arc_at(p, now + self.reach_s), done + o.kind.max_speed * since, cap))
-                if pid == latest:
+                standing = on_it and stands(o)
+                if standing:
+                    # it refused its latest leg and stopped where its status says, until a later leg
+                    # (RobotAgent.on_path): not its way on, only where it stands (it leaves no region)
+                    theirs, reach, cap = sample(p, done, done, step=self.sample_m), done, done
+                    theirs.parks = True
+                elif pid == latest:
                     theirs = sample(p, done, step=self.sample_m)
                 elif on_it:
                     # the path it drives until it takes its latest one: all of its way on, not only
@@ -359,7 +376,7 @@ class GateBook:
                     o_in = reach >= enters and self._may_be_in(p, done, reach, path, mine, i_mine, clear)
                     if o_in and i_mine.min() == 0:
                         self.conflicts.append(o.id)
-                    o_first = (pid != latest or not recorded or o_in
+                    o_first = (standing or pid != latest or not recorded or o_in
                                or (i_mine.min() > 0 and not first_by_plan(mine, path, theirs, i_mine, i_theirs)))
                     if o_first:
                         links += [Link(o.id, pid, ex, en) for ex, en in pieces(theirs, mine, i_theirs, i_mine)]
@@ -440,6 +457,21 @@ class GateBook:
         whose way does are returned (they keep waiting for it: re-plan them)."""
         self.paths.pop(r.id, None)
         self.records.pop(r.id, None)
+        return self._release(r, fleet, now)
+
+    def halted(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
+        """``r``'s status says it refused its latest leg (:func:`stands`): it stopped where it is and
+        stays there until a later leg, so neither that leg nor the way on along the path it stood on is
+        live any more (ours: the planner never assumes a robot took a path it did not report taking).
+        Links on it go, as in :meth:`forget`, from the records of robots whose way does not pass
+        near where it stands: they waited for it to leave regions it will now never reach, or for it
+        to report a leg it will never take (the 22-robot run jammed so: robots waited for a robot that
+        could get no new leg, because their own timed legs, which they could not drive, passed
+        through its start). The others keep waiting for it; their ids are returned."""
+        self._live(r)
+        return self._release(r, fleet, now)
+
+    def _release(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
         out, stuck = [], []
         by_id = {o.id: o for o in fleet}
         for oid, rec in list(self.records.items()):

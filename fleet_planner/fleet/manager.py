@@ -70,6 +70,9 @@ SPOT_RETRY_S = 2.0
 #: in a row up to LEG_RETRY_MAX_S (a refused leg costs the planner its whole time budget: tried at
 #: every step, a few of them stall the step, and the fleet's statuses wait meanwhile)
 LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
+#: simulated s before a robot whose new leg the gate refused (it started in a region another robot may
+#: be in) is re-planned again (it was re-planned at every step: the planner took 76% of a core)
+GATE_RETRY_S = 2.0
 #: a robot stepping aside from a moving obstacle tries this many refuges, nearest first; when none
 #: can be reached it holds and tries again this much later (s)
 EVADE_TRIES, EVADE_RETRY_S = 8, 0.5
@@ -564,6 +567,8 @@ class FleetManager:
                 for o in self._replan_around(r, r.pos, now):
                     if self.gates is not None:  # their links keep them off it: an optimisation, not a hold
                         o.conflict = False
+                if self.gates is not None:  # it stands: robots not passing it stop waiting for its old ways
+                    d.gates += self.gates.halted(r, self.robots.values(), now)[0]
 
     def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
         """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
@@ -669,7 +674,7 @@ class FleetManager:
         waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
                    and not r.immobile and r.online and not r.paused and not r.manual
                    and (r.leg is None or r.status.path_id == r.leg.path_id)
-                   and (now >= r.leg_retry_at or r.on_leg)]
+                   and (now >= r.leg_retry_at or r.on_leg) and now >= r.gate_retry_at]
         waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
         for r, target in waiting:
             if self._out_of_time():
@@ -1052,14 +1057,24 @@ class FleetManager:
 
     def _give(self, r: FleetRobot, leg: Leg, d: Decisions, now: float) -> bool:
         if self.gates is not None:  # its links, and the links others get where it passes first
-            # a leg replacing one it drives is not taken if it starts in a region another robot
-            # may be in (fleet/gate.py): the old leg's links still hold, a re-plan is only an optimisation
-            records = self.gates.on_leg(r, leg.path_id, leg.path, self.robots.values(), now, refuse_conflicts=r.on_leg)
+            # a leg is not taken if it starts in a region another robot may be in (fleet/gate.py):
+            # one replacing a leg it drives keeps that leg, whose links still hold (a re-plan is only an
+            # optimisation); one for a robot that stands keeps it standing (ours: taken, it ranked
+            # the other first, which then drove at it standing in its way once it reported the new
+            # leg, head-on). The others there re-plan around it; it tries again GATE_RETRY_S later
+            records = self.gates.on_leg(r, leg.path_id, leg.path, self.robots.values(), now, refuse_conflicts=True)
             if records is None:
-                why = f"a new leg would start in a region {', '.join(sorted(set(self.gates.conflicts)))} may be in"
+                others = sorted(set(self.gates.conflicts))
+                why = f"a new leg would start in a region {', '.join(others)} may be in"
                 if why != r.trouble:
-                    d.notes.append(f"robot {r.id}: {why}: it keeps its leg")
+                    d.notes.append(f"robot {r.id}: {why}: it {'keeps its leg' if r.on_leg else 'stands'}")
                 r.trouble = why
+                r.gate_retry_at = now + GATE_RETRY_S
+                r.leg_retry_at = max(r.leg_retry_at, r.gate_retry_at)   # (for its other legs: a job's, a spot's)
+                for oid in others:
+                    o = self.robots.get(oid)
+                    if o is not None and o.on_leg and o.target is not None and not o.replan:
+                        o.replan = True
                 return False
             d.gates += records
         r.leg, r.last_path_id = leg, leg.path_id
