@@ -48,7 +48,7 @@ POLICIES = {"legacy": LEGACY, "new": PIPELINED, "s18": DispatchPolicy(),
 
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
         period: float = 0.5, progress: bool = False, seed: int = 1, delay: float = 0.0, status_delay: float = 0.0,
-        notes: list[str] | None = None) -> dict:
+        notes: list[str] | None = None, lateness: float | None = None) -> dict:
     kinds = load_kinds()
     wh = load_warehouse()
     if n == 0:   # the demo's default fleet (config/fleet.yaml) and parking spots (config/planner_params.yaml)
@@ -59,7 +59,8 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
     else:
         members = place_robots(wh, kinds, n)
         parking = parking_spots(wh, members)
-    fm = FleetManager(wh, kinds, DispatchParams(), parking)
+    fm = FleetManager(wh, kinds, DispatchParams() if lateness is None else DispatchParams(lateness_tolerance_s=lateness),
+                      parking)
     fm.policy = policy
     fm.step_budget_s = 1e9   # no wall-clock budget: the planner keeps up whatever the load
     sim = SimFleet(members, kinds, wh, gated=True)
@@ -126,6 +127,15 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
         if progress and k % round(100.0 / dt) == 0:
             print(f"  t = {t:.0f} s: {sum(e == 'done' for e in last_event.values())} done, {submitted} submitted, "
                   f"CPU {time.process_time() - cpu0:.0f} s", file=sys.stderr, flush=True)
+            if notes is not None:   # who waits for whom (the gate), where (to find a jam)
+                for rid, a in sim.agents.items():
+                    st, fr = sim.last.get(rid), fm.robots.get(rid)
+                    if st is None or fr is None:
+                        continue
+                    notes.append(f"{t:.1f} state {rid} ({st.x:.2f}, {st.y:.2f}) {st.mode} waits for "
+                                 f"{getattr(a.driver, 'waits_for', None)} path {st.path_id} leg "
+                                 f"{fr.leg.path_id if fr.leg else None} rejected {st.rejected_path_id} "
+                                 f"target {fr.target.name if fr.target else None} trouble {fr.trouble!r}")
         pos = np.array([(st.x, st.y) for st in statuses])
         for st in statuses:
             tracks[st.id].append((st.x, st.y, t))
@@ -175,7 +185,8 @@ def main() -> None:
                    help="legs and gate records reach robots up to this many simulated s late (random; default 0)")
     p.add_argument("--status-delay", type=float, default=0.0,
                    help="statuses reach the planner up to this many simulated s late (random; default 0)")
-    p.add_argument("--notes", help="write the planner's notes to this file")
+    p.add_argument("--notes", help="write the planner's notes (and who waits for whom every 100 s) to this file")
+    p.add_argument("--lateness", type=float, help="lateness_tolerance_s of the planner (default: DispatchParams')")
     p.add_argument("--progress", action="store_true", help="jobs done every 100 simulated s (on stderr)")
     opts = p.parse_args()
     print(f"{'N':>4} {'policy':>12} {'done':>9} {'span s':>7} {'jobs/h':>7} {'closest':>8} {'CPU s':>6}")
@@ -183,7 +194,8 @@ def main() -> None:
         for name in opts.policies:
             notes: list[str] | None = [] if opts.notes else None
             r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit, progress=opts.progress,
-                    seed=opts.seed, delay=opts.delay, status_delay=opts.status_delay, notes=notes)
+                    seed=opts.seed, delay=opts.delay, status_delay=opts.status_delay, notes=notes,
+                    lateness=opts.lateness)
             if notes is not None:
                 Path(opts.notes).write_text("\n".join(notes) + "\n")
             span = f"{r['span']:.0f}" if r["span"] else "-"
