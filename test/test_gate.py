@@ -223,6 +223,15 @@ def test_a_robot_that_refused_its_leg_stands_and_only_robots_passing_it_keep_wai
     assert [r.robot_id for r in out] == ["e"]                                          # a's record does not grow
     assert {(lk.robot, lk.path_id, lk.exit, lk.ack) for lk in links_of(out[0])} == {("a", 1, None, None)}
     assert gate_limit(out[0], 5, {"a": a.status}) < 5.0 - 2 * R
+    # a leg starting beside where it stands (closer than the regions reach) may leave it, not approach it
+    f = robot("f", 2.0, 5.0 - 2 * R - 0.1)
+    away = book.on_leg(f, 6, straight("f", (2.0, 5.0 - 2 * R - 0.1), (2.0, -5.0), 3.0), [a, f], 3.0)
+    assert away is not None and not links_of(away[0]) and book.conflicts == []
+    f.status = said("f", 6, 0.0)
+    y = 5.0 - 2 * R - 0.1
+    past = book.on_leg(f, 7, straight("f", (1.6, y), (6.0, y), 3.0), [a, f], 3.0)   # past it, closer than at the start
+    assert past is not None and [(lk.robot, lk.exit) for lk in links_of(past[0])] == [("a", None)]
+    assert 0.0 < links_of(past[0])[0].entry < 0.4
 
 
 def test_a_robot_following_another_down_an_aisle_gets_a_staircase_of_links():

@@ -369,6 +369,10 @@ class GateBook:
                 else:
                     continue
                 clear = r.radius + o.radius + self.pad_m
+                if standing:
+                    links += self._past_standing(o.id, pid, theirs.xy[0], mine, clear)
+                    watch[o.id] = latest
+                    continue
                 for i_mine, i_theirs in regions(mine, theirs, clear):
                     # may it be in the region before a new link reaches it? By the fine geometry, not
                     # the region's grown samples: a robot its gate holds at the region's entry is not
@@ -418,6 +422,18 @@ class GateBook:
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
                                             links=kept + added, watch=watch)))
         return out
+
+    def _past_standing(self, oid: str, pid: int, at: np.ndarray, mine: _Samples, clear: float) -> list[Link]:
+        """The link of a new leg (samples ``mine``) on robot ``oid`` standing at ``at`` on its path ``pid``
+        until a later leg (:func:`stands`): do not come closer to it than the region's reach, nor
+        closer than the leg's start already is (ours: moving away from a robot that stands never
+        touches it; the regions' grown samples around a start already that close held the new leg
+        at its start for ever); until it reports a later path (it does not leave on this one)."""
+        d = np.hypot(*(mine.xy - at).T)
+        near = np.nonzero(d < min(clear + mine.h / 2, float(d[0]) - FINE_M))[0]
+        if not len(near):
+            return []
+        return [Link(oid, pid, None, max(0.0, float(mine.s[near[0]] - mine.h / 2 - 1e-6)))]
 
     def _box(self, p: TimedPath) -> tuple[float, float, float, float]:
         """The bounding box (x min, y min, x max, y max) of the waypoints of a live path, kept with it."""
