@@ -59,8 +59,8 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
     else:
         members = place_robots(wh, kinds, n)
         parking = parking_spots(wh, members)
-    fm = FleetManager(wh, kinds, DispatchParams() if lateness is None else DispatchParams(lateness_tolerance_s=lateness),
-                      parking)
+    params = DispatchParams() if lateness is None else DispatchParams(lateness_tolerance_s=lateness)
+    fm = FleetManager(wh, kinds, params, parking)
     fm.policy = policy
     fm.step_budget_s = 1e9   # no wall-clock budget: the planner keeps up whatever the load
     sim = SimFleet(members, kinds, wh, gated=True)
@@ -129,12 +129,12 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
                   f"CPU {time.process_time() - cpu0:.0f} s", file=sys.stderr, flush=True)
             if notes is not None:   # who waits for whom (the gate), where (to find a jam)
                 for rid, a in sim.agents.items():
-                    st, fr = sim.last.get(rid), fm.robots.get(rid)
-                    if st is None or fr is None:
+                    seen, fr = sim.last.get(rid), fm.robots.get(rid)
+                    if seen is None or fr is None:
                         continue
-                    notes.append(f"{t:.1f} state {rid} ({st.x:.2f}, {st.y:.2f}) {st.mode} waits for "
-                                 f"{getattr(a.driver, 'waits_for', None)} path {st.path_id} leg "
-                                 f"{fr.leg.path_id if fr.leg else None} rejected {st.rejected_path_id} "
+                    notes.append(f"{t:.1f} state {rid} ({seen.x:.2f}, {seen.y:.2f}) {seen.mode} waits for "
+                                 f"{getattr(a.driver, 'waits_for', None)} path {seen.path_id} leg "
+                                 f"{fr.leg.path_id if fr.leg else None} rejected {seen.rejected_path_id} "
                                  f"target {fr.target.name if fr.target else None} trouble {fr.trouble!r}")
         pos = np.array([(st.x, st.y) for st in statuses])
         for st in statuses:
