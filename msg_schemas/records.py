@@ -344,9 +344,6 @@ class RobotStatus(Record):
     # the last job whose goods it placed (the robot's word that the place is done, kept until it
     # places again): a planner restarted after the place counts the job done from it, exactly once
     placed_task_id: str | None = spec(optional(nonempty), default=None)
-    # the seq of the gate record it holds for path_id (its acknowledgement: a robot ranked behind it by
-    # a later leg waits for it, fleet_planner/fleet/gate.py)
-    gate_seq: int | None = spec(optional(integer(lo=0)), default=None)
 
     #: the compact form of the same record (:meth:`to_compact_json`), read by the same parser
     COMPACT_SCHEMA: ClassVar[str] = "fleet/robot_status@2"
@@ -394,8 +391,7 @@ class RobotStatus(Record):
              _json_flag(self.manual), _json_flag(self.estop),
              "null" if self.travelled_m is None else _floor(self.travelled_m, 4),
              "null" if self.rejected_path_id is None else str(self.rejected_path_id), _json_flag(self.loaded),
-             "null" if self.placed_task_id is None else json.dumps(self.placed_task_id),
-             "null" if self.gate_seq is None else str(self.gate_seq)]
+             "null" if self.placed_task_id is None else json.dumps(self.placed_task_id)]
         while v[-1] == "null":
             v.pop()
         return f'{{"schema":"{self.COMPACT_SCHEMA}","id":"{self.id}","v":[{",".join(v)}]}}'
@@ -418,7 +414,7 @@ class RobotStatus(Record):
 #: :data:`_COMPACT_REQUIRED` are required, the others may be null or left out at the end
 COMPACT_FIELDS = ("kind", "x", "y", "yaw", "vx", "vy", "battery", "mode", "progress", "stamp", "radius",
                   "task_id", "path_id", "lateness_s", "behavior", "manual", "estop", "travelled_m",
-                  "rejected_path_id", "loaded", "placed_task_id", "gate_seq")
+                  "rejected_path_id", "loaded", "placed_task_id")
 _COMPACT_REQUIRED = 11
 #: how ``fleet/robot_status@2`` rounds (decimals): positions, heading and velocity to 0.1 mm (rad,
 #: mm/s), battery to 1e-6, lateness to 1 ms; progress and travelled_m are rounded down (a robot
@@ -432,8 +428,8 @@ _STATUS_FLOATS = {"x": (-math.inf, math.inf), "y": (-math.inf, math.inf), "yaw":
                   "progress": (0.0, 1.0), "stamp": (-math.inf, math.inf), "radius": (0.0, math.inf),
                   "lateness_s": (0.0, math.inf), "travelled_m": (0.0, math.inf)}
 #: fields whose values of a type skip their check: ids (ints in [0, INT_MAX]) and booleans
-_STATUS_TYPED = {"path_id": "path_id", "rejected_path_id": "path_id", "gate_seq": "path_id", "manual": "bool",
-                 "estop": "bool", "loaded": "bool"}
+_STATUS_TYPED = {"path_id": "path_id", "rejected_path_id": "path_id", "manual": "bool", "estop": "bool",
+                 "loaded": "bool"}
 _STATUS_CHECKS: list[tuple[str, Check, str, float, float, bool, str]] = []
 _STATUS_STRINGS: dict[tuple[str, str], str] = {}   # (field, string) -> what its check returned
 _MAX_STATUS_STRINGS = 10_000
@@ -676,17 +672,9 @@ class ObstacleRecord(Record):
 
 #: one link of a gate record: ``robot`` passes the region first on its path ``path_id``; the robot
 #: the record is for does not drive beyond ``entry`` (m along its own path) before ``robot`` reports
-#: more than ``exit`` (m along ``path_id``; null: it never leaves on that path) or a later path;
-#: with ``ack``, also once ``robot`` reports holding its gate record ``ack`` (or later) while at most
-#: ``hold`` m along ``path_id`` (its own record then holds it there); ``region``: the link grew into a
-#: record while its robot drove (where the region starts along its path: a robot already beyond that
-#: when the link reaches it passes first, fleet_planner/fleet/gate.py)
+#: more than ``exit`` (m along ``path_id``; null: it never leaves on that path) or a later path
 GATE_LINK: dict[str, Check] = {"robot": ros_id, "path_id": integer(lo=0), "exit": optional(number(lo=0.0)),
-                               "entry": number(lo=0.0), "ack": optional(integer(lo=0)),
-                               "hold": optional(number(lo=0.0)), "region": optional(number(lo=0.0))}
-
-
-_LINK_DEFAULTS = {"ack": None, "hold": None, "region": None}
+                               "entry": number(lo=0.0)}
 
 
 @dataclass(frozen=True)
@@ -705,7 +693,7 @@ class GateRecord(Record):
     path_id: int = spec(integer(lo=0))
     seq: int = spec(integer(lo=0))
     stamp: float = spec(number())
-    links: tuple[dict[str, Any], ...] = spec(list_of(_V.mapping(GATE_LINK, defaults=_LINK_DEFAULTS)), default=())
+    links: tuple[dict[str, Any], ...] = spec(list_of(obj(GATE_LINK)), default=())
     watch: dict[str, int] | None = spec(optional(dict_of(integer(lo=0))), default=None)
     auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with keys)
 

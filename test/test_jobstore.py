@@ -171,53 +171,6 @@ def test_a_store_that_cannot_write_rejects_instead_of_accepting(tmp_path):
     assert fm.jobs == {}
 
 
-def test_a_store_write_failing_mid_step_changes_nothing_and_is_tried_again(tmp_path, monkeypatch):
-    # a full disk while a pick is recorded: the step used to raise after the job had changed in
-    # memory (picked, never committed, never announced; the rest of the step lost)
-    path = tmp_path / "jobs.db"
-    sim = Sim(FLEET[:1])
-    store = JobStore(path)
-    sim.fm = FleetManager(WH, FAST, DispatchParams(), PARKING, store=store)
-    sim.submit(TASKS[1])
-    assert sim.run_until(lambda: sim.last("J1") == "assigned")
-    write = store.update
-
-    def full(*args, **kwargs):
-        raise sqlite3.OperationalError("database or disk is full")
-
-    monkeypatch.setattr(store, "update", full)
-    assert sim.run_until(lambda: sim.agents["r1"].loaded, limit=300.0)   # the robot picked ...
-    assert not sim.run_until(lambda: sim.last("J1") != "assigned", limit=20.0)  # ... nothing announced,
-    job = sim.fm.jobs["J1"]
-    assert job.state == "active" and not job.picked and sim.fm.robots["r1"].job == "J1"  # nothing changed
-    assert any("cannot record 'picked'" in n for n in sim.notes)
-    monkeypatch.setattr(store, "update", write)             # the disk has room again: it goes on
-    assert sim.run_until(lambda: sim.last("J1") == "done", limit=300.0)
-    assert [e.event for e in sim.events if e.task_id == "J1"] == ["accepted", "assigned", "picked", "placed", "done"]
-    assert [tr.event for tr in JobStore(path).history("J1")] == ["accepted", "assigned", "picked", "done"]
-
-
-def test_a_robot_unheard_while_it_picked_gets_its_job_back_and_nobody_picks_it_again(tmp_path):
-    # r1 drives on and picks while nobody hears it (cut off): the planner takes it for offline and
-    # queues its job again (not picked, as far as it knows) for r2; r1 is heard again carrying the
-    # goods (or having placed them): the job is r1's again, r2 drops it before picking it a second time
-    sim = Sim(FLEET[:2])
-    sim.fm = FleetManager(WH, FAST, DispatchParams(offline_timeout_s=2.0), PARKING, store=JobStore(tmp_path / "j.db"))
-    sim.submit(TASKS[1])
-    assert sim.run_until(lambda: sim.last("J1") == "assigned")
-    first = sim.events[-1].robot_id
-    other = next(r for r in sim.agents if r != first)
-    sim.mute.add(first)
-    assert sim.run_until(lambda: sim.agents[first].loaded, limit=300.0)
-    assert [(e.event, e.robot_id) for e in sim.events if e.task_id == "J1"][-1] == ("assigned", other)
-    sim.mute.discard(first)
-    assert sim.run_until(lambda: sim.last("J1") == "done", limit=300.0)
-    events = [(e.event, e.robot_id) for e in sim.events if e.task_id == "J1"]
-    assert events[-4:] == [("assigned", first), ("picked", first), ("placed", first), ("done", first)]
-    assert events.count(("picked", first)) == 1 and ("picked", other) not in events
-    assert sim.fm.robots[other].job is None and not sim.agents[other].loaded
-
-
 def test_without_a_store_nothing_changes():
     fm = manager()
     assert fm.store is None and fm.submit(TASKS[0], 1.0)[0].event == "accepted"

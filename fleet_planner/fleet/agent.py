@@ -228,10 +228,8 @@ class RobotAgent:
         if m.mode == "idle" and m.speed == 0.0 and m.progress >= 1.0 and not (self.hand.manual or self.hand.estopped):
             self._act(now)
         state = self.driver.behavior_state()
-        gate = self.gate   # the record it holds for the path it drives (its acknowledgement, fleet/gate.py)
         return RobotStatus(**m.status(now), behavior=state, travelled_m=m.travelled if m.path is not None else None,
                            rejected_path_id=self.rejected, loaded=self.loaded, placed_task_id=self.placed,
-                           gate_seq=gate.seq if gate is not None and gate.path_id == m.path_id else None,
                            **self.hand.status_fields())
 
     # -- where a leg ends ---------------------------------------------------------------------------

@@ -47,7 +47,7 @@ from ..paths import PathFinder
 from ..planners import Planner
 from ..robots import RobotModel
 from ..warehouse import Warehouse
-from .gate import Link, blockers, gate_limit, links_of, too_late
+from .gate import blockers, gate_limit
 from .legs import CONTROL_PERIOD_S, station_at
 from .obstacles import ObstacleMap
 from .state import FleetRobot, Target
@@ -270,10 +270,6 @@ class CentralDriver(Driver):
         self.gate: GateRecord | None = None
         self.stopped = False
         self._arc: tuple[TimedPath, np.ndarray, np.ndarray] | None = None   # its path's arc lengths (_way)
-        # the links of its records for the path of its record that it has seen, and those that came
-        # too late (gate.too_late: it was beyond their region's start; it passes those first)
-        self._seen: set[Link] = set()
-        self._late: set[Link] = set()
 
     def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None,
                heard: Mapping[str, RobotStatus] | None = None) -> None:
@@ -312,21 +308,9 @@ class CentralDriver(Driver):
         self.stopped = True  # the planner no longer keeps the others clear of the old leg's rest
 
     def on_gate(self, record: GateRecord) -> None:
-        """Keep the newest record (by path, then ``seq``); links that grew into it for a region the
-        robot is already in (beyond its start) came too late: it passes those first."""
+        """Keep the newest record (by path, then ``seq``)."""
         if self.gate is None or (record.path_id, record.seq) >= (self.gate.path_id, self.gate.seq):
-            if self.gate is None or record.path_id != self.gate.path_id:
-                self._seen, self._late = set(), set()
-            m = self.model
-            here = m.travelled if m.path is not None and m.path_id == record.path_id else 0.0
-            self._late |= too_late(record, here, self._seen)
-            self._seen.update(links_of(record))
             self.gate = record
-
-    def gate_limit(self, heard: Mapping[str, RobotStatus]) -> float:
-        """How far along its path its gate lets it drive now (:func:`~.gate.gate_limit`)."""
-        m = self.model
-        return gate_limit(self.gate, m.path_id, heard, m.travelled if m.path is not None else 0.0, self._late)
 
     def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
         hold = self.must_wait(t, dt, heard)
@@ -341,7 +325,7 @@ class CentralDriver(Driver):
         m, k = self.model, self.model.kind
         if not self.gated or m.path is None or m.busy_until is not None or m.progress >= 1.0:
             return False
-        limit = self.gate_limit(heard)
+        limit = gate_limit(self.gate, m.path_id, heard)
         if math.isinf(limit):
             return False
         step = min(k.max_speed * (1 + 1e-9), m.speed + k.max_accel * dt) * dt

@@ -30,7 +30,7 @@ records of robots whose way does not pass it; the others keep waiting until they
 from __future__ import annotations
 
 import math
-from collections.abc import Container, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -64,35 +64,21 @@ FINE_M = 0.01
 @dataclass(frozen=True)
 class Link:
     """Do not drive beyond ``entry`` (m along my path) before ``robot`` reports more than ``exit``
-    (m along its path ``path_id``; None: it never leaves the region on that path) or a later path.
-
-    With ``ack`` (my leg passes the region before ``robot``, which was already driving: its record
-    grows), also once ``robot`` reports holding its record ``ack`` or a later one on ``path_id``
-    while at most ``hold`` m along it (its record then holds it short of the region until I left):
-    until then it may not have the link yet, however late the record comes. ``region`` (on the
-    grown links of that record): where the region starts along my path; a robot already beyond that
-    when the link first reaches it came too late to wait and passes first (the other waits for its
-    exit, since its acknowledgement shows it beyond ``hold``)."""
+    (m along its path ``path_id``; None: it never leaves the region on that path) or a later path."""
 
     robot: str
     path_id: int
     exit: float | None
     entry: float
-    ack: int | None = None
-    hold: float | None = None
-    region: float | None = None
 
     def to_dict(self) -> dict[str, object]:
-        return {"robot": self.robot, "path_id": self.path_id, "exit": self.exit, "entry": self.entry,
-                "ack": self.ack, "hold": self.hold, "region": self.region}
+        return {"robot": self.robot, "path_id": self.path_id, "exit": self.exit, "entry": self.entry}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Link:
         """A link of a (validated) gate record."""
-        ex, ack, hold, region = d["exit"], d.get("ack"), d.get("hold"), d.get("region")
-        return cls(str(d["robot"]), int(d["path_id"]), None if ex is None else float(ex), float(d["entry"]),
-                   None if ack is None else int(ack), None if hold is None else float(hold),
-                   None if region is None else float(region))
+        ex = d["exit"]
+        return cls(str(d["robot"]), int(d["path_id"]), None if ex is None else float(ex), float(d["entry"]))
 
 
 def links_of(record: GateRecord) -> tuple[Link, ...]:
@@ -126,48 +112,23 @@ def travelled(status: RobotStatus) -> float | None:
 
 def satisfied(link: Link, statuses: Mapping[str, RobotStatus], watch: Mapping[str, int]) -> bool:
     """Whether ``link``'s robot has left the region: its status shows it beyond the exit on the
-    link's path, or on a later path that the record was checked against (``watch``); for a link
-    with ``ack``, also whether it holds the record that makes it wait short of the region."""
+    link's path, or on a later path that the record was checked against (``watch``)."""
     st = statuses.get(link.robot)
     if st is None or st.path_id is None:
         return False
     if st.path_id == link.path_id:
         done = travelled(st)
-        if done is None:
-            return False
-        if link.exit is not None and done > link.exit:
-            return True
-        return (link.ack is not None and link.hold is not None and st.gate_seq is not None
-                and st.gate_seq >= link.ack and done <= link.hold)
+        return link.exit is not None and done is not None and done > link.exit
     return st.path_id > link.path_id and watch.get(link.robot, -1) >= st.path_id
 
 
-def gate_limit(record: GateRecord | None, path_id: int | None, statuses: Mapping[str, RobotStatus],
-               travelled: float = 0.0, skip: Container[Link] = ()) -> float:
+def gate_limit(record: GateRecord | None, path_id: int | None, statuses: Mapping[str, RobotStatus]) -> float:
     """How far (m along its path ``path_id``) a robot may drive now: the nearest entry of a link
-    not yet satisfied (infinite if none); 0 without a record for that path (wait for it).
-    ``travelled``: how far it drove; a link with ``ack`` whose entry it passed counts no more (it
-    passed while the other robot was held: that one's acknowledgement may not show it so once it
-    goes on). ``skip``: links the robot found it came too late for (:func:`too_late`)."""
+    not yet satisfied (infinite if none); 0 without a record for that path (wait for it)."""
     if record is None or path_id is None or record.path_id != path_id:
         return 0.0
     watch = record.watch or {}
-    return min((lk.entry for lk in links_of(record) if lk not in skip
-                and not (lk.ack is not None and lk.entry < travelled) and not satisfied(lk, statuses, watch)),
-               default=math.inf)
-
-
-def too_late(record: GateRecord, travelled: float, seen: Container[Link]) -> set[Link]:
-    """The links of ``record`` not in ``seen`` that reach a robot ``travelled`` m along the record's
-    path beyond the start of their region (``Link.region``): it passes those regions first."""
-    return {lk for lk in links_of(record) if lk not in seen and lk.region is not None and travelled > lk.region}
-
-
-def stands(o: FleetRobot) -> bool:
-    """Whether ``o``'s status says it refused its latest leg (``rejected_path_id``) and stands where it
-    is on the path it names, until a later leg comes (RobotAgent.on_path, CentralDriver.refused)."""
-    st = o.status
-    return st.rejected_path_id is not None and st.path_id is not None and st.rejected_path_id > st.path_id
+    return min((lk.entry for lk in links_of(record) if not satisfied(lk, statuses, watch)), default=math.inf)
 
 
 def blockers(record: GateRecord | None, statuses: Mapping[str, RobotStatus], before: float) -> list[str]:
@@ -301,12 +262,8 @@ class GateBook:
     def _live(self, o: FleetRobot) -> dict[int, TimedPath]:
         paths = self.paths.get(o.id, {})
         if paths:
-            st = o.status
-            if stands(o):   # the legs it refused (and any before them) it never takes
-                assert st.rejected_path_id is not None
-                paths = {pid: p for pid, p in paths.items() if pid == st.path_id or pid > st.rejected_path_id}
-            latest = max(paths, default=None)
-            paths = {pid: p for pid, p in paths.items() if pid == latest or pid == st.path_id}
+            latest = max(paths)
+            paths = {pid: p for pid, p in paths.items() if pid == latest or pid == o.status.path_id}
             self.paths[o.id] = paths
         return paths
 
@@ -351,28 +308,13 @@ class GateBook:
                 since = max(0.0, now - o.status.stamp) + self.reach_s
                 cap = self._held_at(o, pid, done, heard)
                 reach = max(done, min(arc_at(p, now + self.reach_s), done + o.kind.max_speed * since, cap))
-                standing = on_it and stands(o)
-                if standing:
-                    # it refused its latest leg and stopped where its status says, until a later leg
-                    # (RobotAgent.on_path): not its way on, only where it stands (it leaves no region)
-                    theirs, reach, cap = sample(p, done, done, step=self.sample_m), done, done
-                    theirs.parks = True
-                elif pid == latest:
+                if pid == latest:
                     theirs = sample(p, done, step=self.sample_m)
-                elif on_it:
-                    # the path it drives until it takes its latest one: all of its way on, not only
-                    # what it may drive within reach_s. It drives on until the new leg or its record
-                    # reaches it, however late that is (the 22-robot run under load: 4-14 s of
-                    # simulated time, up to 9.8 m driven on, no link on that stretch); the links stop
-                    # holding once it reports the later path (``watch``)
-                    theirs = sample(p, done, step=self.sample_m)
+                elif on_it:  # the path it drives until it takes its latest one: only near where it is
+                    theirs = sample(p, done, reach, step=self.sample_m)
                 else:
                     continue
                 clear = r.radius + o.radius + self.pad_m
-                if standing:
-                    links += self._past_standing(o.id, pid, theirs.xy[0], mine, clear)
-                    watch[o.id] = latest
-                    continue
                 for i_mine, i_theirs in regions(mine, theirs, clear):
                     # may it be in the region before a new link reaches it? By the fine geometry, not
                     # the region's grown samples: a robot its gate holds at the region's entry is not
@@ -380,22 +322,14 @@ class GateBook:
                     o_in = reach >= enters and self._may_be_in(p, done, reach, path, mine, i_mine, clear)
                     if o_in and i_mine.min() == 0:
                         self.conflicts.append(o.id)
-                    o_first = (standing or pid != latest or not recorded or o_in
+                    o_first = (pid != latest or not recorded or o_in
                                or (i_mine.min() > 0 and not first_by_plan(mine, path, theirs, i_mine, i_theirs)))
                     if o_first:
                         links += [Link(o.id, pid, ex, en) for ex, en in pieces(theirs, mine, i_theirs, i_mine)]
+                        watch[o.id] = latest
                     else:
-                        # o waits for r where its record grows; until o acknowledges that record short
-                        # of the region, r waits for o as if o were first (the record may come late)
-                        waits = pieces(mine, theirs, i_mine, i_theirs)
-                        start = min(en for _, en in waits)
-                        if cap > start and not self._may_be_in(p, done, cap, path, mine, i_mine, clear):
-                            start = cap   # its gate holds it short of the region already (there it stays)
-                        grown.setdefault(o.id, []).extend(Link(r.id, path_id, ex, en, region=start) for ex, en in waits)
-                        ack = self.records[o.id].seq + 1
-                        links += [Link(o.id, pid, ex, en, ack=ack, hold=start)
-                                  for ex, en in pieces(theirs, mine, i_theirs, i_mine)]
-                    watch[o.id] = latest
+                        grown.setdefault(o.id, []).extend(
+                            Link(r.id, path_id, ex, en) for ex, en in pieces(mine, theirs, i_mine, i_theirs))
         if refuse_conflicts and self.conflicts:
             return None
         old = self._live(r)
@@ -422,18 +356,6 @@ class GateBook:
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),
                                             links=kept + added, watch=watch)))
         return out
-
-    def _past_standing(self, oid: str, pid: int, at: np.ndarray, mine: _Samples, clear: float) -> list[Link]:
-        """The link of a new leg (samples ``mine``) on robot ``oid`` standing at ``at`` on its path ``pid``
-        until a later leg (:func:`stands`): do not come closer to it than the region's reach, nor
-        closer than the leg's start already is (ours: moving away from a robot that stands never
-        touches it; the regions' grown samples around a start already that close held the new leg
-        at its start for ever); until it reports a later path (it does not leave on this one)."""
-        d = np.hypot(*(mine.xy - at).T)
-        near = np.nonzero(d < min(clear + mine.h / 2, float(d[0]) - FINE_M))[0]
-        if not len(near):
-            return []
-        return [Link(oid, pid, None, max(0.0, float(mine.s[near[0]] - mine.h / 2 - 1e-6)))]
 
     def _box(self, p: TimedPath) -> tuple[float, float, float, float]:
         """The bounding box (x min, y min, x max, y max) of the waypoints of a live path, kept with it."""
@@ -465,7 +387,7 @@ class GateBook:
             return math.inf
         if rec.path_id != pid:
             return done
-        return gate_limit(rec, pid, heard, done)
+        return gate_limit(rec, pid, heard)
 
     def forget(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
         """``r`` stopped for good where its status says: the records of robots whose way from where
@@ -473,21 +395,6 @@ class GateBook:
         whose way does are returned (they keep waiting for it: re-plan them)."""
         self.paths.pop(r.id, None)
         self.records.pop(r.id, None)
-        return self._release(r, fleet, now)
-
-    def halted(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
-        """``r``'s status says it refused its latest leg (:func:`stands`): it stopped where it is and
-        stays there until a later leg, so neither that leg nor the way on along the path it stood on is
-        live any more (ours: the planner never assumes a robot took a path it did not report taking).
-        Links on it go, as in :meth:`forget`, from the records of robots whose way does not pass
-        near where it stands: they waited for it to leave regions it will now never reach, or for it
-        to report a leg it will never take (the 22-robot run jammed so: robots waited for a robot that
-        could get no new leg, because their own timed legs, which they could not drive, passed
-        through its start). The others keep waiting for it; their ids are returned."""
-        self._live(r)
-        return self._release(r, fleet, now)
-
-    def _release(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
         out, stuck = [], []
         by_id = {o.id: o for o in fleet}
         for oid, rec in list(self.records.items()):
@@ -515,7 +422,7 @@ class GateBook:
         rec, st = self.records.get(r.id), r.status
         if rec is None or st.path_id is None or rec.path_id != st.path_id:
             return math.inf
-        return gate_limit(rec, st.path_id, {o.id: o.status for o in fleet}, travelled(st) or 0.0)
+        return gate_limit(rec, st.path_id, {o.id: o.status for o in fleet})
 
     def _set(self, rec: GateRecord) -> GateRecord:
         self.records[rec.robot_id] = rec

@@ -70,11 +70,6 @@ SPOT_RETRY_S = 2.0
 #: in a row up to LEG_RETRY_MAX_S (a refused leg costs the planner its whole time budget: tried at
 #: every step, a few of them stall the step, and the fleet's statuses wait meanwhile)
 LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
-#: simulated s before a robot whose new leg the gate refused (it started in a region another robot may
-#: be in) is re-planned again (it was re-planned at every step: the planner took 76% of a core)
-GATE_RETRY_S = 2.0
-#: a robot waiting within this many m of where its gate holds it is held there (one control step at top speed)
-GATE_HELD_M = 0.3
 #: a robot stepping aside from a moving obstacle tries this many refuges, nearest first; when none
 #: can be reached it holds and tries again this much later (s)
 EVADE_TRIES, EVADE_RETRY_S = 8, 0.5
@@ -87,13 +82,6 @@ STEP_BUDGET_S = 0.5
 #: finished jobs kept in memory (the latest ones); older ones are only in the job store, which
 #: still answers a re-sent id with its state (without a store such an id is a new job again)
 MAX_CLOSED_JOBS = 1000
-
-
-class _Same:
-    """The value of an argument left as it was."""
-
-
-SAME = _Same()
 
 
 class FleetManager:
@@ -246,18 +234,11 @@ class FleetManager:
         self.jobs[task.id] = Job(task, pick, place, seq)
         return [_event(task.id, "accepted", now)]
 
-    def _record(self, job: Job, event: str, now: float, reason: str | None = None, *, state: str | None = None,
-                robot: str | None | _Same = SAME, picked: bool | None = None) -> None:
-        """Change ``job`` (its ``state``, ``robot``, ``picked``: those given) and commit the change to the
-        store (if any) first: the store's error (sqlite3.Error, a full disk) leaves the job as it was,
-        and nothing is announced that is not committed. A finished job stays in ``jobs`` until
-        MAX_CLOSED_JOBS later ones finished (then only the store has it)."""
-        new_state = job.state if state is None else state
-        new_robot = job.robot if isinstance(robot, _Same) else robot
-        new_picked = job.picked if picked is None else picked
+    def _record(self, job: Job, event: str, now: float, reason: str | None = None) -> None:
+        """Commit a change of ``job`` to the store (if any) before it is announced. A finished job
+        stays in ``jobs`` until MAX_CLOSED_JOBS later ones finished (then only the store has it)."""
         if self.store is not None:
-            self.store.update(job.task.id, event, new_state, new_robot, new_picked, now, reason)
-        job.state, job.robot, job.picked = new_state, new_robot, new_picked
+            self.store.update(job.task.id, event, job.state, job.robot, job.picked, now, reason)
         if job.state in CLOSED:
             self._closed.pop(job.task.id, None)
             self._closed[job.task.id] = reason
@@ -266,17 +247,6 @@ class FleetManager:
                 del self._closed[old]
                 if old in self.jobs and self.jobs[old].state in CLOSED:
                     del self.jobs[old]
-
-    def _commit(self, job: Job, event: str, now: float, d: Decisions, reason: str | None = None, *,
-                state: str | None = None, robot: str | None | _Same = SAME, picked: bool | None = None) -> bool:
-        """:meth:`_record` within a step: False (noted, nothing changed) if the store cannot take it;
-        the caller changes nothing else then and the step tries it again later."""
-        try:
-            self._record(job, event, now, reason, state=state, robot=robot, picked=picked)
-        except sqlite3.Error as exc:
-            d.notes.append(f"job {job.task.id}: the job store cannot record {event!r} ({exc}): tried again later")
-            return False
-        return True
 
     def _known(self, task_id: str, now: float) -> TaskEvent | None:
         """The event of the job's current state if ``task_id`` is a job's (in memory or in the
@@ -409,44 +379,31 @@ class FleetManager:
         now if the store did not know it yet: announced once) it heads for the storing site,
         else for the chute; a robot whose status says it placed the goods of a job that was on it
         (``placed_task_id``: while the planner was down) finishes that job, once. A queued job
-        the robot still names (queued again while nobody heard from it) goes back to it; so does one
-        it picked or placed while nobody heard from it, even if another robot got it meanwhile (that
-        one has not picked it: it is released, never a second pick)."""
+        the robot still names (queued again while nobody heard from it) goes back to it."""
         st = r.status
         if r.job is not None or not r.online or r.immobile or (st.task_id is None and st.placed_task_id is None):
             return
         placed = self.jobs.get(st.placed_task_id) if st.placed_task_id is not None else None
-        if (placed is not None and st.task_id != placed.task.id and st.loaded is not True
-                and (placed.state == "active" and placed.robot == r.id and not self._held(placed)
-                     or self._unpicked_elsewhere(placed, r))):
-            if placed.robot != r.id and not self._take_back(placed, r, now, d):
-                return
+        if (placed is not None and placed.state == "active" and placed.robot == r.id and st.task_id != placed.task.id
+                and st.loaded is not True and not self._held(placed)):
             r.job = placed.task.id
-            if ((placed.picked or self._action_done(r, Target("pick", placed.pick.name, placed.pick.pose), now, d))
-                    and self._action_done(r, Target("place", placed.place.name, placed.place.pose), now, d)):
-                d.notes.append(f"robot {r.id} placed the goods of job {placed.task.id} while the planner was down")
-            else:
-                r.job, r.target, r.replan = None, None, False   # (the store failed: tried again next step)
+            d.notes.append(f"robot {r.id} placed the goods of job {placed.task.id} while the planner was down")
+            if not placed.picked:
+                self._action_done(r, Target("pick", placed.pick.name, placed.pick.pose), now, d)
+            self._action_done(r, Target("place", placed.place.name, placed.place.pose), now, d)
             return
         job = self.jobs.get(st.task_id) if st.task_id is not None else None
-        if job is None:
-            return
-        if st.loaded is True and self._unpicked_elsewhere(job, r):
-            if not self._take_back(job, r, now, d):   # it carries the goods: the job is its
-                return
-        elif self._held(job) or not (job.state == "queued" or job.state == "active" and job.robot == r.id):
+        if job is None or self._held(job) or not (job.state == "queued" or job.state == "active" and job.robot == r.id):
             return
         if job.picked and st.loaded is False:
             return  # it says the goods are not on board: the job waits for its word (or fails, _orphans)
         if job.state == "queued":
-            if not self._commit(job, "assigned", now, d, state="active", robot=r.id):
-                return
+            job.state, job.robot = "active", r.id
+            self._record(job, "assigned", now)
             d.events.append(_event(job.task.id, "assigned", now, r.id))
         r.job = job.task.id
         if st.loaded and not job.picked:  # picked while the planner was down
-            if not self._action_done(r, Target("pick", job.pick.name, job.pick.pose), now, d):
-                r.job = None   # (the store failed: tried again next step)
-                return
+            self._action_done(r, Target("pick", job.pick.name, job.pick.pose), now, d)
         else:
             target = (Target("place", job.place.name, job.place.pose) if job.picked
                       else Target("pick", job.pick.name, job.pick.pose))
@@ -454,26 +411,6 @@ class FleetManager:
             r.target, r.replan = target, st.mode != ACTING[target.purpose]
         d.notes.append(f"robot {r.id} is on job {job.task.id} again: on to {r.target.name if r.target else '?'}"
                        f"{' with the goods' if job.picked else ''}")
-
-    def _unpicked_elsewhere(self, job: Job, r: FleetRobot) -> bool:
-        """``job`` is open, not picked as far as the planner knows, and queued or on another robot."""
-        return (not job.picked and (job.state == "queued" or job.state == "active" and job.robot != r.id))
-
-    def _take_back(self, job: Job, r: FleetRobot, now: float, d: Decisions) -> bool:
-        """``r`` says it has the goods of ``job`` (or placed them) while nobody heard from it: the job is
-        its again (``assigned``); a robot that got it meanwhile drops it before picking. False if
-        the store cannot take it (nothing changed)."""
-        other = self.robots.get(job.robot) if job.state == "active" and job.robot is not None else None
-        if not self._commit(job, "assigned", now, d, state="active", robot=r.id):
-            return False
-        d.events.append(_event(job.task.id, "assigned", now, r.id))
-        if other is not None and other.job == job.task.id:
-            other.job, other.target, other.replan, other.arrived_at, other.saw_action = None, None, False, None, False
-            other.idle_since = now
-            d.notes.append(f"robot {other.id} drops job {job.task.id}: robot {r.id} has its goods")
-            if other.on_leg and other.online and not other.immobile:
-                self._hold(other, now, d)   # not on to the chute: it stands, and is sent on from there
-        return True
 
     def _held(self, job: Job) -> bool:
         """Some robot here has ``job``."""
@@ -492,13 +429,16 @@ class FleetManager:
             if job.state != "active" or job.task.id in held:
                 continue
             if job.picked:
+                job.state = "failed"
                 reason = (f"robot {job.robot} held the goods when the planner restarted and has not "
                           "reported carrying them")
-                if self._commit(job, "failed", now, d, reason, state="failed"):
-                    d.events.append(_event(job.task.id, "failed", now, job.robot, reason))
-            elif self._commit(job, "requeued", now, d, state="queued", robot=None):
-                d.notes.append(f"job {job.task.id}: the robot it was on has not reported being on it since the "
+                self._record(job, "failed", now, reason)
+                d.events.append(_event(job.task.id, "failed", now, job.robot, reason))
+            else:
+                d.notes.append(f"job {job.task.id}: robot {job.robot} has not reported being on it since the "
                                "restart: queued again")
+                job.state, job.robot = "queued", None
+                self._record(job, "requeued", now)
 
     def _note_arrival(self, r: FleetRobot, now: float) -> None:
         """Note when ``r``'s status first shows it at the end of the leg to its target, and whether
@@ -553,8 +493,6 @@ class FleetManager:
                 self._immobilise(r, now, d, f"offline: no status for {now - r.seen:.1f} s")
             elif r.online and not r.immobile and r.status.mode == "error":
                 self._immobilise(r, now, d, "out of battery")
-            elif r.immobile and r.job is not None:  # its job could not be released (the store failed): again
-                self._release(r, now, d, "offline" if not r.online else "out of battery")
 
     def _find_rejected(self, now: float, d: Decisions) -> None:
         """A robot whose status names its latest leg as rejected stands where it is (it stopped):
@@ -569,8 +507,6 @@ class FleetManager:
                 for o in self._replan_around(r, r.pos, now):
                     if self.gates is not None:  # their links keep them off it: an optimisation, not a hold
                         o.conflict = False
-                if self.gates is not None:  # it stands: robots not passing it stop waiting for its old ways
-                    d.gates += self.gates.halted(r, self.robots.values(), now)[0]
 
     def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
         """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
@@ -579,7 +515,18 @@ class FleetManager:
         r.leg, r.target, r.replan, r.conflict, r.arrived_at = None, None, False, False, None
         self._changed(r)
         d.notes.append(f"robot {r.id} {why}; it is an obstacle at ({r.status.x:.2f}, {r.status.y:.2f})")
-        self._release(r, now, d, why)
+        if r.job is not None:
+            job = self.jobs[r.job]
+            r.job = None
+            if job.picked:  # never picked twice: the goods are on the robot that stopped
+                job.state = "failed"
+                reason = f"robot {r.id} is {why} with the goods"
+                self._record(job, "failed", now, reason)
+                d.events.append(_event(job.task.id, "failed", now, r.id, reason))
+            else:
+                job.state, job.robot, job.picked = "queued", None, False
+                self._record(job, "requeued", now)
+                d.notes.append(f"job {job.task.id} is queued again for another robot")
         for o in self._replan_around(r, r.pos, now):
             d.notes.append(f"robot {o.id} re-plans around {r.id}")
         if self.gates is not None:  # robots waiting for it that do not pass it go on; the others re-plan
@@ -591,24 +538,6 @@ class FleetManager:
                     o.replan = o.conflict = True
                     d.notes.append(f"robot {o.id} re-plans around {r.id} (its gate waits for it)")
 
-    def _release(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
-        """The job of ``r``, which stopped for good, goes back to the queue, or fails if it holds the
-        goods (never picked twice); if the store cannot take that, ``r`` keeps it and the next step
-        tries again."""
-        if r.job is None:
-            return
-        job = self.jobs[r.job]
-        if job.picked:  # never picked twice: the goods are on the robot that stopped
-            reason = f"robot {r.id} is {why} with the goods"
-            if not self._commit(job, "failed", now, d, reason, state="failed"):
-                return
-            d.events.append(_event(job.task.id, "failed", now, r.id, reason))
-        else:
-            if not self._commit(job, "requeued", now, d, state="queued", robot=None, picked=False):
-                return
-            d.notes.append(f"job {job.task.id} is queued again for another robot")
-        r.job = None
-
     def _arrivals(self, now: float, d: Decisions) -> None:
         """Robots at the end of their legs: a pick or place done moves the job on, and done means
         the robot reported it: a status showed it picking / placing there and a later one shows it
@@ -619,8 +548,8 @@ class FleetManager:
             if target is None or not r.online:
                 continue
             if target.purpose in ACTING and r.job is not None and self._reported_done(r, target.purpose):
-                if self._action_done(r, target, now, d):  # its word, even where no status showed it acting
-                    r.arrived_at, r.saw_action = None, False
+                self._action_done(r, target, now, d)  # its word, even where no status showed it acting
+                r.arrived_at, r.saw_action = None, False
                 continue
             if r.arrived_at is None:
                 continue
@@ -629,8 +558,7 @@ class FleetManager:
                     continue
                 if r.status.loaded is not None and r.status.loaded != (target.purpose == "pick"):
                     continue  # it says the goods are not (or still) on board: not done, whatever the clock
-                if not self._action_done(r, target, now, d):
-                    continue  # (the store failed: tried again next step)
+                self._action_done(r, target, now, d)
             else:
                 r.target, r.idle_since = None, now
             r.arrived_at, r.saw_action = None, False
@@ -644,29 +572,27 @@ class FleetManager:
             return st.loaded is True and st.task_id == r.job
         return st.placed_task_id == r.job and st.task_id != r.job and st.loaded is not True
 
-    def _action_done(self, r: FleetRobot, target: Target, now: float, d: Decisions) -> bool:
-        """``r`` picked (it heads for the storing site next) or placed (its job is done); False if
-        the store could not take it (nothing changed)."""
+    def _action_done(self, r: FleetRobot, target: Target, now: float, d: Decisions) -> None:
+        """``r`` picked (it heads for the storing site next) or placed (its job is done)."""
         assert r.job is not None  # a robot picks and places only for its job
         job = self.jobs[r.job]
         if target.purpose == "pick":
-            if not self._commit(job, "picked", now, d, picked=True):
-                return False
+            job.picked = True
+            self._record(job, "picked", now)
             d.events.append(_event(job.task.id, "picked", now, r.id))
             r.target = Target("place", job.place.name, job.place.pose)
             r.replan = True
         else:
-            if not self._commit(job, "done", now, d, state="done"):
-                return False
+            job.state = "done"
+            self._record(job, "done", now)
             d.events.append(_event(job.task.id, "placed", now, r.id))
             d.events.append(_event(job.task.id, "done", now, r.id))
             r.job, r.target, r.idle_since = None, None, now
-        return True
 
     def _find_late(self, d: Decisions) -> None:
         for r in self.robots.values():
             if (r.target is not None and not r.replan and r.on_leg and r.status.mode != "error"
-                    and self.strategy.is_late(r, self.params.lateness_tolerance_s) and not self._gate_held(r)):
+                    and self.strategy.is_late(r, self.params.lateness_tolerance_s)):
                 r.replan = True
                 d.notes.append(f"robot {r.id} is {r.status.lateness_s:.1f} s late: re-planning its leg")
 
@@ -676,7 +602,7 @@ class FleetManager:
         waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
                    and not r.immobile and r.online and not r.paused and not r.manual
                    and (r.leg is None or r.status.path_id == r.leg.path_id)
-                   and (now >= r.leg_retry_at or r.on_leg) and now >= r.gate_retry_at]
+                   and (now >= r.leg_retry_at or r.on_leg)]
         waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
         for r, target in waiting:
             if self._out_of_time():
@@ -857,9 +783,9 @@ class FleetManager:
                 continue   # another free robot stands there (it could not do this job)
             if self._plan_leg(r, Target("park", spot, self.staging[spot]), now, d) is None:
                 continue
-            if not self._commit(job, "assigned", now, d, state="active", robot=r.id):
-                continue   # (it parks there without the job; the job stays queued)
             r.job = job.task.id
+            job.state, job.robot = "active", r.id
+            self._record(job, "assigned", now)
             d.events.append(_event(job.task.id, "assigned", now, r.id))
             d.notes.append(f"robot {r.id} waits at {spot} for {job.pick.name} (job {job.task.id})")
 
@@ -928,10 +854,9 @@ class FleetManager:
             return False
         if self._plan_leg(r, Target("pick", job.pick.name, pose), now, d) is None:
             return False
-        if not self._commit(job, "assigned", now, d, state="active", robot=r.id):
-            r.target = None   # it drives to the chute without the job (which stays queued), and does nothing there
-            return False
         r.job = job.task.id
+        job.state, job.robot = "active", r.id
+        self._record(job, "assigned", now)
         d.events.append(_event(job.task.id, "assigned", now, r.id))
         return True
 
@@ -1059,24 +984,14 @@ class FleetManager:
 
     def _give(self, r: FleetRobot, leg: Leg, d: Decisions, now: float) -> bool:
         if self.gates is not None:  # its links, and the links others get where it passes first
-            # a leg is not taken if it starts in a region another robot may be in (fleet/gate.py):
-            # one replacing a leg it drives keeps that leg, whose links still hold (a re-plan is only an
-            # optimisation); one for a robot that stands keeps it standing (ours: taken, it ranked
-            # the other first, which then drove at it standing in its way once it reported the new
-            # leg, head-on). The others there re-plan around it; it tries again GATE_RETRY_S later
-            records = self.gates.on_leg(r, leg.path_id, leg.path, self.robots.values(), now, refuse_conflicts=True)
+            # a leg replacing one it drives is not taken if it starts in a region another robot
+            # may be in (fleet/gate.py): the old leg's links still hold, a re-plan is only an optimisation
+            records = self.gates.on_leg(r, leg.path_id, leg.path, self.robots.values(), now, refuse_conflicts=r.on_leg)
             if records is None:
-                others = sorted(set(self.gates.conflicts))
-                why = f"a new leg would start in a region {', '.join(others)} may be in"
+                why = f"a new leg would start in a region {', '.join(sorted(set(self.gates.conflicts)))} may be in"
                 if why != r.trouble:
-                    d.notes.append(f"robot {r.id}: {why}: it {'keeps its leg' if r.on_leg else 'stands'}")
+                    d.notes.append(f"robot {r.id}: {why}: it keeps its leg")
                 r.trouble = why
-                r.gate_retry_at = now + GATE_RETRY_S
-                r.leg_retry_at = max(r.leg_retry_at, r.gate_retry_at)   # (for its other legs: a job's, a spot's)
-                for oid in others:
-                    o = self.robots.get(oid)
-                    if o is not None and o.on_leg and o.target is not None and not o.replan:
-                        o.replan = True
                 return False
             d.gates += records
         r.leg, r.last_path_id = leg, leg.path_id
@@ -1090,15 +1005,6 @@ class FleetManager:
         if self._occ is not None:
             self._occ.touch(r)
         self._free_spots.clear()
-
-    def _gate_held(self, r: FleetRobot) -> bool:
-        """``r`` waits where its gate holds it (by the statuses heard): it is late by design, waiting for a
-        robot ranked above it to leave a region; a re-plan would only start a new leg there (ours: with
-        the gate of session 20, such re-plans at every lateness were most of the planner's work and their
-        legs, planned from where it waited, were refused or reached it after it had gone on)."""
-        if self.gates is None or r.status.mode != "waiting" or r.status.travelled_m is None:
-            return False
-        return r.status.travelled_m >= self._gate_limit(r) - GATE_HELD_M
 
     def _gate_limit(self, r: FleetRobot) -> float:
         """How far along its path ``r``'s gate lets it drive (a new leg never starts beyond it)."""

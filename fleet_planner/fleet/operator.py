@@ -35,7 +35,6 @@ Times are seconds on the planner's clock: ``now`` is always passed in.
 from __future__ import annotations
 
 import math
-import sqlite3
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -260,10 +259,6 @@ class Operator:
         d = Decisions()
         why = "cancelled by the operator" + (f": {reason}" if reason else "")
         r = self.fleet.robots.get(job.robot) if job.robot is not None else None
-        try:  # committed first: if the store cannot take it, nothing changes and the operator is told
-            self.fleet._record(job, "cancelled", now, why, state="cancelled")
-        except sqlite3.Error as exc:
-            raise OperatorError(f"job {job.task.id}: the job store cannot record the cancel ({exc})") from None
         if r is not None and r.job == job.task.id:
             r.job = None
             if job.picked:
@@ -275,6 +270,8 @@ class Operator:
                         self.fleet._hold(r, now, d)
                     r.idle_since = now
                 why += f"; robot {r.id} is released"
+        job.state = "cancelled"
+        self.fleet._record(job, "cancelled", now, why)
         d.events.append(TaskEvent(task_id=job.task.id, event="cancelled", stamp=float(now),
                                   robot_id=r.id if r is not None else None, reason=why))
         return Outcome(True, f"job {job.task.id} {why}", d)

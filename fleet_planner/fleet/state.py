@@ -72,7 +72,6 @@ class FleetRobot:
     retry_at: float = -math.inf       # a spot it could not get a leg to is tried again from then on
     leg_retry_at: float = -math.inf   # a leg that could not be planned is tried again from then on
     evade_retry_at: float = -math.inf  # no refuge from a moving obstacle could be reached: tried again from then on
-    gate_retry_at: float = -math.inf  # its last new leg was refused by the gate (fleet/gate.py): planned again then
     leg_failures: int = 0             # legs refused in a row (the wait before the next try doubles)
 
     @property

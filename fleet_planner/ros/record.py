@@ -5,7 +5,7 @@ channel's offered QoS), readable by ``ros2 bag`` and Foxglove; :mod:`.replay` dr
 
 :class:`McapRecorder` writes (the messages arrive serialized: the node subscribes raw, so nothing is
 decoded and encoded again); :class:`RecorderNode` subscribes the fleet topics (and every robot's
-timed path and gate record as they appear) and hands it each message stamped with its ROS clock (simulated time with
+timed path as it appears) and hands it each message stamped with its ROS clock (simulated time with
 ``use_sim_time:=true``, as ``ros2 bag record --use-sim-time``)::
 
     fleet-record run.mcap --ros-args -p use_sim_time:=true
@@ -46,7 +46,6 @@ RECORDED: tuple[tuple[str, Any, QoSProfile], ...] = (
     (topics.MAP, OccupancyGrid, topics.MAP_QOS),
 )
 _TIMED_PATH = re.compile(r"^/robots/[A-Za-z0-9_]+/timed_path$")
-_GATE = re.compile(r"^/robots/[A-Za-z0-9_]+/gate$")
 _PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32",
                "uint32", "int64", "uint64", "string", "wstring"}
 _SEPARATOR = "=" * 80
@@ -165,7 +164,6 @@ class RecorderNode(Node):
         self.recorder = McapRecorder(self.output)
         # the timed paths of this fleet's robots (this node's namespace)
         self._timed_path = re.compile("^" + re.escape(self.get_namespace().rstrip("/")) + _TIMED_PATH.pattern[1:])
-        self._gate = re.compile("^" + re.escape(self.get_namespace().rstrip("/")) + _GATE.pattern[1:])
         for topic, msg_type, qos in (*RECORDED, *extra):
             self._subscribe(topic, msg_type, qos)
         self._discover = self.create_timer(0.5, self._find_paths)
@@ -184,12 +182,10 @@ class RecorderNode(Node):
         create_draining_subscription(self, msg_type, topic, on_message, qos, raw=True)
 
     def _find_paths(self) -> None:
-        """Every robot's timed path and gate record (its precedence links), as their topics appear."""
+        """Every robot's timed path, as its topic appears."""
         for topic, types in self.get_topic_names_and_types():
             if self._timed_path.match(topic) and "nav_msgs/msg/Path" in types and not self.recorder.has(topic):
                 self._subscribe(topic, PathMsg, topics.TIMED_PATH_QOS)
-            elif self._gate.match(topic) and "std_msgs/msg/String" in types and not self.recorder.has(topic):
-                self._subscribe(topic, String, topics.GATE_QOS)
 
     def destroy_node(self) -> None:
         self.recorder.close()
