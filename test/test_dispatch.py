@@ -1,6 +1,7 @@
 """The fleet manager and the robot agent, without ROS: task checks, allocation, charging, parking,
 offline handover, late robots, and a short simulated run whose legs and driven positions keep every
 pair of robots apart (the independent checker is the oracle)."""
+import importlib
 import json
 import math
 from dataclasses import replace
@@ -45,6 +46,9 @@ def task(tid="J1", pick="chute_1", place="B01-01", **fields):
 
 def manager(wh=WH, parking=PARKING, **params):
     return FleetManager(wh, FAST, DispatchParams(**params), parking)
+
+
+MANAGER = importlib.import_module("fleet_planner.fleet.manager")   # (the package's name ``manager`` is another)
 
 
 class Sim:
@@ -306,6 +310,28 @@ def test_an_offline_robot_becomes_an_obstacle_and_its_job_goes_to_another_robot(
     assert any(f"robot {first} offline" in n for n in sim.notes)
     gap, *who = min_separation(sim.driven())  # the dead robot's track ends where it stopped
     assert gap >= 0.0, who
+
+
+@pytest.mark.parametrize("deaf_factor", [MANAGER.DEAF_FACTOR, 0.0])
+def test_a_planner_that_hears_no_robot_at_all_for_a_while_takes_nobody_offline(monkeypatch, deaf_factor):
+    """Statuses of the whole fleet stop at once for twice the offline timeout (a starved planner, its
+    network: the offline waves of the process-mode demo) and come back: nobody is offline, the note
+    says why. Control (DEAF_FACTOR 0, the old rule): every robot goes offline. One robot silent among
+    others' statuses is offline at the timeout either way (the test above); the whole fleet silent
+    for longer than DEAF_FACTOR timeouts goes offline too."""
+    monkeypatch.setattr(MANAGER, "DEAF_FACTOR", deaf_factor)
+    sim = Sim(four_robots(), offline_timeout_s=2.0)
+    assert sim.run_until(lambda: len(sim.fm.robots) == 4, limit=2)
+    sim.mute.update(sim.agents)
+    sim.run_until(lambda: False, limit=4.0)   # 2x the timeout, nobody heard
+    sim.mute.clear()
+    offline = sorted(rid for rid in sim.agents if any(n.startswith(f"robot {rid} offline") for n in sim.notes))
+    if deaf_factor:
+        assert offline == [] and any("the planner's input is late" in n for n in sim.notes)
+        sim.mute.update(sim.agents)   # silent past DEAF_FACTOR timeouts: offline after all
+        assert sim.run_until(lambda: not any(r.online for r in sim.fm.robots.values()), limit=7.0)
+    else:
+        assert offline == sorted(sim.agents)
 
 
 def test_a_robot_heard_again_after_a_silence_is_stopped_where_it_is_and_serves_again():

@@ -19,7 +19,8 @@ twice the largest such lag plus ``safety_margin``, so the discs as driven stay a
 
 When things go wrong: a leg that cannot be planned now (someone is parked in the way) is tried
 again at the next step, and an idle robot in the way is sent off first; a robot silent for
-``offline_timeout_s`` (or out of battery) is immobile: its last position becomes a fixed obstacle,
+``offline_timeout_s`` (or out of battery; when no robot at all is heard, after ``DEAF_FACTOR`` times
+that: the planner's input is late, not every robot at once) is immobile: its last position becomes a fixed obstacle,
 its job goes back to the queue (or fails, if it was carrying it with an empty battery) and, under
 central coordination, robots whose legs pass near it re-plan; a central robot more than
 ``lateness_tolerance_s`` behind its schedule re-plans the rest of its leg from where it is, around
@@ -82,6 +83,10 @@ STEP_BUDGET_S = 0.5
 #: finished jobs kept in memory (the latest ones); older ones are only in the job store, which
 #: still answers a re-sent id with its state (without a store such an id is a new job again)
 MAX_CLOSED_JOBS = 1000
+#: (ours) when no robot at all has been heard for half the offline timeout, the planner's own input is
+#: late (a starved planner, its network), not every robot at once: robots go offline only after this
+#: many offline timeouts then (a single robot's silence amid others' statuses still counts at once)
+DEAF_FACTOR = 3.0
 
 
 class _Same:
@@ -151,6 +156,7 @@ class FleetManager:
         self.obstacles = ObstacleMap(obstacle_params, self.max_clock_skew_s)
         self.roster = Roster(roster)  # (None: anyone joins)
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
+        self._deaf = False   # no robot heard for half the offline timeout (noted once: _find_immobile)
         self._seq = 0
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
         #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
@@ -542,10 +548,18 @@ class FleetManager:
             self._housekeeping(now, d)
 
     def _find_immobile(self, now: float, d: Decisions) -> None:
+        timeout = self.params.offline_timeout_s
+        heard = max((r.seen for r in self.robots.values() if r.online), default=now)
+        deaf = now - heard > timeout / 2   # nobody heard: the planner's input is late (see DEAF_FACTOR)
+        if deaf and not self._deaf:
+            d.notes.append(f"no status from any robot for {now - heard:.1f} s: the planner's input is late, not "
+                           f"every robot at once; robots go offline only after {DEAF_FACTOR * timeout:g} s of silence")
+        self._deaf = deaf
         for r in self.robots.values():
-            if r.online and now - r.seen > self.params.offline_timeout_s:
+            silent = now - r.seen
+            if r.online and silent > timeout and (not deaf or silent > DEAF_FACTOR * timeout):
                 r.online = False
-                self._immobilise(r, now, d, f"offline: no status for {now - r.seen:.1f} s")
+                self._immobilise(r, now, d, f"offline: no status for {silent:.1f} s")
             elif r.online and not r.immobile and r.status.mode == "error":
                 self._immobilise(r, now, d, "out of battery")
             elif r.immobile and r.job is not None:  # its job could not be released (the store failed): again
