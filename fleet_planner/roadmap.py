@@ -18,16 +18,13 @@ without knowing about it.
 
 ARMO (:func:`armo_roadmap`) - ours after the paper's one-paragraph summary ("based on linear
 programming, ARMO computes an optimal road map according to environmental constraints and the
-demand for transportation tasks from stations"): a mixed-integer program (SciPy's HiGHS
-``milp``) over the 4-connected cells the disc fits on. Each maximal straight run of cells (a row
-or column stretch: an aisle lane) is one-way forward, one-way backward or two-way; two-way costs
-``two_way_cost`` per cell (one-way where the demand allows, two-way where it must). Flows, one
-commodity per station with demand out of it (its demand to every other station, from the delivery
-sequence), may use a run's edges only in its allowed directions; two connectivity commodities
-(root to every cell, every cell to root, tiny flows) make the whole free space strongly connected,
-so no lane is a dead end and every station reaches every other in both directions. The objective
-is the demand-weighted driving distance plus the two-way costs. A time limit keeps the best
-solution HiGHS has found (all two-way is always feasible).
+demand for transportation tasks from stations"): the demand-weighted multi-commodity min-cost flow
+over the directed moves between the cells the disc fits on, solved exactly by one shortest-path
+tree per commodity (the program has no capacities; :func:`_flow_lp` is the same program for
+HiGHS, checked to agree, far too slow at warehouse scale), head-on costs by successive averages
+so that opposing flows take different aisles, and rounding to one-way runs (maximal straight row
+or column stretches: aisle lanes) that keeps the free space strongly connected, so no lane is a
+dead end and every station reaches every other in both directions.
 
 Lanes file (YAML; :func:`load_lanes`, :func:`save_lanes`)::
 
