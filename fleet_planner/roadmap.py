@@ -418,6 +418,46 @@ class _Net:
         return float(2 * np.minimum(fwd, back).sum() / total) if total > 0 else 0.0
 
 
+def _lanes(free: np.ndarray, runs: Sequence[Sequence[int]], tails: np.ndarray, heads: np.ndarray,
+           run_of: np.ndarray, narrow: int) -> np.ndarray:
+    """Per edge: its lane (ours), the unit a direction is chosen for. A run is cut where it enters or
+    leaves a narrow corridor (at most ``narrow`` cells across: two discs in neighbouring runs of it
+    cannot pass each other, e.g. a 2 m aisle on a 0.5 m grid has two rows of cells the disc fits
+    on, 0.5 m apart), so an aisle is a lane of its own, not one with the cross aisle beyond it; and
+    the parallel pieces side by side in a narrow corridor are one lane (one direction for all of
+    them, else opposing robots would meet head-on in it anyway). Lanes numbered from 0."""
+    h, w = free.shape
+    across = np.ones((2, h * w), dtype=np.int64)       # [0]: free extent along the column, [1]: along the row
+    for cells in runs:
+        vertical = cells[1] - cells[0] != 1
+        across[0 if vertical else 1, cells] = len(cells)
+    horizontal = heads - tails == 1
+    width = np.where(horizontal, np.maximum(across[0, tails], across[0, heads]),
+                     np.maximum(across[1, tails], across[1, heads]))
+    is_narrow = width <= narrow
+    # pieces: runs cut where the narrow flag changes (a run's edges are consecutive, in order)
+    new = np.ones(len(tails), dtype=bool)
+    new[1:] = (run_of[1:] != run_of[:-1]) | (is_narrow[1:] != is_narrow[:-1])
+    piece = np.cumsum(new) - 1
+    parent = np.arange(int(piece[-1]) + 1 if len(piece) else 0)
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = int(parent[a])
+        return a
+
+    edge = {(int(t), int(hd)): k for k, (t, hd) in enumerate(zip(tails, heads))}
+    for k in np.nonzero(is_narrow)[0]:
+        side = w if horizontal[k] else 1                 # the parallel edge below / to the right
+        other = edge.get((int(tails[k]) + side, int(heads[k]) + side))
+        if other is not None and is_narrow[other]:
+            parent[find(int(piece[k]))] = find(int(piece[other]))
+    roots = np.array([find(p) for p in range(len(parent))], dtype=np.int64)
+    _, label = np.unique(roots, return_inverse=True)
+    return label[piece]
+
+
 def _net(grid: GridMap, radius: float, stations: Mapping[str, Point], keep_right: float) -> tuple[_Net, dict]:
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
@@ -433,7 +473,9 @@ def _net(grid: GridMap, radius: float, stations: Mapping[str, Point], keep_right
     node = np.full(h * w, -1, dtype=np.int64)
     node[cells] = np.arange(len(cells))
     keep = node[tails] >= 0
-    tails, heads, run_of = tails[keep], heads[keep], run_of[keep]
+    narrow = int(math.floor(2 * radius / grid.resolution - 1e-9)) + 1   # (k - 1) cells apart < 2 radius
+    lane_of = _lanes(free, runs, tails, heads, run_of, narrow)
+    tails, heads, run_of = tails[keep], heads[keep], lane_of[keep]
     arc_t = np.concatenate([tails, heads])
     arc_h = np.concatenate([heads, tails])
     dcol = arc_h % w - arc_t % w
@@ -442,7 +484,7 @@ def _net(grid: GridMap, radius: float, stations: Mapping[str, Point], keep_right
     right_free = (rc >= 0) & (rc < w) & (rr >= 0) & (rr < h)
     right_free[right_free] = free[rr[right_free], rc[right_free]]
     net = _Net(cells, node[arc_t], node[arc_h], np.concatenate([run_of, run_of]), 1.0 + keep_right * right_free,
-               len(tails), len(runs))
+               len(tails), int(lane_of.max()) + 1 if len(lane_of) else 0)
     return net, {s: int(node[c]) for s, c in st_cell.items()}
 
 

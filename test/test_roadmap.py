@@ -95,6 +95,30 @@ def test_armo_sends_opposing_flows_along_different_aisles(head_on):
         assert not middle_one_way and info.opposed == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("narrow", [1, 2])
+def test_a_corridor_too_narrow_to_pass_in_is_one_lane_and_apart_from_the_open_space(narrow):
+    # two rows of cells between two open blocks: on a 0.5 m grid (narrow = 2) discs of radius
+    # 0.354 in the two rows cannot pass each other, so both rows are one lane (one direction);
+    # on a 1 m grid (narrow = 1, the control) they can, and each row is a lane of its own
+    from fleet_planner.roadmap import _lanes, _runs
+
+    free = np.zeros((6, 12), dtype=bool)
+    free[:, :3] = free[:, 9:] = True
+    free[2:4, :] = True
+    runs, tails, heads, run_of = _runs(free)
+    lane = _lanes(free, runs, tails, heads, run_of, narrow)
+    w = free.shape[1]
+
+    def lane_of(row: int, col: int) -> int:      # the edge (col, row) -> (col + 1, row)
+        k = int(np.nonzero((tails == row * w + col) & (heads == row * w + col + 1))[0][0])
+        return int(lane[k])
+
+    assert (lane_of(2, 5) == lane_of(3, 5)) == (narrow == 2)
+    assert lane_of(2, 5) == lane_of(2, 4)                 # one piece along the corridor
+    # a narrow corridor is cut off the open blocks' rows; a wide one is not (rows run through)
+    assert (lane_of(2, 0) != lane_of(2, 5) != lane_of(2, 10)) == (narrow == 2)
+
+
 def test_armo_on_the_default_warehouse_takes_seconds_and_connects_every_station_pair_both_ways():
     import time
 
