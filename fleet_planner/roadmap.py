@@ -458,12 +458,20 @@ def _lanes(free: np.ndarray, runs: Sequence[Sequence[int]], tails: np.ndarray, h
     return label[piece]
 
 
-def _net(grid: GridMap, radius: float, stations: Mapping[str, Point], keep_right: float) -> tuple[_Net, dict]:
+def _net(grid: GridMap, radius: float, stations: Mapping[str, Point], keep_right: float,
+         parked: Sequence[Point] = ()) -> tuple[_Net, dict]:
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
-    free = free_cells(grid, radius)
+    free = free_cells(grid, radius).copy()
     h, w = free.shape
+    res = grid.resolution
+    for x, y in parked:   # no centre within 2 radii of a parked robot (its cells stay unrestricted)
+        c0, c1 = max(int((x - 2 * radius) / res) - 1, 0), min(int((x + 2 * radius) / res) + 2, w)
+        r0, r1 = max(int((y - 2 * radius) / res) - 1, 0), min(int((y + 2 * radius) / res) + 2, h)
+        cols, rows = np.meshgrid(np.arange(c0, c1), np.arange(r0, r1))
+        near = ((cols + 0.5) * res - x) ** 2 + ((rows + 0.5) * res - y) ** 2 < (2 * radius) ** 2
+        free[rows[near], cols[near]] = False
     runs, tails, heads, run_of = _runs(free)
     g = csr_matrix((np.ones(len(tails)), (tails, heads)), shape=(h * w, h * w))
     _, label = connected_components(g, directed=False)
@@ -573,7 +581,7 @@ def _flow_lp(net: _Net, cost: np.ndarray, open_arc: np.ndarray,
 def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
                  demand: Mapping[tuple[str, str], float], *, minor_share: float = 0.2, keep_right: float = 0.2,
                  head_on: float = 1.0, iterations: int = 8, rounds: int = 3, time_limit_s: float = 120.0,
-                 name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
+                 name: str = "armo", parked: Sequence[Point] = ()) -> tuple[RoadMap, ArmoInfo]:
     """ARMO's road map for discs of ``radius``: one-way runs where the demand allows.
 
     The program (the paper's idea: "based on linear programming, ARMO computes an optimal road map
@@ -596,11 +604,18 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
     space (every cell keeps a way to every other, so no lane is a dead end and every station
     reaches every other both ways); then the flows are solved again along the lanes. Runs no flow
     uses stay two-way. No new round starts after ``time_limit_s``. ``demand[(a, b)]``: how often
-    robots drive from station a to station b (any scale)."""
+    robots drive from station a to station b (any scale).
+
+    ``parked`` (ours): where robots stand parked (their homes): the lanes are laid out round them,
+    so a parked robot never cuts the only way along the lanes (on a map of two-way moves a robot
+    can turn back; on one-way lanes it cannot). The cells near them keep every move. When the
+    space round them is not connected, they are left out."""
     import time
 
     t0 = time.perf_counter()
-    net, st_node = _net(grid, radius, stations, keep_right)
+    net, st_node = _net(grid, radius, stations, keep_right, parked)
+    if parked and not net.strongly_connected(np.ones(2 * net.m, dtype=bool)):
+        net, st_node = _net(grid, radius, stations, keep_right)
     sources = _sources(st_node, demand)
     m = net.m
     open_arc = np.ones(2 * m, dtype=bool)

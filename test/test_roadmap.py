@@ -95,6 +95,23 @@ def test_armo_sends_opposing_flows_along_different_aisles(head_on):
         assert not middle_one_way and info.opposed == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("parked", [False, True])
+def test_armos_lanes_go_round_a_parked_robot(parked):
+    # the scene above with a robot parked in the bottom aisle: laid out without it (the control),
+    # the bottom aisle is the only way east and the parked robot cuts P off Q; laid out round it,
+    # P and Q reach each other both ways with the robot standing there
+    grid = _grid()
+    stations = {"P": (0.5, 2.5), "Q": (11.5, 2.5)}
+    home = (5.5, 4.5)
+    lanes, _ = armo_roadmap(grid, R, stations, {("P", "Q"): 1.0, ("Q", "P"): 1.0},
+                            parked=[home] if parked else [])
+    free = free_cells(grid, R).copy()
+    c, r = grid.cell_of(*home)
+    free[r, c] = False                       # the parked robot's cell
+    cut = lanes.unreachable_pairs(free, [grid.cell_of(*p) for p in stations.values()])
+    assert (cut == []) == parked
+
+
 @pytest.mark.parametrize("narrow", [1, 2])
 def test_a_corridor_too_narrow_to_pass_in_is_one_lane_and_apart_from_the_open_space(narrow):
     # two rows of cells between two open blocks: on a 0.5 m grid (narrow = 2) discs of radius
