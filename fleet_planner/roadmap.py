@@ -316,11 +316,14 @@ def save_lanes(rm: RoadMap, grid: GridMap, path: str | Path, comment: str = "") 
 # -- ARMO: the road map from the demand ------------------------------------------------------------
 @dataclass(frozen=True)
 class ArmoInfo:
-    """How the road map was computed. ``variables``: of the flow program (arcs x commodities)
-    whose optimum the shortest-path trees are; ``objective``: the demand-weighted driving distance
-    (cells, keep-right costs, demand scaled to 1) along the final lanes, ``open_objective`` the
-    same on the map without lanes; ``opposed``: share of the driving on runs driven both ways
-    (the head-on traffic lanes remove), first on the open map, then on the road map."""
+    """How the road map was computed. ``runs``: lanes (:func:`_lanes`: runs cut at narrow
+    corridors, the parallel pieces of one such corridor together), ``one_way_runs`` those made
+    one-way; ``variables``: of the flow program (arcs x commodities) whose optimum the
+    shortest-path trees are; ``objective``: the demand-weighted driving distance (cells,
+    keep-right costs, demand scaled to 1) along the final lanes, ``open_objective`` the same on
+    the map without lanes (both round the parked robots); ``opposed``: share of the driving that
+    meets opposing flow in its lane (the head-on traffic lanes remove), first on the open map
+    (``opposed_open``), then on the road map."""
 
     cells: int
     runs: int
