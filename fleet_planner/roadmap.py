@@ -18,16 +18,13 @@ without knowing about it.
 
 ARMO (:func:`armo_roadmap`) - ours after the paper's one-paragraph summary ("based on linear
 programming, ARMO computes an optimal road map according to environmental constraints and the
-demand for transportation tasks from stations"): a mixed-integer program (SciPy's HiGHS
-``milp``) over the 4-connected cells the disc fits on. Each maximal straight run of cells (a row
-or column stretch: an aisle lane) is one-way forward, one-way backward or two-way; two-way costs
-``two_way_cost`` per cell (one-way where the demand allows, two-way where it must). Flows, one
-commodity per station with demand out of it (its demand to every other station, from the delivery
-sequence), may use a run's edges only in its allowed directions; two connectivity commodities
-(root to every cell, every cell to root, tiny flows) make the whole free space strongly connected,
-so no lane is a dead end and every station reaches every other in both directions. The objective
-is the demand-weighted driving distance plus the two-way costs. A time limit keeps the best
-solution HiGHS has found (all two-way is always feasible).
+demand for transportation tasks from stations"): the demand-weighted multi-commodity min-cost flow
+over the directed moves between the cells the disc fits on, solved exactly by one shortest-path
+tree per commodity (the program has no capacities; :func:`_flow_lp` is the same program for
+HiGHS, checked to agree, far too slow at warehouse scale), head-on costs by successive averages
+so that opposing flows take different aisles, and rounding to one-way runs (maximal straight row
+or column stretches: aisle lanes) that keeps the free space strongly connected, so no lane is a
+dead end and every station reaches every other in both directions.
 
 Lanes file (YAML; :func:`load_lanes`, :func:`save_lanes`)::
 
@@ -42,9 +39,11 @@ rejected with a :class:`LanesError` naming the field.
 """
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -314,10 +313,17 @@ def save_lanes(rm: RoadMap, grid: GridMap, path: str | Path, comment: str = "") 
     return path
 
 
-# -- ARMO: the road map from the demand, by mixed-integer linear programming ---------------------
+# -- ARMO: the road map from the demand ------------------------------------------------------------
 @dataclass(frozen=True)
 class ArmoInfo:
-    """How the road map was computed."""
+    """How the road map was computed. ``runs``: lanes (:func:`_lanes`: runs cut at narrow
+    corridors, the parallel pieces of one such corridor together), ``one_way_runs`` those made
+    one-way; ``variables``: of the flow program (arcs x commodities) whose optimum the
+    shortest-path trees are; ``objective``: the demand-weighted driving distance (cells,
+    keep-right costs, demand scaled to 1) along the final lanes, ``open_objective`` the same on
+    the map without lanes (both round the parked robots); ``opposed``: share of the driving that
+    meets opposing flow in its lane (the head-on traffic lanes remove), first on the open map
+    (``opposed_open``), then on the road map."""
 
     cells: int
     runs: int
@@ -327,6 +333,9 @@ class ArmoInfo:
     status: str
     objective: float
     solve_s: float
+    open_objective: float = math.nan
+    opposed_open: float = math.nan
+    opposed: float = math.nan
 
 
 def _runs(free: np.ndarray) -> tuple[list[list[int]], np.ndarray, np.ndarray, np.ndarray]:
@@ -367,55 +376,105 @@ def _nearest_free(free: np.ndarray, grid: GridMap, p: Point) -> int:
     return int(rows[k] * w + cols[k])
 
 
-def _commodities(stations: Sequence[str], demand: Mapping[tuple[str, str], float]) -> list[tuple[str, str, dict]]:
-    """Group the station pairs with demand into commodities: a greedy vertex cover of the demand
-    graph, each chosen station carrying its uncovered pairs as one source commodity (out of it)
-    and one sink commodity (into it). ``[(kind, station, {other: weight})]``."""
-    left = {(a, b): v for (a, b), v in demand.items() if v > 0 and a != b and a in stations and b in stations}
-    out = []
-    while left:
-        score: dict[str, float] = {}
-        for (a, b) in left:
-            score[a] = score.get(a, 0) + 1
-            score[b] = score.get(b, 0) + 1
-        s = max(score, key=lambda x: (score[x], x))
-        src = {b: v for (a, b), v in left.items() if a == s}
-        dst = {a: v for (a, b), v in left.items() if b == s}
-        if src:
-            out.append(("source", s, src))
-        if dst:
-            out.append(("sink", s, dst))
-        left = {k: v for k, v in left.items() if s not in k}
-    return out
+@dataclass(frozen=True)
+class _Net:
+    """The flow network: nodes = the traversable cells of the stations' component, arcs = the
+    orthogonal moves between them, ``0..m-1`` along their run, ``m..2m-1`` against it."""
+
+    cells: np.ndarray        # node -> flat cell
+    tail: np.ndarray         # arc -> node
+    head: np.ndarray
+    run: np.ndarray          # arc -> run index
+    cost: np.ndarray         # arc -> base cost (1 + keep right)
+    m: int
+    n_runs: int
+
+    @property
+    def n(self) -> int:
+        return len(self.cells)
+
+    @cached_property
+    def arc_id(self) -> dict[int, int]:
+        """``tail * n + head`` -> arc."""
+        return {int(t) * self.n + int(h): j for j, (t, h) in enumerate(zip(self.tail, self.head))}
+
+    def graph(self, cost: np.ndarray, open_arc: np.ndarray):
+        from scipy.sparse import csr_matrix
+
+        return csr_matrix((cost[open_arc], (self.tail[open_arc], self.head[open_arc])), shape=(self.n, self.n))
+
+    def strongly_connected(self, open_arc: np.ndarray) -> bool:
+        from scipy.sparse.csgraph import connected_components
+
+        return connected_components(self.graph(self.cost, open_arc), directed=True, connection="strong")[0] == 1
+
+    def run_flows(self, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per run: the flow along it and against it."""
+        m = self.m
+        return (np.bincount(self.run[:m], weights=flow[:m], minlength=self.n_runs),
+                np.bincount(self.run[m:], weights=flow[m:], minlength=self.n_runs))
+
+    def opposed(self, flow: np.ndarray) -> float:
+        """Share of the flow (cells driven) on runs driven both ways that meets opposing flow."""
+        fwd, back = self.run_flows(flow)
+        total = float(fwd.sum() + back.sum())
+        return float(2 * np.minimum(fwd, back).sum() / total) if total > 0 else 0.0
 
 
-def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
-                 demand: Mapping[tuple[str, str], float], *, minor_share: float = 0.2, keep_right: float = 0.2,
-                 rounds: int = 3, time_limit_s: float = 120.0, name: str = "armo") -> tuple[RoadMap, ArmoInfo]:
-    """ARMO's road map for discs of ``radius``: one-way runs where the demand allows.
+def _lanes(free: np.ndarray, runs: Sequence[Sequence[int]], tails: np.ndarray, heads: np.ndarray,
+           run_of: np.ndarray, narrow: int) -> np.ndarray:
+    """Per edge: its lane (ours), the unit a direction is chosen for. A run is cut where it enters or
+    leaves a narrow corridor (at most ``narrow`` cells across: two discs in neighbouring runs of it
+    cannot pass each other, e.g. a 2 m aisle on a 0.5 m grid has two rows of cells the disc fits
+    on, 0.5 m apart), so an aisle is a lane of its own, not one with the cross aisle beyond it; and
+    the parallel pieces side by side in a narrow corridor are one lane (one direction for all of
+    them, else opposing robots would meet head-on in it anyway). Lanes numbered from 0."""
+    h, w = free.shape
+    across = np.ones((2, h * w), dtype=np.int64)       # [0]: free extent along the column, [1]: along the row
+    for cells in runs:
+        vertical = cells[1] - cells[0] != 1
+        across[0 if vertical else 1, cells] = len(cells)
+    horizontal = heads - tails == 1
+    width = np.where(horizontal, np.maximum(across[0, tails], across[0, heads]),
+                     np.maximum(across[1, tails], across[1, heads]))
+    is_narrow = width <= narrow
+    # pieces: runs cut where the narrow flag changes (a run's edges are consecutive, in order)
+    new = np.ones(len(tails), dtype=bool)
+    new[1:] = (run_of[1:] != run_of[:-1]) | (is_narrow[1:] != is_narrow[:-1])
+    piece = np.cumsum(new) - 1
+    parent = np.arange(int(piece[-1]) + 1 if len(piece) else 0)
 
-    The program (ours, after the paper's summary): the demand-weighted multi-commodity min-cost
-    flow over the directed orthogonal moves between the cells the disc fits on, as a linear
-    program (SciPy's HiGHS ``linprog``), each move costing its length plus ``keep_right`` when the
-    cell on its right is free (keep right: opposing flows take opposite sides of a wide aisle);
-    two connectivity commodities (root to every cell, every cell to root, tiny flows) keep the
-    whole free space strongly connected. Rounding, in ``rounds`` rounds: a run (maximal straight
-    row or column stretch of cells) whose flow against its main direction is at most
-    ``minor_share`` of the flow along it becomes one-way (its reverse moves removed) and the
-    program is solved again on what is left (so the flows re-route along the lanes); a batch that
-    makes the program infeasible (it would cut the space) is halved, the most balanced runs
-    staying two-way. Runs no flow uses stay two-way. No new round or halving starts after
-    ``time_limit_s`` (the lanes found so far are kept). ``demand[(a, b)]``: how often robots drive
-    from station a to station b (any scale)."""
-    import time
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = int(parent[a])
+        return a
 
-    from scipy.optimize import linprog
-    from scipy.sparse import block_diag, coo_matrix, csr_matrix
+    edge = {(int(t), int(hd)): k for k, (t, hd) in enumerate(zip(tails, heads))}
+    for k in np.nonzero(is_narrow)[0]:
+        side = w if horizontal[k] else 1                 # the parallel edge below / to the right
+        other = edge.get((int(tails[k]) + side, int(heads[k]) + side))
+        if other is not None and is_narrow[other]:
+            parent[find(int(piece[k]))] = find(int(piece[other]))
+    roots = np.array([find(p) for p in range(len(parent))], dtype=np.int64)
+    _, label = np.unique(roots, return_inverse=True)
+    return label[piece]
+
+
+def _net(grid: GridMap, radius: float, stations: Mapping[str, Point], keep_right: float,
+         parked: Sequence[Point] = ()) -> tuple[_Net, dict]:
+    from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
-    t0 = time.perf_counter()
-    free = free_cells(grid, radius)
+    free = free_cells(grid, radius).copy()
     h, w = free.shape
+    res = grid.resolution
+    for x, y in parked:   # no centre within 2 radii of a parked robot (its cells stay unrestricted)
+        c0, c1 = max(int((x - 2 * radius) / res) - 1, 0), min(int((x + 2 * radius) / res) + 2, w)
+        r0, r1 = max(int((y - 2 * radius) / res) - 1, 0), min(int((y + 2 * radius) / res) + 2, h)
+        cols, rows = np.meshgrid(np.arange(c0, c1), np.arange(r0, r1))
+        near = ((cols + 0.5) * res - x) ** 2 + ((rows + 0.5) * res - y) ** 2 < (2 * radius) ** 2
+        free[rows[near], cols[near]] = False
     runs, tails, heads, run_of = _runs(free)
     g = csr_matrix((np.ones(len(tails)), (tails, heads)), shape=(h * w, h * w))
     _, label = connected_components(g, directed=False)
@@ -425,88 +484,198 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
     node = np.full(h * w, -1, dtype=np.int64)
     node[cells] = np.arange(len(cells))
     keep = node[tails] >= 0
-    tails, heads, run_of = tails[keep], heads[keep], run_of[keep]
-    n, m = len(cells), len(tails)
-    # directed arcs: 0..m-1 along their run (tail -> head), m..2m-1 against it
+    narrow = int(math.floor(2 * radius / grid.resolution - 1e-9)) + 1   # (k - 1) cells apart < 2 radius
+    lane_of = _lanes(free, runs, tails, heads, run_of, narrow)
+    tails, heads, run_of = tails[keep], heads[keep], lane_of[keep]
     arc_t = np.concatenate([tails, heads])
     arc_h = np.concatenate([heads, tails])
-    arc_run = np.concatenate([run_of, run_of])
     dcol = arc_h % w - arc_t % w
     drow = arc_h // w - arc_t // w
     rc, rr = arc_t % w - drow, arc_t // w + dcol            # the cell on the right (y down): (-drow, dcol)
     right_free = (rc >= 0) & (rc < w) & (rr >= 0) & (rr < h)
     right_free[right_free] = free[rr[right_free], rc[right_free]]
-    cost = 1.0 + keep_right * right_free
-    n_arcs = 2 * m
-    # commodities
-    groups = _commodities(list(stations), demand)
-    total = float(sum(sum(d.values()) for _, _, d in groups)) or 1.0
-    supplies = []
-    for kind, s, other in groups:
-        b = np.zeros(n)
-        sign = -1.0 if kind == "source" else 1.0
-        for t, v in other.items():
-            b[node[st_cell[t]]] += sign * v / total
-        b[node[st_cell[s]]] -= b.sum()
-        supplies.append(b)
-    n_cost = len(supplies)
-    root = int(node[st_cell[next(iter(stations))]]) if stations else 0
-    eps = 1e-5
-    b = np.full(n, -eps)
-    b[root] = eps * (n - 1)
-    supplies += [b, -b]
-    k = len(supplies)
+    net = _Net(cells, node[arc_t], node[arc_h], np.concatenate([run_of, run_of]), 1.0 + keep_right * right_free,
+               len(tails), int(lane_of.max()) + 1 if len(lane_of) else 0)
+    return net, {s: int(node[c]) for s, c in st_cell.items()}
+
+
+def _sources(st_node: Mapping[str, int],
+             demand: Mapping[tuple[str, str], float]) -> list[tuple[int, dict[int, float]]]:
+    """One commodity per station with demand out of it: (its node, {destination node: demand}),
+    the demand scaled to a total of 1."""
+    out: dict[int, dict[int, float]] = {}
+    for (a, b), v in demand.items():
+        if v > 0 and a != b and a in st_node and b in st_node and st_node[a] != st_node[b]:
+            d = out.setdefault(st_node[a], {})
+            d[st_node[b]] = d.get(st_node[b], 0.0) + float(v)
+    total = sum(sum(d.values()) for d in out.values()) or 1.0
+    return [(s, {t: v / total for t, v in d.items()}) for s, d in sorted(out.items())]
+
+
+def _path_flows(net: _Net, cost: np.ndarray, open_arc: np.ndarray,
+                sources: Sequence[tuple[int, Mapping[int, float]]]) -> np.ndarray:
+    """The optimum of the multi-commodity min-cost flow :func:`_flow_lp` states, by shortest-path
+    trees: without capacities the commodities do not interact (the program's matrix is block
+    diagonal) and one source's optimal flow is its shortest-path tree to its destinations (a
+    classical result; test_roadmap checks the objectives agree with HiGHS). Flow per arc."""
+    from scipy.sparse.csgraph import dijkstra
+
+    flow = np.zeros(len(cost))
+    if not sources:
+        return flow
+    arc_id = net.arc_id
+    dist, pred = dijkstra(net.graph(cost, open_arc), indices=[s for s, _ in sources], return_predecessors=True)
+    n = net.n
+    for k, (s, dests) in enumerate(sources):
+        acc: dict[int, float] = {}
+        for t, v in dests.items():
+            if not np.isfinite(dist[k, t]):
+                raise ValueError("armo: a station cannot reach another along the lanes")
+            acc[t] = acc.get(t, 0.0) + v
+        p = pred[k]
+        # push the demand up the tree, farthest nodes first (each node once, with all it carries)
+        heap = [(-dist[k, t], t) for t in acc]
+        heapq.heapify(heap)
+        seen = set()
+        while heap:
+            _, v = heapq.heappop(heap)
+            if v in seen or v == s:
+                continue
+            seen.add(v)
+            u = int(p[v])
+            flow[arc_id[u * n + v]] += acc[v]
+            if u not in acc:
+                acc[u] = 0.0
+                heapq.heappush(heap, (-dist[k, u], u))
+            acc[u] += acc[v]
+    return flow
+
+
+def _flow_lp(net: _Net, cost: np.ndarray, open_arc: np.ndarray,
+             sources: Sequence[tuple[int, Mapping[int, float]]]) -> tuple[np.ndarray, float]:
+    """ARMO's flow program as a linear program (SciPy's HiGHS): one commodity per source station,
+    flow conservation at every cell, arcs closed by the lanes bounded to 0, minimum total cost.
+    (flow per arc summed over commodities, objective). The reference :func:`_path_flows` is checked
+    against; too slow to solve at warehouse scale (a 161 x 63 map with 16 commodities: 280 896
+    variables, 47 s CPU for one solve, more than 1000 s wall on the loaded machine)."""
+    from scipy.optimize import linprog
+    from scipy.sparse import block_diag, coo_matrix
+
+    n, n_arcs = net.n, len(cost)
     inc = coo_matrix((np.concatenate([np.ones(n_arcs), -np.ones(n_arcs)]),
-                      (np.concatenate([node[arc_t], node[arc_h]]), np.concatenate([np.arange(n_arcs)] * 2))),
+                      (np.concatenate([net.tail, net.head]), np.concatenate([np.arange(n_arcs)] * 2))),
                      shape=(n, n_arcs)).tocsr()
-    a_eq = block_diag([inc] * k, format="csr")
-    b_eq = np.concatenate(supplies)
-    c = np.tile(cost, k)
-    open_arc = np.ones(n_arcs, dtype=bool)
-    status = "no demand"
-    objective = math.nan
-    one_way_runs: set[int] = set()
-
-    def solve(arcs_open: np.ndarray):
-        ub = np.tile(np.where(arcs_open, np.inf, 0.0), k)
-        return linprog(c, A_eq=a_eq, b_eq=b_eq, bounds=np.column_stack([np.zeros(len(c)), ub]), method="highs")
-
-    res = solve(open_arc)
+    supplies = []
+    for s, dests in sources:
+        b = np.zeros(n)
+        for t, v in dests.items():
+            b[t] += v
+        b[s] -= b.sum()
+        supplies.append(-b)          # out-flow minus in-flow: +supply at the source, -demand at sinks
+    k = len(supplies)
+    ub = np.tile(np.where(open_arc, np.inf, 0.0), k)
+    res = linprog(np.tile(cost, k), A_eq=block_diag([inc] * k, format="csr"), b_eq=np.concatenate(supplies),
+                  bounds=np.column_stack([np.zeros(len(ub)), ub]), method="highs")
     if not res.success:
-        raise ValueError(f"armo: the free space of the stations is not connected ({res.message})")
-    for _ in range(max(rounds, 0)):
+        raise ValueError(f"armo: the flow program has no solution ({res.message})")
+    return res.x.reshape(k, n_arcs).sum(axis=0), float(res.fun)
+
+
+def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
+                 demand: Mapping[tuple[str, str], float], *, minor_share: float = 0.2, keep_right: float = 0.2,
+                 head_on: float = 1.0, iterations: int = 8, rounds: int = 3, time_limit_s: float = 120.0,
+                 name: str = "armo", parked: Sequence[Point] = ()) -> tuple[RoadMap, ArmoInfo]:
+    """ARMO's road map for discs of ``radius``: one-way runs where the demand allows.
+
+    The program (the paper's idea: "based on linear programming, ARMO computes an optimal road map
+    according to environmental constraints and the demand for transportation tasks from stations";
+    the formulation is ours): the demand-weighted multi-commodity min-cost flow over the directed
+    orthogonal moves between the cells the disc fits on (one commodity per station with demand out
+    of it), each move costing its length plus ``keep_right`` when the cell on its right is free
+    (keep right: opposing flows take opposite sides of a wide aisle). It has no capacities, so its
+    optimum is a shortest-path tree per commodity, which is how it is solved (:func:`_path_flows`;
+    the same program for HiGHS is :func:`_flow_lp`, checked to agree).
+
+    Head-on traffic (ours; ARMO separates opposing lanes, the flow program alone does not: with
+    demand both ways every aisle carries both): ``iterations`` rounds of successive averages, each
+    move costing ``head_on`` times the share of its run's flow going the other way on top, so
+    opposing flows settle in different parallel aisles.
+
+    Rounding, in ``rounds`` rounds: a run (maximal straight row or column stretch of cells: an
+    aisle lane) whose flow against its main direction is at most ``minor_share`` of the flow along
+    it becomes one-way, the clearest first, unless that breaks the strong connectivity of the free
+    space (every cell keeps a way to every other, so no lane is a dead end and every station
+    reaches every other both ways); then the flows are solved again along the lanes. Runs no flow
+    uses stay two-way. No new round starts after ``time_limit_s``. ``demand[(a, b)]``: how often
+    robots drive from station a to station b (any scale).
+
+    ``parked`` (ours): where robots stand parked (their homes): the lanes are laid out round them,
+    so a parked robot never cuts the only way along the lanes (on a map of two-way moves a robot
+    can turn back; on one-way lanes it cannot). The cells near them keep every move. When the
+    space round them is not connected, they are left out."""
+    import time
+
+    t0 = time.perf_counter()
+    net, st_node = _net(grid, radius, stations, keep_right, parked)
+    if parked and not net.strongly_connected(np.ones(2 * net.m, dtype=bool)):
+        net, st_node = _net(grid, radius, stations, keep_right)
+    sources = _sources(st_node, demand)
+    m = net.m
+    open_arc = np.ones(2 * m, dtype=bool)
+    if not net.strongly_connected(open_arc):
+        raise ValueError("armo: the free space of the stations is not connected")
+    is_fwd = np.arange(2 * m) < m
+
+    def equilibrium(open_arc: np.ndarray) -> np.ndarray:
+        # successive averages, one commodity after the other (all at once, two opposing flows of
+        # the same size would swap aisles together for ever)
+        own = [_path_flows(net, net.cost, open_arc, [c]) for c in sources]
+        flow = np.sum(own, axis=0)
+        for it in range(2, max(iterations, 1) + 1):
+            for k, c in enumerate(sources):
+                fwd, back = net.run_flows(flow)
+                tot = (fwd + back)[net.run]
+                share = np.where(is_fwd, back[net.run], fwd[net.run]) / np.maximum(tot, 1e-12)
+                step = (_path_flows(net, net.cost * (1.0 + head_on * share), open_arc, [c]) - own[k]) / it
+                own[k] += step
+                flow += step
+        return flow
+
+    open_objective = float(_path_flows(net, net.cost, open_arc, sources) @ net.cost)
+    opposed_open = net.opposed(_path_flows(net, net.cost, open_arc, sources))
+    one_way_runs: set[int] = set()
+    status = "no demand" if not sources else "optimal"
+    for _ in range(max(rounds, 0) if sources else 0):
         if time.perf_counter() - t0 >= time_limit_s:
+            status = "time limit"
             break
-        status, objective = str(res.message), float(res.fun)
-        flow = res.x[:n_cost * n_arcs].reshape(n_cost, n_arcs).sum(axis=0)
-        fwd = np.bincount(run_of, weights=flow[:m], minlength=len(runs))
-        back = np.bincount(run_of, weights=flow[m:], minlength=len(runs))
+        flow = equilibrium(open_arc)
+        fwd, back = net.run_flows(flow)
         major, minor = np.maximum(fwd, back), np.minimum(fwd, back)
         cand = [int(r) for r in np.nonzero((major > 1e-9) & (minor <= minor_share * major))[0]
                 if r not in one_way_runs]
-        cand.sort(key=lambda r: minor[r] / major[r])          # the clearest first
-        while cand and time.perf_counter() - t0 < time_limit_s:
-            trial = open_arc.copy()
-            for r in cand:
-                against = (arc_run == r) & (np.arange(n_arcs) >= m if fwd[r] >= back[r] else np.arange(n_arcs) < m)
-                trial[against] = False
-            new = solve(trial)
-            if new.success:
-                open_arc, res = trial, new
-                one_way_runs.update(cand)
-                break
-            cand = cand[:len(cand) // 2]
-        else:
+        cand.sort(key=lambda r: (minor[r] / major[r], -major[r]))          # the clearest, busiest first
+        added = 0
+        for r in cand:
+            against = (net.run == r) & (~is_fwd if fwd[r] >= back[r] else is_fwd)
+            trial = open_arc & ~against
+            if net.strongly_connected(trial):
+                open_arc = trial
+                one_way_runs.add(r)
+                added += 1
+        if not added:
             break
-    status, objective = str(res.message), float(res.fun)
+    flow = _path_flows(net, net.cost, open_arc, sources)
+    h, w = grid.blocked.shape
     allowed = np.full((h, w), ALL_ORTHOGONAL, dtype=np.uint8)
-    shut = np.nonzero(~open_arc)[0]
-    for j in shut:   # the move against the lane is forbidden
-        t_cell = int(arc_t[j])
-        allowed[t_cell // w, t_cell % w] &= np.uint8(~_BIT[(int(dcol[j]), int(drow[j]))] & 0xFF)
+    for j in np.nonzero(~open_arc)[0]:   # the move against the lane is forbidden
+        t_cell, h_cell = int(net.cells[net.tail[j]]), int(net.cells[net.head[j]])
+        d = (h_cell % w - t_cell % w, h_cell // w - t_cell // w)
+        allowed[t_cell // w, t_cell % w] &= np.uint8(~_BIT[d] & 0xFF)
     rm = RoadMap(allowed, grid.resolution, name, float(radius))
-    info = ArmoInfo(n, len(np.unique(run_of)), len(one_way_runs), k, len(c), status, objective,
-                    time.perf_counter() - t0)
+    info = ArmoInfo(net.n, int(len(np.unique(net.run))), len(one_way_runs), len(sources), 2 * m * len(sources),
+                    status, float(flow @ net.cost), time.perf_counter() - t0, open_objective, opposed_open,
+                    net.opposed(flow))
     return rm, info
 
 

@@ -54,6 +54,109 @@ def test_armo_makes_one_way_lanes_that_connect_every_station_pair_both_ways():
     assert lanes.unreachable_pairs(free, all_cells[::7]) == []
 
 
+def test_the_shortest_path_trees_are_the_optimum_of_armos_flow_program():
+    # the program has no capacities, so its optimum is one shortest-path tree per commodity; HiGHS
+    # on the same program (some moves closed by a one-way lane, costs raised by head-on shares)
+    # must find the same total cost
+    from fleet_planner.roadmap import _flow_lp, _net, _path_flows, _sources
+
+    net, st_node = _net(_grid(), R, STATIONS, keep_right=0.2)
+    sources = _sources(st_node, {("A", "B"): 5.0, ("B", "C"): 3.0, ("C", "D"): 5.0, ("D", "A"): 3.0,
+                                 ("B", "A"): 1.0})
+    rng = np.random.default_rng(3)
+    cost = net.cost * (1.0 + rng.random(len(net.cost)))
+    open_arc = np.ones(len(cost), dtype=bool)
+    open_arc[(net.run == net.run[0]) & (np.arange(len(cost)) >= net.m)] = False   # one lane one-way
+    assert net.strongly_connected(open_arc)
+    flow = _path_flows(net, cost, open_arc, sources)
+    lp_flow, lp_cost = _flow_lp(net, cost, open_arc, sources)
+    assert flow @ cost == pytest.approx(lp_cost, rel=1e-9)
+    assert not flow[~open_arc].any() and not lp_flow[~open_arc].any()
+    assert flow.sum() > 1.0                                       # it carried the demand somewhere
+
+
+@pytest.mark.parametrize("head_on", [0.0, 1.0])
+def test_armo_sends_opposing_flows_along_different_aisles(head_on):
+    # P and Q at the two ends of the middle aisle, as much demand each way: the shortest way both
+    # ways is the middle aisle, so without head-on costs (the control) it stays two-way with all
+    # the traffic meeting head-on; with them one direction takes a side aisle and the middle one
+    # becomes one-way
+    grid = _grid()
+    stations = {"P": (0.5, 2.5), "Q": (11.5, 2.5)}
+    lanes, info = armo_roadmap(grid, R, stations, {("P", "Q"): 1.0, ("Q", "P"): 1.0}, head_on=head_on)
+    free = free_cells(grid, R)
+    assert info.opposed_open == pytest.approx(1.0)
+    assert lanes.unreachable_pairs(free, [grid.cell_of(*p) for p in stations.values()]) == []
+    middle_one_way = lanes.allows(5, 2, 1, 0) != lanes.allows(5, 2, -1, 0)
+    if head_on:
+        assert middle_one_way and info.opposed == pytest.approx(0.0)
+        assert info.objective <= 1.25 * info.open_objective          # the detour of one direction
+    else:
+        assert not middle_one_way and info.opposed == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("parked", [False, True])
+def test_armos_lanes_go_round_a_parked_robot(parked):
+    # the scene above with a robot parked in the bottom aisle: laid out without it (the control),
+    # the bottom aisle is the only way east and the parked robot cuts P off Q; laid out round it,
+    # P and Q reach each other both ways with the robot standing there
+    grid = _grid()
+    stations = {"P": (0.5, 2.5), "Q": (11.5, 2.5)}
+    home = (5.5, 4.5)
+    lanes, _ = armo_roadmap(grid, R, stations, {("P", "Q"): 1.0, ("Q", "P"): 1.0},
+                            parked=[home] if parked else [])
+    free = free_cells(grid, R).copy()
+    c, r = grid.cell_of(*home)
+    free[r, c] = False                       # the parked robot's cell
+    cut = lanes.unreachable_pairs(free, [grid.cell_of(*p) for p in stations.values()])
+    assert (cut == []) == parked
+
+
+@pytest.mark.parametrize("narrow", [1, 2])
+def test_a_corridor_too_narrow_to_pass_in_is_one_lane_and_apart_from_the_open_space(narrow):
+    # two rows of cells between two open blocks: on a 0.5 m grid (narrow = 2) discs of radius
+    # 0.354 in the two rows cannot pass each other, so both rows are one lane (one direction);
+    # on a 1 m grid (narrow = 1, the control) they can, and each row is a lane of its own
+    from fleet_planner.roadmap import _lanes, _runs
+
+    free = np.zeros((6, 12), dtype=bool)
+    free[:, :3] = free[:, 9:] = True
+    free[2:4, :] = True
+    runs, tails, heads, run_of = _runs(free)
+    lane = _lanes(free, runs, tails, heads, run_of, narrow)
+    w = free.shape[1]
+
+    def lane_of(row: int, col: int) -> int:      # the edge (col, row) -> (col + 1, row)
+        k = int(np.nonzero((tails == row * w + col) & (heads == row * w + col + 1))[0][0])
+        return int(lane[k])
+
+    assert (lane_of(2, 5) == lane_of(3, 5)) == (narrow == 2)
+    assert lane_of(2, 5) == lane_of(2, 4)                 # one piece along the corridor
+    # a narrow corridor is cut off the open blocks' rows; a wide one is not (rows run through)
+    assert (lane_of(2, 0) != lane_of(2, 5) != lane_of(2, 10)) == (narrow == 2)
+
+
+def test_armo_on_the_default_warehouse_takes_seconds_and_connects_every_station_pair_both_ways():
+    import time
+
+    from fleet_planner.delivery import ROBOT_RADIUS, warehouse_problem
+    from fleet_planner.roadmap import demand_of
+    from fleet_planner.warehouse import load_warehouse
+
+    problem = warehouse_problem(load_warehouse(), 20, 60, 0)
+    c0 = time.process_time()
+    lanes, info = armo_roadmap(problem.grid, ROBOT_RADIUS, problem.stations,
+                               demand_of(problem.deliveries, list(problem.stations)))
+    cpu = time.process_time() - c0
+    assert cpu < 20.0, cpu           # about 0.6 s; one solve of the old single LP took minutes
+    assert info.status == "optimal" and info.one_way_runs >= 50 and info.opposed < info.opposed_open
+    free = free_cells(problem.grid, ROBOT_RADIUS)
+    cells = [problem.grid.cell_of(*p) for p in problem.stations.values()]
+    cells = [c for c in cells if free[c[1], c[0]]]
+    assert len(cells) >= 20 and lanes.unreachable_pairs(free, cells) == []
+    assert lanes.dead_ends(free) == []
+
+
 def _one_way_east_middle() -> dict:
     return {"name": "t", "radius": R, "lanes": [{"from": [1, 2], "to": [10, 2]}]}
 

@@ -55,13 +55,15 @@ METHODS = (*planner_names(), "behavior", "armo")
 
 def armo_problem(problem: DeliveryProblem, **options) -> tuple[DeliveryProblem, object]:
     """The problem on ARMO's road map for its demand (:func:`fleet_planner.roadmap.armo_roadmap`):
-    every method run on it plans along the lanes. Returns (problem, the program's info)."""
+    every method run on it plans along the lanes, laid out round the robots' homes (where they park).
+    Returns (problem, the program's info)."""
     from dataclasses import replace
 
     from ..roadmap import armo_roadmap, demand_of, with_lanes
 
     lanes, info = armo_roadmap(problem.grid, problem.radius, problem.stations,
-                               demand_of(problem.deliveries, list(problem.stations)), **options)
+                               demand_of(problem.deliveries, list(problem.stations)),
+                               **{"parked": problem.homes, **options})
     return replace(problem, grid=with_lanes(problem.grid, lanes)), info
 
 
