@@ -801,10 +801,10 @@ class FleetManager:
             if job is None:
                 continue
             stuck = self._stopped_on(chute, r.radius, exclude=r)
-            if stuck is not None:   # nobody picks there: the job goes back to the queue
-                r.job, job.state, job.robot = None, "queued", None
-                self._record(job, "requeued", now)
-                d.notes.append(f"job {job.task.id} is queued again: {stuck.id} stands on {chute} for good")
+            if stuck is not None:   # nobody picks there: the job goes back to the queue (committed first)
+                if self._commit(job, "requeued", now, d, state="queued", robot=None):
+                    r.job = None
+                    d.notes.append(f"job {job.task.id} is queued again: {stuck.id} stands on {chute} for good")
             elif not self._reserved(self.work_stops[chute]) and self._may_plan(r, now):
                 occupant = self._occupant(job.pick.pose, r.radius, exclude=r)
                 if occupant is None or self._leaving(occupant, job.pick.pose):
