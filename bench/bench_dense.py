@@ -14,7 +14,7 @@ alone at its top speed) and makespan / longest no-interference arrival; the chec
 iterations (the timed LNS's after a timed first plan). Exit status 1 when any plan was invalid.
 
     .venv/bin/python bench/bench_dense.py [warehouse-10-20-10-2-1:400,1000 warehouse-20-40-10-2-2:2000]
-        [--planners dense,md,prior] [--timeout 60] [--dense-timeout 300] [--refine 1.0]
+        [--planners dense,md,prior] [--timeout 60] [--dense-timeout 300] [--refine 1.0] [--timed-refine 1.2]
         [--maps-dir DIR] [--seed 0] [--csv out/bench_dense.csv]
 """
 from __future__ import annotations
@@ -70,6 +70,9 @@ def _args(argv=None) -> argparse.Namespace:
                    help="seconds per run of the dense solver (default: %(default)s)")
     p.add_argument("--refine", type=float, default=None,
                    help="CPU seconds of the dense solver's LNS refinement (default: the planner's own)")
+    p.add_argument("--timed-refine", type=float, default=None,
+                   help="CPU seconds of the dense solver's timed LNS (default: the planner's own; its "
+                        "timed_refine_s)")
     p.add_argument("--seed", type=int, default=0, help="radii and speeds (default: %(default)s)")
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     args = p.parse_args(argv)
@@ -91,6 +94,9 @@ def _args(argv=None) -> argparse.Namespace:
         p.error(f"--planners: unknown {unknown}; choose from {', '.join(planner_names())}")
     if not (args.timeout > 0 and args.dense_timeout > 0):
         p.error("--timeout, --dense-timeout: must be > 0")
+    for name, value in (("--refine", args.refine), ("--timed-refine", args.timed_refine)):
+        if value is not None and not value >= 0:
+            p.error(f"{name}: must be >= 0")
     return args
 
 
@@ -191,6 +197,16 @@ def table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
+def dense_options(args: argparse.Namespace) -> dict:
+    """The dense solver's options from the command line (its time limit, and its LNS budgets where given)."""
+    options: dict = {"time_limit": args.dense_timeout}
+    if args.refine is not None:
+        options["refine_s"] = args.refine
+    if args.timed_refine is not None:
+        options["timed_refine_s"] = args.timed_refine
+    return options
+
+
 def main(argv=None) -> int:
     from tqdm import tqdm
 
@@ -220,9 +236,7 @@ def main(argv=None) -> int:
         for name, grid, robots, planner, alone in bar:
             bar.set_postfix_str(f"{name} N={len(robots)} {planner}")
             dense = planner in ("dense", "crowd")
-            options = {"time_limit": args.dense_timeout} if dense else {}
-            if dense and args.refine is not None:
-                options["refine_s"] = args.refine
+            options = dense_options(args) if dense else {}
             row = run_one(grid, robots, name, planner, args.dense_timeout if dense else args.timeout, options, alone)
             rows.append(row)
             if row.verdict != "ok":

@@ -213,3 +213,24 @@ def test_a_robot_shut_off_by_a_parked_robot_is_repaired_in_the_same_pass(monkeyp
         passed = [t0 + (x0 - 6.5) / (x0 - x1) * (t1 - t0) for (x0, y0, t0), (x1, y1, t1) in zip(wp[:-1], wp[1:])
                   if y0 == y1 == 2.5 and x1 < 6.5 <= x0]
         assert len(passed) == 1 and near.arrival_time > passed[0], (near.waypoints, wp)
+
+
+def test_the_dense_benchmark_passes_the_timed_lns_budget_to_the_solver(capsys):
+    """bench_dense --timed-refine S gives the dense solver timed_refine_s = S (the LNS budget curve of
+    issue 11 is measured with it); without it the solver keeps its own budget; a negative one is refused."""
+    import sys
+    from pathlib import Path
+
+    import pytest
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import bench_dense
+
+    given_budget = bench_dense.dense_options(bench_dense._args(["--timed-refine", "2.5", "--dense-timeout", "40"]))
+    assert given_budget == {"time_limit": 40.0, "timed_refine_s": 2.5}
+    assert "timed_refine_s" not in bench_dense.dense_options(bench_dense._args([]))      # (control)
+    with pytest.raises(SystemExit) as stop:
+        bench_dense._args(["--timed-refine", "-1"])
+    assert stop.value.code == 2
+    assert "--timed-refine: must be >= 0" in capsys.readouterr().err
+    assert CrowdPlanner(**given_budget).timed_refine_s == 2.5

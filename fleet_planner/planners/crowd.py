@@ -288,7 +288,10 @@ class CrowdPlanner(Planner):
 
 #: CPU seconds of a whole plan (first plan and timed LNS) after a timed first plan from 375 robots on,
 #: less below (0.25 + N / 500 of it: at 100 robots SoC/free is reached after ~0.5 s), unless
-#: ``timed_refine_s`` says otherwise
+#: ``timed_refine_s`` says otherwise. More LNS time helps little (bench_dense --timed-refine, 400 robots on
+#: warehouse-10-20-10-2-1, seeds 0/1/2, SoC/free mean: the default ~1.15 s 1.176, 2.3 s 1.168, 4.6 s 1.163,
+#: 9.2 s 1.158): a faster LNS alone cannot bring it to 1.15; the first plan's robots parked in 1-cell aisles
+#: are most of the excess (robots vanishing on arrival: first plan 1.10 instead of 1.19, floor 1.064)
 TIMED_BUDGET_S = 1.5
 #: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
 #: re-planned ones move up, which gives the next round room)
