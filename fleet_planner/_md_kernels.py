@@ -495,9 +495,11 @@ HOLD_COLUMNS = ("X_SEG", "Y_SEG", "PHI_LO", "PHI_HI", "XS_LO", "XS_HI", "XE_LO",
 
 
 @_jit_numpy_errors
-def hold_constraints(P, cols, who, first, last, arr_all, dep_all, cum_j):
+def hold_constraints(P, cols, cols_sw, sw, who, first, last, arr_all, dep_all, cum_j):
     """The forbidden intervals of :meth:`fleet_planner.scheduler.DelayScheduler._hold_constraints`
-    from its pieces ``P`` (rows seen from j, columns ``cols`` in the order of HOLD_COLUMNS), each
+    from its pieces ``P`` (columns ``cols`` in the order of HOLD_COLUMNS; rows with ``sw`` set list
+    j in the x columns and i in the y columns, their columns are ``cols_sw`` and their phi range is
+    negated: read as seen from j, with no swapped copy of the table), each
     row's higher robot ``who``, where that robot's vertex times start in ``arr_all`` / ``dep_all``
     (``first``) and its last vertex (``last``), and j's travelled length at its vertices ``cum_j``:
     (G key, lo, hi, owner, F key, lo, hi, owner), the candidates of each kind in row order, kinds in
@@ -516,22 +518,26 @@ def hold_constraints(P, cols, who, first, last, arr_all, dep_all, cum_j):
     nf = 0
     for kind in range(9):
         for r in range(n):
-            i_seg = np.int64(P[r, cols[0]])
-            j_seg = np.int64(P[r, cols[1]])
+            c = cols_sw if sw[r] else cols
+            i_seg = np.int64(P[r, c[0]])
+            j_seg = np.int64(P[r, c[1]])
             s0 = min(i_seg, last[r])
             s1 = first[r] + min(s0 + 1, last[r])
             s0 = first[r] + s0
             a0, d0, a1, d1 = arr_all[s0], dep_all[s0], arr_all[s1], dep_all[s1]
-            is_lo, is_hi, ie_lo, ie_hi = P[r, cols[4]], P[r, cols[5]], P[r, cols[6]], P[r, cols[7]]
-            i_off, i_v, j_off, j_v = P[r, cols[12]], P[r, cols[14]], P[r, cols[15]], P[r, cols[17]]
+            is_lo, is_hi, ie_lo, ie_hi = P[r, c[4]], P[r, c[5]], P[r, c[6]], P[r, c[7]]
+            i_off, i_v, j_off, j_v = P[r, c[12]], P[r, c[14]], P[r, c[15]], P[r, c[17]]
             ok = False
             lo = 0.0
             hi = 0.0
             key = j_seg
             if kind == 0:   # both moving: the piece's phi range shifted by i's entry time
-                phi_lo, phi_hi = P[r, cols[2]], P[r, cols[3]]
-                sh_i = d0 - P[r, cols[13]]
-                j_t0 = P[r, cols[16]]
+                if sw[r]:
+                    phi_lo, phi_hi = -P[r, cols[3]], -P[r, cols[2]]
+                else:
+                    phi_lo, phi_hi = P[r, cols[2]], P[r, cols[3]]
+                sh_i = d0 - P[r, c[13]]
+                j_t0 = P[r, c[16]]
                 ok = np.isfinite(phi_lo) and np.isfinite(sh_i)
                 lo, hi = sh_i + phi_lo + j_t0, sh_i + phi_hi + j_t0
             elif kind == 1:   # i holding at its segment start
@@ -544,7 +550,7 @@ def hold_constraints(P, cols, who, first, last, arr_all, dep_all, cum_j):
                 j_end = cum_j[min(j_seg + 1, nv - 1)]
                 at = j_off if kind <= 5 else j_end   # j standing at its segment's start / end
                 if kind == 3 or kind == 6:   # i's segment passes within reach
-                    e_lo, e_hi = (P[r, cols[8]], P[r, cols[9]]) if kind == 3 else (P[r, cols[10]], P[r, cols[11]])
+                    e_lo, e_hi = (P[r, c[8]], P[r, c[9]]) if kind == 3 else (P[r, c[10]], P[r, c[11]])
                     ok = np.isfinite(d0) and e_lo <= e_hi
                     lo, hi = d0 + (e_lo - i_off) / i_v, d0 + (e_hi - i_off) / i_v
                 elif kind == 4 or kind == 7:   # i holding at its segment start within reach
@@ -585,7 +591,8 @@ def warm_up() -> None:
     box_pairs(p0 - 1.0, p0 + 1.0, p0 - 1.0, p0 + 1.0)
     segment_pieces(np.array([0]), np.array([1]), p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1,
                    p0, u, two, idx, 0 * one, 0 * one, one, idx, idx == 0, idx == 1, np.full(2, 0.4), 0.0, 28)
-    hold_constraints(np.ones((1, 28)), np.arange(18, dtype=np.int64), np.zeros(1, dtype=np.int64),
+    hold_constraints(np.ones((1, 28)), np.arange(18, dtype=np.int64), np.arange(18, dtype=np.int64),
+                     np.zeros(1, dtype=np.bool_), np.zeros(1, dtype=np.int64),
                      np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.int64), np.array([0.0, 1.0]),
                      np.array([0.5, np.inf]), np.array([0.0, 1.0]))
     _WARM = True

@@ -103,7 +103,8 @@ class DelayScheduler:
         for x in range(len(model.paths)):
             self.set_timing(x, 0.0)
         self._done: set[int] = set()   # robots whose delay is up to date
-        #: piece tables with the pair's robots swapped (:meth:`_facing`), by (i, j) with i > j
+        #: piece tables with the pair's robots swapped (:meth:`_facing`, for tests; the hold search reads
+        #: the tables swapped in place), by (i, j) with i > j
         self._swapped: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         #: called after robot x is scheduled (holds); True if it changed x's path (route choice)
         self.after: Callable[[int], bool] | None = None
@@ -311,10 +312,12 @@ class DelayScheduler:
         i holding at a segment end is j's range near that point (a zero-speed piece); j standing /
         i moving is the window in which i's segment passes within reach of j's vertex; j standing
         / i holding is i's hold interval when the two points are within reach."""
-        tables = self._facing_all(j, higher)
+        tables = self.model.pieces_with(j, higher)   # the smaller robot index in the x columns
         sizes = [len(t) for t in tables]
-        P = np.vstack(tables)   # every row as seen from j: i in the x columns, j in the y columns
-        who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
+        P = np.vstack(tables)
+        higher_a = np.asarray(higher, dtype=np.int64)
+        who = np.repeat(higher_a, sizes)
+        swapped = np.repeat(higher_a > j, sizes)   # rows with j in the x columns: read swapped
         # each row's segment ends as timed: i's vertex times of all higher robots in one array
         lens = np.array([len(self.arr[i]) for i in higher], dtype=np.int64)
         first = np.repeat(np.cumsum(lens) - lens, sizes)
@@ -326,23 +329,10 @@ class DelayScheduler:
         # holding at its segment's start or end, then j standing at its segment's start or end / i
         # moving, holding at its segment's start, or at its end
         g_key, g_lo, g_hi, g_own, f_key, f_lo, f_hi, f_own = K.hold_constraints(
-            P, _HOLD_COLUMNS, who, first, last, arr_all, dep_all, self.model.cumlen[j])
+            P, _HOLD_COLUMNS, _HOLD_COLUMNS_SWAPPED, swapped, who, first, last, arr_all, dep_all, self.model.cumlen[j])
         G = g_key, g_lo, g_hi, g_own
         F = f_key, f_lo, f_hi, f_own
         return G, F
-
-    def _facing_all(self, j: int, higher: list[int]) -> list[np.ndarray]:
-        """:meth:`_facing` for each robot of ``higher`` against j (one pass: this runs for every
-        robot scheduled, over all its higher neighbours)."""
-        swapped = self._swapped
-        out = []
-        for i, raw in zip(higher, self.model.pieces_with(j, higher)):
-            if i < j:
-                out.append(raw)
-                continue
-            got = swapped.get((i, j))
-            out.append(got[1] if got is not None and got[0] is raw else self._facing(i, j))
-        return out
 
     def _facing(self, i: int, j: int) -> np.ndarray:
         """The pieces of the pair (i, j) with i in the x columns and j in the y columns (the model
@@ -503,6 +493,8 @@ for _a, _b in ((C.P_X, C.P_Y), (C.P_A_LO, C.P_B_LO), (C.P_A_HI, C.P_B_HI), (C.P_
                (C.P_X_LAST, C.P_Y_LAST), (C.P_X_OFF, C.P_Y_OFF), (C.P_X_T0, C.P_Y_T0), (C.P_X_V, C.P_Y_V),
                (C.P_X_SEG, C.P_Y_SEG)):
     _SWAP[_a], _SWAP[_b] = _b, _a
+#: the columns of :data:`_HOLD_COLUMNS` in a piece table whose robots are the other way round
+_HOLD_COLUMNS_SWAPPED = _SWAP[_HOLD_COLUMNS]
 
 
 def _grouped(key: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
