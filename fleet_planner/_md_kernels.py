@@ -49,6 +49,32 @@ def _jit_numpy_errors(fn: Any) -> Any:
 # safe intervals and the earliest arrival along a chain of hold vertices
 # ---------------------------------------------------------------------------------------------
 @_jit
+def grouped(key, lo, hi, n):
+    """Open intervals (lo, hi) grouped by ``key`` in 0..n-1, each group sorted by ``lo``, ties in
+    the given order (numpy's stable ``lexsort((lo, key))``): (ptr, lo, hi) with group k at
+    ``ptr[k]:ptr[k + 1]``. A counting sort by key, then an insertion sort in each group (groups
+    are a vertex's or a segment's few intervals)."""
+    m = key.shape[0]
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for r in range(m):
+        ptr[key[r] + 1] += 1
+    for k in range(n):
+        ptr[k + 1] += ptr[k]
+    fill = ptr[:-1].copy()
+    out_lo = np.empty(m)
+    out_hi = np.empty(m)
+    for r in range(m):
+        q = fill[key[r]]
+        fill[key[r]] += 1
+        a, b = lo[r], hi[r]
+        while q > ptr[key[r]] and out_lo[q - 1] > a:   # stable: equal lo keep their order
+            out_lo[q], out_hi[q] = out_lo[q - 1], out_hi[q - 1]
+            q -= 1
+        out_lo[q], out_hi[q] = a, b
+    return ptr, out_lo, out_hi
+
+
+@_jit
 def safe_intervals(f_ptr, f_lo, f_hi, free_start):
     """The closed safe intervals in [0, inf) of each hold vertex k outside its open forbidden
     intervals ``f_lo/f_hi[f_ptr[k]:f_ptr[k + 1]]`` (sorted by lo); two forbidden intervals that
@@ -580,6 +606,7 @@ def warm_up() -> None:
     global _WARM
     if _WARM:
         return
+    grouped(np.array([1, 0], dtype=np.int64), np.array([1.0, 0.5]), np.array([2.0, 1.5]), 3)
     f_ptr = np.array([0, 1, 2, 2], dtype=np.int64)
     s_ptr, s_lo, s_hi = safe_intervals(f_ptr, np.array([1.0, 0.5]), np.array([2.0, 1.5]), False)
     earliest(s_ptr, s_lo, s_hi, np.array([0, 1, 1], dtype=np.int64), np.array([0.2]), np.array([0.4]),

@@ -499,7 +499,7 @@ _HOLD_COLUMNS_SWAPPED = _SWAP[_HOLD_COLUMNS]
 
 def _grouped(key: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Open intervals (lo, hi) grouped by ``key`` in 0..n-1, each group sorted by ``lo``: (ptr, lo,
-    hi) with group k at ``ptr[k]:ptr[k + 1]``."""
-    order = np.lexsort((lo, key))
-    ptr = np.searchsorted(key[order], np.arange(n + 1)).astype(np.int64)
-    return ptr, np.ascontiguousarray(lo[order], dtype=float), np.ascontiguousarray(hi[order], dtype=float)
+    hi) with group k at ``ptr[k]:ptr[k + 1]`` (compiled: :func:`fleet_planner._md_kernels.grouped`;
+    numpy's lexsort and its calls were 4% of md's planning time at 100 robots)."""
+    return K.grouped(np.ascontiguousarray(key, dtype=np.int64), np.ascontiguousarray(lo, dtype=float),
+                     np.ascontiguousarray(hi, dtype=float), int(n))

@@ -457,3 +457,19 @@ def test_the_compiled_hold_constraints_are_the_numpy_ones(monkeypatch, seed):
     plan = get_planner("md", compare_above=None, time_limit=600.0).plan(inst.grid, inst.robots)
     assert check_plan(inst.grid, inst.robots, plan) == []
     assert len(calls) > 25 and sum(calls) > 1000   # many calls, many intervals
+
+
+def test_the_compiled_grouping_orders_intervals_as_a_stable_lexsort():
+    from fleet_planner.scheduler import _grouped
+
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        n = int(rng.integers(1, 7))
+        m = int(rng.integers(0, 25))
+        key = rng.integers(0, n, m).astype(np.int64)
+        lo = rng.integers(0, 4, m).astype(float)   # many ties in lo: their order must be kept
+        hi = lo + rng.uniform(0.1, 2.0, m)
+        order = np.lexsort((lo, key))
+        ptr, got_lo, got_hi = _grouped(key, lo, hi, n)
+        assert ptr.tolist() == np.searchsorted(key[order], np.arange(n + 1)).tolist()
+        assert got_lo.tolist() == lo[order].tolist() and got_hi.tolist() == hi[order].tolist()
