@@ -295,7 +295,9 @@ def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src
     triangle inequality v is at least ``lm[v, m] - lm_hi[m]`` and ``lm_lo[m] - lm[v, m]`` from every
     target; cuts only lengthen paths, so the bound holds for every search, and each term is
     consistent (a move changes ``lm[v, m]`` by at most its weight). On warehouse maps the octile
-    distance misses the detours round the racks (half the nodes expanded with 4 landmarks).  Ties: every move into a cell also
+    distance misses the detours round the racks (half the nodes expanded with 4 landmarks).
+
+    Ties: every move into a cell also
     costs ``tie`` times the cell's distance (in cells) from the line through start and goal, so of
     equal-length paths the one nearest that line is found (it pulls straighter); the heuristic
     stays consistent since those costs are >= 0."""

@@ -63,8 +63,7 @@ class PathFinder:
         self.grid = grid
         self.radius = float(radius)
         res = grid.resolution
-        h, w = grid.height, grid.width
-        self._wp = w + 2  # the move table has a one-cell border of non-traversable cells
+        self._wp = grid.width + 2  # the move table has a one-cell border of non-traversable cells
 
         # A cell is traversable iff its centre's clearance (distance to the nearest blocked cell's
         # boundary or the map edge) is >= radius.  The distance from a centre to the cell
@@ -134,10 +133,10 @@ class PathFinder:
             moves[1:-1, 1:-1] |= ok.astype(np.uint8) * np.uint8(_BIT[d])
         if self._lanes is not None:
             moves[1:-1, 1:-1] &= self._lanes.move_mask((h, w))
-        moves = moves.ravel()
-        for arr in (free, free_p, moves):
+        flat = moves.ravel()
+        for arr in (free, free_p, flat):
             arr.flags.writeable = False
-        return free, free_p, moves
+        return free, free_p, flat
 
     # -- public -------------------------------------------------------------------------------
     def find(self, start: Point, goal: Point, avoid: Sequence[Disc] | np.ndarray = (),
