@@ -80,6 +80,10 @@ STANDING_LOOKAHEAD = 1.5
 #: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
 #: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
 STEP_BUDGET_S = 0.5
+#: wall seconds of leg planning per step at least, however fast the clock (one leg always goes)
+MIN_STEP_BUDGET_S = 0.05
+#: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
+MIN_LEG_LIMIT_S = 0.1
 #: finished jobs kept in memory (the latest ones); older ones are only in the job store, which
 #: still answers a re-sent id with its state (without a store such an id is a new job again)
 MAX_CLOSED_JOBS = 1000
@@ -87,6 +91,17 @@ MAX_CLOSED_JOBS = 1000
 #: late (a starved planner, its network), not every robot at once: robots go offline only after this
 #: many offline timeouts then (a single robot's silence amid others' statuses still counts at once)
 DEAF_FACTOR = 3.0
+
+
+def paced_budgets(lead_s: float, rate: float, leg_limit: float | None) -> tuple[float, float | None]:
+    """The step's planning budget and the planner's limit per leg (wall s) on a clock running ``rate``
+    times faster than the wall: a leg starts ``lead_s`` of clock time after it is planned, so the legs
+    of one step must be planned within about ``lead_s / rate`` wall seconds (a quarter of it here) or
+    they reach the robots after they were due to start (and are refused); ``leg_limit``: the planner's
+    own limit (None: it has none)."""
+    budget = 0.25 * lead_s / max(1.0, rate)
+    step = min(STEP_BUDGET_S, max(MIN_STEP_BUDGET_S, budget))
+    return step, None if leg_limit is None else min(leg_limit, max(MIN_LEG_LIMIT_S, budget))
 
 
 class _Same:
