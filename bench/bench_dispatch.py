@@ -166,12 +166,12 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
             tracks[st.id].append((st.x, st.y, t))
         dist = np.hypot(pos[:, None, 0] - pos[None, :, 0], pos[:, None, 1] - pos[None, :, 1])
         gap = min(gap, float(np.min(dist - reach)))
+        if t < busy_until:
+            continue   # (the planner node's timer fires again only once its step is done)
         prof = cProfile.Profile() if profile else None
         w0, c0 = time.perf_counter(), time.process_time()
         if prof is not None:
             prof.enable()
-        if t < busy_until:
-            continue   # (the planner node's timer fires again only once its step is done)
         d = fm.step(t)
         if prof is not None:
             prof.disable()
