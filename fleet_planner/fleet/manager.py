@@ -693,13 +693,19 @@ class FleetManager:
                 d.notes.append(f"robot {r.id} is {r.status.lateness_s:.1f} s late: re-planning its leg")
 
     def _replan(self, now: float, d: Decisions) -> None:
-        """Plan the legs of robots that have somewhere to go: those that just picked first (they
-        hold a chute), then those re-planning. A robot whose new leg is not yet acknowledged waits."""
+        """Plan the legs of robots that have somewhere to go, in turn: those not refused since their
+        last leg first (of them, those that just picked first: they hold a chute), then the refused
+        ones, whose retry came due longest ago first. A robot whose new leg is not yet acknowledged
+        waits; so does one refused a leg (the back-off), but, ungated, one driving a leg (late or in
+        conflict, it is held when no new leg comes; gated, its old leg's links still hold)."""
         waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
                    and not r.immobile and r.online and not r.paused and not r.manual
                    and (r.leg is None or r.status.path_id == r.leg.path_id)
-                   and (now >= r.leg_retry_at or r.on_leg)]
-        waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
+                   and (now >= r.leg_retry_at or r.on_leg and self.gates is None)]
+        # (ours) in turn: the step's budget holds about one leg on a fast clock; in a fixed order the robots
+        # refused at every step (held by their gates, re-planning in vain) took it at every step and a robot
+        # standing after a refused leg, which they all waited for, was never planned (100 robots on large)
+        waiting.sort(key=lambda item: (item[0].leg_retry_at, item[1].purpose != "place", item[0].id))
         for r, target in waiting:
             if self._out_of_time():
                 return   # the rest next step (a robot on its leg drives on meanwhile; it re-plans then)
@@ -1056,22 +1062,27 @@ class FleetManager:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
                 r.trouble = exc.why
-                # (the exponent capped: a robot on its leg re-plans at every step, and 2 ** 1024 failures
-                # overflowed a float: every step of the planner then failed)
-                r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
-                r.leg_failures += 1
+                self._back_off(r, now)
                 blocker = self.robots.get(exc.blocker) if exc.blocker is not None else None
                 if clear_way and blocker is not None and blocker.free:
                     self._send_away(blocker, now, d)
                 return None
         leg = Leg(r.id, path, path_id, target.purpose, target.name)
         if not self._give(r, leg, d, now):
+            self._back_off(r, now)   # (a gate refused it: tried again later, as a leg not planned)
             return None  # (why is noted)
         r.target, r.trouble = target, ""
         r.leg_retry_at, r.leg_failures = -math.inf, 0
         if self._reserved_at is not None:
             self._reserved_at.append(target.pose)
         return leg
+
+    @staticmethod
+    def _back_off(r: FleetRobot, now: float) -> None:
+        """``r`` was refused a leg: it is tried again after a wait that doubles with each refusal in a row."""
+        # (the exponent capped: 2 ** 1024 failures overflowed a float: every step of the planner then failed)
+        r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
+        r.leg_failures += 1
 
     def _leg_path(self, r: FleetRobot, start: Point, target: Target, t0: float, now: float) -> TimedPath:
         """``r``'s timed path from ``start`` at ``t0`` to ``target``, as the coordination mode plans it
