@@ -62,7 +62,7 @@ POLICIES = {"legacy": LEGACY, "new": PIPELINED, "s18": SERIAL,
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
         period: float = 0.5, progress: bool = False, seed: int = 1, delay: float = 0.0, status_delay: float = 0.0,
         notes: list[str] | None = None, lateness: float | None = None, warehouse: str | None = None,
-        rate: float | None = None, profile: bool = False) -> dict:
+        rate: float | None = None, profile: bool = False, pace: bool = True) -> dict:
     kinds = load_kinds()
     wh = generated_warehouse(warehouse, n) or load_warehouse(Path(warehouse) if warehouse else None)
     if n == 0:   # the demo's default fleet (config/fleet.yaml) and parking spots (config/planner_params.yaml)
@@ -82,6 +82,19 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
         fm.step_budget_s, leg_limit = paced_budgets(fm.params.lead_s, rate, getattr(fm.planner, "leg_time_limit", None))
         if leg_limit is not None:
             fm.planner.leg_time_limit = leg_limit  # type: ignore[attr-defined]
+    legs_cpu: list[tuple[float, bool]] = []   # CPU s of each leg the planner planned, and whether it failed
+    plan_incremental = fm.planner.plan_incremental
+
+    def timed_leg(*args, **kwargs):
+        c = time.process_time()
+        try:
+            out = plan_incremental(*args, **kwargs)
+        except Exception:
+            legs_cpu.append((time.process_time() - c, True))
+            raise
+        legs_cpu.append((time.process_time() - c, False))
+        return out
+    fm.planner.plan_incremental = timed_leg  # type: ignore[method-assign]
     steps: list[tuple[float, float, float]] = []   # (wall s, CPU s, simulated t) of each step
     worst: tuple[float, cProfile.Profile | None] = (-1.0, None)   # the longest step's wall s and profile
     sim = SimFleet(members, kinds, wh, gated=True)
@@ -180,7 +193,9 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
         # reaches the robots that much later (its CPU time, not wall: the same on a loaded machine)
         late = rate * steps[-1][1] if rate is not None else 0.0
         busy_until = t + late
-        if steps[-1][0] > worst[0]:
+        if rate is not None and pace:
+            fm.note_pace(rate, steps[-1][1])   # (as the planner node does, with its wall time)
+        if steps[-1][0] > worst[0] and t > 10.0:   # (the first legs load numba's compiled kernels)
             worst = (steps[-1][0], prof)
         if notes is not None:
             notes += [f"{t:.1f} {note}" for note in d.notes]
@@ -212,7 +227,7 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
         pstats.Stats(worst[1], stream=buf).sort_stats("cumulative").print_stats(25)
         report = buf.getvalue()
     out = {"n": n, "jobs": len(jobs), "done": len(done_t), "span": span, "longest": longest, "profile": report,
-           "steps_cpu": sum(c for _, c, _ in steps), "done_by": sorted(done_t),
+           "steps_cpu": sum(c for _, c, _ in steps), "done_by": sorted(done_t), "legs": legs_cpu,
            "per_h": 3600.0 * len(done_t) / span if span else 0.0, "gap": gap, "cpu": time.process_time() - cpu0,
            "events": events, "task": jobs}
     if span:
@@ -244,6 +259,8 @@ def main() -> None:
                    "budgets, and the clock runs on while the planner steps (its decisions reach the robots rate x "
                    "the step's CPU s later; default: none, the planner always keeps up)")
     p.add_argument("--profile", action="store_true", help="print cProfile's top lines of the longest step")
+    p.add_argument("--no-pace", action="store_true", help="with --rate: the manager is not told the pace "
+                   "(FleetManager.note_pace: legs of standing robots start no later for the steps' time)")
     opts = p.parse_args()
     print(f"{'N':>4} {'policy':>12} {'done':>9} {'span s':>7} {'jobs/h':>7} {'closest':>8} {'CPU s':>6}")
     for n in opts.robots:
@@ -251,7 +268,8 @@ def main() -> None:
             notes: list[str] | None = [] if opts.notes else None
             r = run(n, POLICIES[name], opts.jobs, opts.interval, opts.limit, progress=opts.progress,
                     seed=opts.seed, delay=opts.delay, status_delay=opts.status_delay, notes=notes,
-                    lateness=opts.lateness, warehouse=opts.warehouse, rate=opts.rate, profile=opts.profile)
+                    lateness=opts.lateness, warehouse=opts.warehouse, rate=opts.rate, profile=opts.profile,
+                    pace=not opts.no_pace)
             if notes is not None:
                 Path(opts.notes).write_text("\n".join(notes) + "\n")
             span = f"{r['span']:.0f}" if r["span"] else "-"
@@ -262,6 +280,12 @@ def main() -> None:
             print(f"     jobs done by simulated s: {by}; steps CPU {r['steps_cpu']:.0f} s; longest steps "
                   "(wall s / CPU s at t): " + ", ".join(f"{w:.2f}/{c:.2f}@{t:.0f}" for w, c, t in r["longest"]),
                   flush=True)
+            legs = np.array(r["legs"], dtype=float).reshape(-1, 2)
+            if len(legs):
+                failed = legs[legs[:, 1] > 0, 0]
+                print(f"     legs planned: {len(legs)} ({len(failed)} failed), CPU s mean {legs[:, 0].mean():.3f}, "
+                      f"p99 {np.percentile(legs[:, 0], 99):.3f}, max {legs[:, 0].max():.3f}; failed ones: mean "
+                      f"{failed.mean() if len(failed) else 0:.3f}, CPU in failed legs {failed.sum():.0f} s", flush=True)
             if r["profile"]:
                 print(r["profile"], flush=True)
             if opts.time_use and "use" in r:

@@ -482,6 +482,25 @@ def test_robots_waiting_for_legs_are_planned_in_turn_when_a_step_holds_one_leg(m
     assert run() == [{"a"}, {"b"}, {"c"}]   # each of them once, then the fourth gets its leg
 
 
+@pytest.mark.parametrize("told", [True, False])
+def test_on_a_fast_clock_a_standing_robots_leg_starts_after_its_step_can_have_reached_it(told):
+    """On a clock 10x real time where a step takes 0.3 s of wall time, its legs reach the robots 3 s of
+    clock time after the ``now`` they were planned at: a standing robot's leg starts that much later
+    than ``lead_s`` (else it is 2 s late on arrival, re-plans as late, and its legs keep arriving late);
+    the estimate fades with quicker steps. Control (the manager not told the pace): lead_s only."""
+    fm = manager()
+    fm.on_status(status("r1", "cargo", *CHARGERS[0]), 0.0)
+    if told:
+        fm.note_pace(10.0, 0.3)
+    fm.submit(task("J1"), 0.0)
+    [leg] = fm.step(0.5).legs
+    lag = 3.0 if told else 0.0
+    assert leg.path.waypoints[0, 2] == pytest.approx(0.5 + fm.params.lead_s + lag)
+    if told:
+        fm.note_pace(10.0, 0.01)
+        assert fm.decision_lag_s == pytest.approx(2.7)
+
+
 # -- fleet files ------------------------------------------------------------------------------------------
 def test_the_shipped_demo_fleet_is_mixed_and_fits_the_default_warehouse():
     fleet = load_fleet(None, KINDS, load_warehouse())

@@ -387,6 +387,7 @@ class PlannerNode(Node):
             return
         now = self._now()
         self._pace(now)
+        wall = time.monotonic()
         try:
             decisions = self.operator.step(now)  # the fleet's step, with the operator's part
         except Exception as exc:
@@ -394,6 +395,8 @@ class PlannerNode(Node):
                                     throttle_duration_sec=5.0)
             return
         self._publish(decisions, now)
+        # its legs reached the robots this late: the next ones start later (FleetManager.note_pace)
+        self.fleet.note_pace(self._rate, time.monotonic() - wall)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         names = {f.name for f in fields(DispatchParams)}
