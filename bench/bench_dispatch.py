@@ -48,6 +48,7 @@ from fleet_planner.robots import load_kinds  # noqa: E402
 from fleet_planner.ros.demo.jobs import random_jobs  # noqa: E402
 from fleet_planner.ros.demo.timeuse import sites_of, time_use  # noqa: E402
 from fleet_planner.warehouse import config_path, load_warehouse  # noqa: E402
+from msg_schemas.records import RobotStatus  # noqa: E402
 
 #: "new" is the default (PIPELINED: the chute queue, sites held until "soon"); "s18" the session-18 default (SERIAL)
 POLICIES = {"legacy": LEGACY, "new": PIPELINED, "s18": SERIAL,
@@ -121,6 +122,7 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
     due_of: dict[tuple[str, str], float] = {}
     order = itertools.count()
 
+    latest: dict[str, RobotStatus] = {}   # the statuses since the last step, the latest of each robot
     busy_until = -math.inf   # (``rate``) the planner is still busy with its last step until then
 
     def send(topic: str, rid: str, payload: object, late: float, fixed: float = 0.0) -> None:
@@ -155,13 +157,16 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
             if status_delay > 0:
                 send("status", st.id, st, status_delay)
             else:
-                fm.on_status(st, t)
+                latest[st.id] = st
             entry = (st.stamp, st.mode, st.lateness_s > 0.5, st.task_id, bool(st.loaded), st.kind)
             log = modes.setdefault(st.id, [])
             if not log or log[-1][1:] != entry[1:]:
                 log.append(entry)
         if k % round(period / dt):
             continue
+        for st in latest.values():   # each robot's latest status, as the planner node reads it off the wire
+            fm.on_status(RobotStatus.from_json(st.to_compact_json()), t)   # (positions rounded to 0.1 mm)
+        latest.clear()
         if progress and k % round(100.0 / dt) == 0:
             print(f"  t = {t:.0f} s: {sum(e == 'done' for e in last_event.values())} done, {submitted} submitted, "
                   f"CPU {time.process_time() - cpu0:.0f} s", file=sys.stderr, flush=True)
