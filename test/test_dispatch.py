@@ -421,6 +421,86 @@ def test_two_robots_stopped_within_the_margin_of_each_other_both_get_on_their_wa
     assert any("parks on its goal in the way" in n for n in sim.notes)
 
 
+def test_robots_waiting_for_legs_are_planned_in_turn_when_a_step_holds_one_leg(monkeypatch):
+    """On a fast clock a step's planning budget holds about one leg. Three robots on their legs re-plan
+    in vain at every step (nobody can get past; as robots held by their gates did) and a fourth stands
+    with somewhere to go (after a leg it could not take): it gets its leg once each of them was tried.
+    Control (manager.py of 3a29e8b: legs to storing sites first, then by id, a driving robot tried at
+    every step whatever its back-off): the first of the three took every step and the fourth never got
+    a leg (100 robots on large: all the others ended up waiting for it)."""
+    from fleet_planner.fleet.state import Target
+    from fleet_planner.model import PlanningError
+    from fleet_planner.planners import get_planner
+
+    clock = [0.0]   # wall time as the manager sees it: each leg planned takes 1 s, the step's budget 0.5 s
+
+    class OneLegPerStep:
+        def __init__(self, margin):
+            self.md, self.refuse = get_planner("md", margin=margin), set()
+
+        def plan_incremental(self, grid, robots, fixed, t0):
+            clock[0] += 1.0
+            if robots[0].id in self.refuse:
+                raise PlanningError({robots[0].id: "blocked by x, which parks on its goal in the way"})
+            return self.md.plan_incremental(grid, robots, fixed, t0)
+
+    monkeypatch.setattr(MANAGER, "time", type("Clock", (), {"monotonic": staticmethod(lambda: clock[0])}))
+
+    def run():
+        fm = manager()
+        fm.planner = OneLegPerStep(fm.margin)
+        starts = {"a": (2.25, 6.5), "b": (5.25, 6.5), "c": (8.25, 6.5), "d": (13.25, 6.5)}
+        for rid, (x, y) in starts.items():
+            fm.on_status(status(rid, "cargo", x, y), 0.0)
+        sites = {rid: WH.stations["B0" + str(k + 1)] for k, rid in enumerate("abc")}
+        for rid, site in sites.items():
+            fm.robots[rid].target, fm.robots[rid].replan = Target("place", site.name, site.pose), True
+        t, legs = 0.0, {}
+        while len(legs) < 3:   # each of them gets its leg to its storing site, one per step
+            t += 0.5
+            legs.update({leg.robot_id: leg for leg in fm.step(t).legs})
+        fm.planner.refuse = set("abc")
+        for rid, leg in legs.items():  # on their legs, late: they re-plan (and are refused at every step)
+            fm.on_status(status(rid, "cargo", *starts[rid], mode="driving", path_id=leg.path_id, progress=0.3,
+                                stamp=t), t)
+            fm.robots[rid].replan = True
+        fm.on_status(status("d", "cargo", *starts["d"], stamp=t), t)
+        fm.robots["d"].target, fm.robots["d"].replan = Target("park", "parking_1", PARKING[0]), True
+        tried = []   # who was refused at each step
+        for _ in range(12):
+            t += 0.5
+            d = fm.step(t)
+            if any(leg.robot_id == "d" for leg in d.legs):
+                return tried
+            tried.append({n.split()[1].rstrip(":") for n in d.notes if "no leg" in n})
+            for rid, leg in legs.items():
+                fm.on_status(status(rid, "cargo", *starts[rid], mode="driving", path_id=leg.path_id, progress=0.3,
+                                    stamp=t), t)
+            fm.on_status(status("d", "cargo", *starts["d"], stamp=t), t)
+        return None
+
+    assert run() == [{"a"}, {"b"}, {"c"}]   # each of them once, then the fourth gets its leg
+
+
+@pytest.mark.parametrize("told", [True, False])
+def test_on_a_fast_clock_a_standing_robots_leg_starts_after_its_step_can_have_reached_it(told):
+    """On a clock 10x real time where a step takes 0.3 s of wall time, its legs reach the robots 3 s of
+    clock time after the ``now`` they were planned at: a standing robot's leg starts that much later
+    than ``lead_s`` (else it is 2 s late on arrival, re-plans as late, and its legs keep arriving late);
+    the estimate fades with quicker steps. Control (the manager not told the pace): lead_s only."""
+    fm = manager()
+    fm.on_status(status("r1", "cargo", *CHARGERS[0]), 0.0)
+    if told:
+        fm.note_pace(10.0, 0.3)
+    fm.submit(task("J1"), 0.0)
+    [leg] = fm.step(0.5).legs
+    lag = 3.0 if told else 0.0
+    assert leg.path.waypoints[0, 2] == pytest.approx(0.5 + fm.params.lead_s + lag)
+    if told:
+        fm.note_pace(10.0, 0.01)
+        assert fm.decision_lag_s == pytest.approx(2.7)
+
+
 # -- fleet files ------------------------------------------------------------------------------------------
 def test_the_shipped_demo_fleet_is_mixed_and_fits_the_default_warehouse():
     fleet = load_fleet(None, KINDS, load_warehouse())

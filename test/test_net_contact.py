@@ -79,6 +79,24 @@ def test_a_new_leg_whose_start_jumps_onto_another_robot_is_refused():
     assert (m.x, m.y) == start
 
 
+@pytest.mark.parametrize("off", [5e-5, 0.02])
+def test_a_leg_planned_from_a_rounded_position_is_taken_beside_a_robot_within_the_nets_reach(off):
+    """The planner plans from reported positions rounded to 0.1 mm: a robot standing within the net's
+    reach of another takes a leg whose start is that far off towards it (it is where it stands; it
+    refused every such leg before, and stood in four robots' ways for good); a start 2 cm towards it
+    is still a jump the net refuses. Control (``JUMP_TOL_M`` 1e-6, as before): both refused."""
+    m = RobotModel("a", KIND, 0.0, 0.0)
+    d = CentralDriver(m, gated=True)
+    b = RobotModel("b", KIND, 2 * KIND.radius + 0.03, 0.0)   # within the sum of radii + NET_MARGIN_M
+    path = TimedPath("a", KIND.radius, np.array([[off, 0.0, 0.0], [off, 3.0, 5.0]]))
+    if off > 1e-3:
+        with pytest.raises(ValueError, match="towards robot 'b'"):
+            d.follow(path, 0.0, 1, 0.0, {"b": _status(b, 0.0)})
+    else:
+        d.follow(path, 0.0, 1, 0.0, {"b": _status(b, 0.0)})
+        assert m.x == pytest.approx(off)
+
+
 def test_a_robot_that_drove_on_past_a_legs_start_joins_the_leg_where_it_is():
     # the leg was planned from where the robot was 1 s ago (the planner was busy): it starts 1 m behind it
     m = RobotModel("a", KIND, 3.0, 0.0)

@@ -80,6 +80,15 @@ STANDING_LOOKAHEAD = 1.5
 #: wall seconds of leg planning per step, at most (the planner node lowers it on a fast clock): what
 #: is left waits for the next step (legs to places first, then re-plans, new jobs, charging, parking)
 STEP_BUDGET_S = 0.5
+#: (ours) a leg of a standing robot starts this much later than ``lead_s`` at most for the time its step takes
+#: (:meth:`FleetManager.note_pace`)
+MAX_DECISION_LAG_S = 10.0
+#: ... estimated from the steps' durations: the longest one, fading by this factor per step
+STEP_TIME_FADE = 0.9
+#: wall seconds of leg planning per step at least, however fast the clock (one leg always goes)
+MIN_STEP_BUDGET_S = 0.05
+#: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
+MIN_LEG_LIMIT_S = 0.1
 #: finished jobs kept in memory (the latest ones); older ones are only in the job store, which
 #: still answers a re-sent id with its state (without a store such an id is a new job again)
 MAX_CLOSED_JOBS = 1000
@@ -87,6 +96,17 @@ MAX_CLOSED_JOBS = 1000
 #: late (a starved planner, its network), not every robot at once: robots go offline only after this
 #: many offline timeouts then (a single robot's silence amid others' statuses still counts at once)
 DEAF_FACTOR = 3.0
+
+
+def paced_budgets(lead_s: float, rate: float, leg_limit: float | None) -> tuple[float, float | None]:
+    """The step's planning budget and the planner's limit per leg (wall s) on a clock running ``rate``
+    times faster than the wall: a leg starts ``lead_s`` of clock time after it is planned, so the legs
+    of one step must be planned within about ``lead_s / rate`` wall seconds (a quarter of it here) or
+    they reach the robots after they were due to start (and are refused); ``leg_limit``: the planner's
+    own limit (None: it has none)."""
+    budget = 0.25 * lead_s / max(1.0, rate)
+    step = min(STEP_BUDGET_S, max(MIN_STEP_BUDGET_S, budget))
+    return step, None if leg_limit is None else min(leg_limit, max(MIN_LEG_LIMIT_S, budget))
 
 
 class _Same:
@@ -169,6 +189,9 @@ class FleetManager:
         self._spot_trees: dict[int, Any] = {}
         self.step_budget_s = STEP_BUDGET_S
         self._step_deadline = math.inf   # (time.monotonic) no more legs this step after it
+        #: clock s between ``now`` of a step and its legs reaching the robots (:meth:`note_pace`)
+        self.decision_lag_s = 0.0
+        self._step_s = 0.0
         if store is not None:
             self._reload(store)
 
@@ -528,6 +551,18 @@ class FleetManager:
             self._plan_id += 1
         return d
 
+    def note_pace(self, rate: float, step_s: float) -> None:
+        """The caller's clock runs ``rate`` times faster than the wall, and its last step took ``step_s``
+        wall seconds: the legs of a step reach the robots about ``rate`` x a step's time after the
+        ``now`` they were planned at, so a standing robot's leg starts that much later besides ``lead_s``
+        (at most :data:`MAX_DECISION_LAG_S`; the step's time estimated by the longest recent one, fading by
+        :data:`STEP_TIME_FADE` a step). Ours. Without it, on a fast clock where one leg takes longer to plan
+        than ``lead_s`` of clock time, every leg reached its robot late (100 robots on large at 10x: a
+        leg 0.12 s CPU on average, 1.2 s of clock): robots re-planned as late, refused legs that started
+        behind them, and stood in others' ways."""
+        self._step_s = max(float(step_s), STEP_TIME_FADE * self._step_s)
+        self.decision_lag_s = min(MAX_DECISION_LAG_S, max(0.0, float(rate)) * self._step_s)
+
     def _decide(self, now: float, d: Decisions) -> None:
         self._find_immobile(now, d)
         self._watch_obstacles(now, d)
@@ -678,13 +713,19 @@ class FleetManager:
                 d.notes.append(f"robot {r.id} is {r.status.lateness_s:.1f} s late: re-planning its leg")
 
     def _replan(self, now: float, d: Decisions) -> None:
-        """Plan the legs of robots that have somewhere to go: those that just picked first (they
-        hold a chute), then those re-planning. A robot whose new leg is not yet acknowledged waits."""
+        """Plan the legs of robots that have somewhere to go, in turn: those not refused since their
+        last leg first (of them, those that just picked first: they hold a chute), then the refused
+        ones, whose retry came due longest ago first. A robot whose new leg is not yet acknowledged
+        waits; so does one refused a leg (the back-off), but, ungated, one driving a leg (late or in
+        conflict, it is held when no new leg comes; gated, its old leg's links still hold)."""
         waiting = [(r, r.target) for r in self.robots.values() if r.replan and r.target is not None
                    and not r.immobile and r.online and not r.paused and not r.manual
                    and (r.leg is None or r.status.path_id == r.leg.path_id)
-                   and (now >= r.leg_retry_at or r.on_leg)]
-        waiting.sort(key=lambda item: (item[1].purpose != "place", item[0].id))
+                   and (now >= r.leg_retry_at or r.on_leg and self.gates is None)]
+        # (ours) in turn: the step's budget holds about one leg on a fast clock; in a fixed order the robots
+        # refused at every step (held by their gates, re-planning in vain) took it at every step and a robot
+        # standing after a refused leg, which they all waited for, was never planned (100 robots on large)
+        waiting.sort(key=lambda item: (item[0].leg_retry_at, item[1].purpose != "place", item[0].id))
         for r, target in waiting:
             if self._out_of_time():
                 return   # the rest next step (a robot on its leg drives on meanwhile; it re-plans then)
@@ -1041,22 +1082,27 @@ class FleetManager:
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
                 r.trouble = exc.why
-                # (the exponent capped: a robot on its leg re-plans at every step, and 2 ** 1024 failures
-                # overflowed a float: every step of the planner then failed)
-                r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
-                r.leg_failures += 1
+                self._back_off(r, now)
                 blocker = self.robots.get(exc.blocker) if exc.blocker is not None else None
                 if clear_way and blocker is not None and blocker.free:
                     self._send_away(blocker, now, d)
                 return None
         leg = Leg(r.id, path, path_id, target.purpose, target.name)
         if not self._give(r, leg, d, now):
+            self._back_off(r, now)   # (a gate refused it: tried again later, as a leg not planned)
             return None  # (why is noted)
         r.target, r.trouble = target, ""
         r.leg_retry_at, r.leg_failures = -math.inf, 0
         if self._reserved_at is not None:
             self._reserved_at.append(target.pose)
         return leg
+
+    @staticmethod
+    def _back_off(r: FleetRobot, now: float) -> None:
+        """``r`` was refused a leg: it is tried again after a wait that doubles with each refusal in a row."""
+        # (the exponent capped: 2 ** 1024 failures overflowed a float: every step of the planner then failed)
+        r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
+        r.leg_failures += 1
 
     def _leg_path(self, r: FleetRobot, start: Point, target: Target, t0: float, now: float) -> TimedPath:
         """``r``'s timed path from ``start`` at ``t0`` to ``target``, as the coordination mode plans it
@@ -1105,6 +1151,8 @@ class FleetManager:
             # its way than its radius, and the robot refuses a leg that starts beyond it (one that
             # starts behind it on its way, once it drove on, it joins where it is: CentralDriver.follow)
             lead = 0.0
+        else:
+            lead += self.decision_lag_s   # (it stands: it waits on the leg's start until its leg reaches it)
         return max(round((now + lead) * 1e9), r.last_path_id + 1)
 
     def _occupant(self, pose: Point, radius: float, exclude: FleetRobot | None = None) -> FleetRobot | None:

@@ -116,4 +116,15 @@ def warehouse_for(robots: int, name: str = "large") -> Warehouse:
     return generate_warehouse(blocks_x, 6, 40, 2, 4, 0.5, name, chutes=chutes, chargers=chargers)
 
 
-__all__ = ["GAP_M", "STATION_CLEARANCE_M", "parking_spots", "place_robots", "warehouse_for"]
+def generated_warehouse(spec: str | None, robots: int) -> Warehouse | None:
+    """The generated warehouse ``fleet-demo --warehouse SPEC`` (and ``bench_dispatch.py``) run on for
+    ``robots`` robots: "large" is sized for ``max(robots, 50)``, a number for that many robots; None
+    when ``spec`` names a warehouse file (or none: the default warehouse)."""
+    if spec == "large":
+        return warehouse_for(max(robots, 50))
+    if spec is not None and spec.isdigit():
+        return warehouse_for(int(spec))
+    return None
+
+
+__all__ = ["GAP_M", "STATION_CLEARANCE_M", "generated_warehouse", "parking_spots", "place_robots", "warehouse_for"]

@@ -36,7 +36,7 @@ from fleet_planner.fleet.inbox import StatusInbox
 from fleet_planner.fleet.intake import MAX_STATUS_AGE_S, stamp_problem
 from fleet_planner.fleet.jobstore import open_store
 from fleet_planner.fleet.legs import MAX_CLOCK_SKEW_S
-from fleet_planner.fleet.manager import STEP_BUDGET_S
+from fleet_planner.fleet.manager import paced_budgets
 from fleet_planner.fleet.neighbours import RELAY_PERIOD_S
 from fleet_planner.fleet.obstacles import ObstacleParams
 from fleet_planner.robots import RobotKind, load_kinds
@@ -66,10 +66,6 @@ STATUS_LOG_EVERY_S = 5.0
 
 #: the largest share of wall time the RViz markers may take (they are sent less often when they cost more)
 MARKERS_SHARE = 0.05
-#: wall seconds of leg planning per step at least, however fast the clock (one leg always goes)
-MIN_STEP_BUDGET_S = 0.05
-#: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
-MIN_LEG_LIMIT_S = 0.1
 
 #: a planner that reloaded open jobs waits before its first step until the subscribers of its task
 #: events have stopped appearing for this many wall seconds (events are volatile: one announced
@@ -356,20 +352,17 @@ class PlannerNode(Node):
             self.get_logger().error(f"obstacle {msg.data[:200]!r}: {exc!r}", throttle_duration_sec=5.0)
 
     def _pace(self, now: float) -> None:
-        """Fit the step's planning budget to the clock: a leg starts ``lead_s`` of ROS time after it is
-        planned, so on a clock running R times faster than the wall the legs of one step must be
-        planned within about lead_s / R wall seconds (a quarter of it here), or they reach the robots after
-        they were due to start (and are refused). The rate R is measured between steps."""
+        """Fit the step's planning budget and the planner's limit per leg to the clock
+        (:func:`~fleet_planner.fleet.manager.paced_budgets`); the rate is measured between steps."""
         wall = time.monotonic()
         if self._paced is not None:
             d_ros, d_wall = now - self._paced[0], wall - self._paced[1]
             if d_ros > 0 and d_wall > 0:
                 self._rate = 0.8 * self._rate + 0.2 * min(1000.0, d_ros / d_wall)
         self._paced = (now, wall)
-        budget = 0.25 * self.fleet.params.lead_s / max(1.0, self._rate)
-        self.fleet.step_budget_s = min(STEP_BUDGET_S, max(MIN_STEP_BUDGET_S, budget))
-        if self._leg_limit is not None:  # the planner's own limit per leg (md: detours, re-orderings)
-            self.fleet.planner.leg_time_limit = min(self._leg_limit, max(MIN_LEG_LIMIT_S, budget))  # type: ignore
+        self.fleet.step_budget_s, leg_limit = paced_budgets(self.fleet.params.lead_s, self._rate, self._leg_limit)
+        if leg_limit is not None:  # the planner's own limit per leg (md: detours, re-orderings)
+            self.fleet.planner.leg_time_limit = leg_limit  # type: ignore
 
     def _heard(self) -> bool:
         """Whether the task events would reach the fleet's subscribers now: always, but for a planner
@@ -394,6 +387,7 @@ class PlannerNode(Node):
             return
         now = self._now()
         self._pace(now)
+        wall = time.monotonic()
         try:
             decisions = self.operator.step(now)  # the fleet's step, with the operator's part
         except Exception as exc:
@@ -401,6 +395,8 @@ class PlannerNode(Node):
                                     throttle_duration_sec=5.0)
             return
         self._publish(decisions, now)
+        # its legs reached the robots this late: the next ones start later (FleetManager.note_pace)
+        self.fleet.note_pace(self._rate, time.monotonic() - wall)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         names = {f.name for f in fields(DispatchParams)}
