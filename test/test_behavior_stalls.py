@@ -211,3 +211,53 @@ def test_a_wait_cycle_of_retreating_robots_turns_one_of_them(monkeypatch):
     _drive(control, limit_s=120.0)
     assert not control.arrived("a") and not control.arrived("b")
     assert control.stats().deadlocks > 10 and control.stats().replans == 0
+
+
+def _blocked_short_way() -> BehaviorFleet:
+    """Two ways from a to its goal: the short one along the bottom row, shut near the goal by a
+    robot parked there (p: a one-cell row, no way past it), and a long one over the top row, 8 m
+    up, where a comes no closer to its goal for longer than ``escape_after``. (The scene of ARMO on
+    the default warehouse at 50 robots: the last robot among robots parked at their homes.)"""
+    grid = GridMap.from_rows(["." * 30] + ["." + "@" * 28 + "."] * 7 + ["." * 30])
+    robots = [RobotSpec("a", 0.354, 0.8, (2.5, 8.5), (28.5, 8.5)), RobotSpec("p", 0.354, 0.8, (25.5, 8.5), (25.5, 8.5))]
+    fleet = BehaviorFleet(grid, robots)
+    fleet.assign("a", (28.5, 8.5))
+    return fleet
+
+
+def _until_a_arrives(fleet: BehaviorFleet, limit_s: float) -> None:
+    while fleet.time < limit_s and not fleet.arrived("a"):
+        fleet.step(0.1)
+
+
+def test_an_escaped_robot_plans_round_a_parked_robot_it_saw_out_of_range_now(monkeypatch):
+    """a fails at the parked robot and re-plans over the top (IV.C), escapes on the way (no
+    progress for 30 s), and then plans its way back from where it stands: round the parked robot it
+    remembers (ours, ``BehaviorController._remember``), so it takes the top and arrives. Control
+    (forgetting it once out of range): back along the bottom row into p, again and again."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _blocked_short_way()
+    _until_a_arrives(fleet, 200.0)
+    assert fleet.arrived("a")
+    monkeypatch.setattr(BehaviorController, "_remember", lambda self, sensed: None)
+    control = _blocked_short_way()
+    _until_a_arrives(control, 600.0)
+    assert not control.arrived("a") and control.controller("a").escapes >= 10
+
+
+def test_a_robot_standing_where_it_escaped_to_has_its_way_to_the_goal_left():
+    """The delivery run measures a leg's progress by ``remaining()``; a robot standing in its
+    escape place (no path, still bound for its goal) reported 0 (the leg as good as done), so no
+    later progress counted and the run declared a stall (ARMO, default warehouse, 50 robots:
+    149/150, "1 deadlocked", while the robot was still on its way)."""
+    import math
+
+    fleet = _niche_corridor(BehaviorParams())
+    standing = None
+    while fleet.time < 90.0 and standing is None:
+        fleet.step(0.1)
+        standing = next((c for c in map(fleet.controller, fleet.ids) if c.escape_to is not None and c.path is None),
+                        None)
+    assert standing is not None and standing.goal is not None
+    assert standing.remaining() == math.dist(standing.position, standing.goal) > 1.0

@@ -111,6 +111,7 @@ class BehaviorController:
         self.escape_end = -math.inf           # the escape ends then at the latest
         self.escape_hold = -math.inf          # standing in the less crowded place at least until then
         self.escape_ready = -math.inf         # no new escape before this time
+        self.seen_standing: dict[str, tuple[Point, float]] = {}  # robots seen standing in its way (see _remember)
         self.deadlocks = self.replans = self.replan_failures = self.yields = self.escapes = 0
 
     # -- public ---------------------------------------------------------------------------
@@ -138,6 +139,7 @@ class BehaviorController:
             self.docking.withdraw(self.station, self.id)
             self.dock_since = None
         self.goal, self.station, self.arrived = (float(g[0]), float(g[1])), station, False
+        self.seen_standing = {}
         self.escape_to = None
         self._set_path(path)
         self.best_distance, self.progress_at = math.dist(self.pos, g), self.time
@@ -159,8 +161,13 @@ class BehaviorController:
                          self.holds[0] if self.holds else None, self.dock_since, self.retreat)
 
     def remaining(self) -> float:
-        """``view().remaining`` (the length of the rest of the path), without building the view."""
+        """``view().remaining`` (the length of the rest of the path), without building the view; but a
+        robot standing in the place it escaped to (no path, still bound for its goal) has the
+        straight way to its goal left, not 0: else a run measuring progress by it saw the leg all
+        but done and any later progress as none (issue 13: ARMO, warehouse, 50 robots, "stalled")."""
         if self.path is None:
+            if self.escape_to is not None and self.goal is not None:
+                return math.dist(tuple(self.pos.tolist()), self.goal)
             return 0.0
         assert self.tail is not None   # set with the path
         remaining = math.dist(tuple(self.pos.tolist()), tuple(self.path[self.wp].tolist())) + float(self.tail[self.wp])
@@ -343,7 +350,7 @@ class BehaviorController:
             self.holds = None                   # another robot asked to dock earlier: queue again
         if self.escape_to is not None and (self.time >= self.escape_end or (
                 self.path is None and self.time >= self.escape_hold and not self._in_the_way(sensed))):
-            self._resume()                      # made room (or took too long): back to the goal
+            self._resume(sensed)                # made room (or took too long): back to the goal
         if self.path is None:                   # idle, or parked on its goal (docked if it holds)
             self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
             return
@@ -584,11 +591,21 @@ class BehaviorController:
                 return True
         return False
 
-    def _resume(self) -> None:
-        """End an escape: the path to the goal from here (walls only; the robots it meets are the
-        behaviours' business)."""
+    def _resume(self, sensed: Sequence[RobotView] = ()) -> None:
+        """End an escape: the path to the goal from here, round the robots standing in range (the
+        paper's obstacles, IV.C.1), else walls only; the robots it meets driving are the
+        behaviours' business.
+
+        Interpretation (ours, issue 13): walls only, a robot that had escaped from a pocket shut by
+        robots parked at their homes planned straight back into it, failed there, escaped again,
+        and so on (measured: ARMO, default warehouse, 50 robots: the last robot 59 escapes and 860
+        s for its last leg)."""
         assert self.goal is not None
-        path = self.finder.find(self.position, self.goal)
+        keep = [(o.position, self.radius + o.radius + self.params.critical_margin) for o in sensed if not o.travelling]
+        keep += self._remembered(sensed)
+        path = self.finder.find(self.position, self.goal, avoid=keep) if keep else None
+        if path is None:
+            path = self.finder.find(self.position, self.goal)
         if path is None:               # no way from here (the map): stand, and try again in a second
             self.path = self.tail = self.run = None
             self.escape_end = self.time + 1.0
@@ -811,6 +828,7 @@ class BehaviorController:
         if self.path is None or self.goal is None:
             return
         path = None
+        self._remember(sensed)
         if self.time >= self.replan_after:
             path = self._find_detour(sensed)
             self.replan_after = self.time + self.params.blocked_timeout
@@ -849,6 +867,32 @@ class BehaviorController:
                 break
         return points
 
+    # Interpretation (ours, issue 13): a robot re-plans round the robots standing in range (IV.C.1),
+    # but forgot them once out of range: an escaped robot planned its way back straight into the
+    # robot parked in it, failed, re-planned away, escaped, ... (measured: ARMO on the default
+    # warehouse, 50 robots, the last robot circling for 860 s between robots parked at their
+    # homes, one-way lanes leaving it one way in). So it remembers, for the rest of its leg, the
+    # robots it saw standing when it had to re-plan, and keeps out of them while they are out of
+    # range; one seen again moving or elsewhere is forgotten.
+    def _remember(self, sensed: Sequence[RobotView]) -> None:
+        """Note the robots standing in range now (when a behaviour failed)."""
+        for o in sensed:
+            if not o.travelling:
+                self.seen_standing[o.id] = (o.position, o.radius)
+
+    def _remembered(self, sensed: Sequence[RobotView]) -> list[tuple[Point, float]]:
+        """Keep-out discs of the robots remembered standing that are not in range now (those in
+        range are seen as they are; one seen moving or moved is forgotten)."""
+        if not self.seen_standing:
+            return []
+        for o in sensed:
+            seen = self.seen_standing.get(o.id)
+            if seen is not None and (o.travelling or math.dist(o.position, seen[0]) > _PROGRESS):
+                del self.seen_standing[o.id]
+        here = {o.id for o in sensed}
+        return [(p, self.radius + r + self.params.critical_margin) for i, (p, r) in self.seen_standing.items()
+                if i not in here]
+
     def _find_detour(self, sensed: Sequence[RobotView]) -> np.ndarray | None:
         """The re-planned path, or None (counted as a failed re-plan)."""
         assert self.goal is not None   # a robot with a path has a goal
@@ -864,8 +908,11 @@ class BehaviorController:
                     if not o.travelling or (with_waiting and (o.behavior.is_wait or o.id == self.partner)
                                             and math.dist(o.position, self.pos) <= reach + o.radius)]
 
-        path = self.finder.find(self.position, self.goal, avoid=keep_out(True), blocked_cells=wall)
+        remembered = self._remembered(sensed)   # robots seen standing, out of range now (see _remember)
+        path = self.finder.find(self.position, self.goal, avoid=keep_out(True) + remembered, blocked_cells=wall)
         if path is None:
+            path = self.finder.find(self.position, self.goal, avoid=keep_out(False) + remembered, blocked_cells=wall)
+        if path is None and remembered:   # they may have left: the robots in range only
             path = self.finder.find(self.position, self.goal, avoid=keep_out(False), blocked_cells=wall)
         if path is None:
             # Interpretation (ours, issue 13): the paper's A* paths have a waypoint per cell, ours
