@@ -63,7 +63,7 @@ POLICIES = {"legacy": LEGACY, "new": PIPELINED, "s18": SERIAL,
 def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | None, limit: float, dt: float = 0.1,
         period: float = 0.5, progress: bool = False, seed: int = 1, delay: float = 0.0, status_delay: float = 0.0,
         notes: list[str] | None = None, lateness: float | None = None, warehouse: str | None = None,
-        rate: float | None = None, profile: bool = False, pace: bool = True) -> dict:
+        rate: float | None = None, profile: bool = False, pace: bool = True, probe=None) -> dict:
     kinds = load_kinds()
     wh = generated_warehouse(warehouse, n) or load_warehouse(Path(warehouse) if warehouse else None)
     if n == 0:   # the demo's default fleet (config/fleet.yaml) and parking spots (config/planner_params.yaml)
@@ -202,6 +202,8 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
             fm.note_pace(rate, steps[-1][1])   # (as the planner node does, with its wall time)
         if steps[-1][0] > worst[0] and t > 10.0:   # (the first legs load numba's compiled kernels)
             worst = (steps[-1][0], prof)
+        if probe is not None:   # (a diagnostic's look at the fleet every period: probe(t, manager, sim, decisions))
+            probe(t, fm, sim, d)
         if notes is not None:
             notes += [f"{t:.1f} {note}" for note in d.notes]
         for rec in d.gates:   # (the planner node publishes them before the legs)

@@ -21,6 +21,7 @@ from fleet_planner.fleet import (
 )
 from fleet_planner.fleet.dispatch import LEGACY
 from fleet_planner.fleet.jobstore import RESENT
+from fleet_planner.fleet.state import Target
 from fleet_planner.grid import GridMap
 from fleet_planner.model import TimedPath
 from fleet_planner.robots import RobotModel, load_kinds
@@ -221,6 +222,21 @@ def test_a_robot_low_on_battery_goes_to_the_nearest_free_charger():
     d = fm.step(0.5)
     [leg] = d.legs
     assert (leg.robot_id, leg.purpose, leg.goal) == ("r1", "charge", "charger_3")
+
+
+def test_a_charger_stays_with_the_robot_bound_for_it_while_it_has_no_leg_there():
+    """A robot whose leg to a charger was refused (it stands; its new leg is not planned yet) keeps
+    the charger: another robot is not sent there (late messages: the second parked on it and the
+    first could never get a leg there, standing in others' way for good)."""
+    fm = manager()
+    fm.on_status(status("r1", "cargo", 5.25, 9.25, battery=0.1), 0.0)
+    fm.on_status(status("r2", "cargo", 8.25, 9.25), 0.0)
+    r2 = fm.robots["r2"]
+    r2.target, r2.replan, r2.leg_retry_at = Target("charge", "charger_2", CHARGERS[1]), True, 10.0
+    d = fm.step(0.5)
+    [leg] = d.legs
+    assert (leg.robot_id, leg.purpose) == ("r1", "charge")
+    assert leg.goal != "charger_2"
 
 
 def test_an_idle_robot_goes_charging_and_one_at_a_station_parks_when_no_charger_is_free():

@@ -109,19 +109,17 @@ class FleetRobot:
 
 class Occupancy:
     """Where the robots stand and where they are bound, indexed for one planning step: a k-d tree
-    over every robot's position and the end of its leg (:meth:`occupant`), so spot and station
-    queries cost a logarithm of the fleet, not the fleet. Robots whose leg changes during the step
-    are :meth:`touch` ed and checked directly (they are few)."""
+    over every robot's position, the end of its leg and its target (:meth:`occupant`), so spot and
+    station queries cost a logarithm of the fleet, not the fleet. Robots whose leg changes during
+    the step are :meth:`touch` ed and checked directly (they are few)."""
 
     def __init__(self, robots: list[FleetRobot]):
         from scipy.spatial import cKDTree
 
         pts, owners = [], []
         for o in robots:
-            pts.append(o.pos)
-            owners.append(o)
-            if o.leg is not None and not o.immobile:
-                pts.append(tuple(o.leg.path.waypoints[-1, :2]))
+            for p in _ends(o):
+                pts.append(p)
                 owners.append(o)
         self._owners = owners
         self._tree = cKDTree(np.asarray(pts, dtype=float).reshape(-1, 2)) if pts else None
@@ -148,7 +146,20 @@ class Occupancy:
         return None
 
 
+def _ends(o: FleetRobot) -> list[Point]:
+    """Where ``o`` stands, where its leg ends and where it is bound: its target too, which it keeps
+    when it has no leg there (its leg was refused, it holds): ours, a charger whose robot refused its
+    leg (late messages) went to a second robot, which parked on it; the first then could never get
+    a leg there ("blocked by ..., which parks on its goal") and stood in the way of others for good."""
+    ends = [o.pos]
+    if not o.immobile:
+        if o.leg is not None:
+            ends.append((float(o.leg.path.waypoints[-1, 0]), float(o.leg.path.waypoints[-1, 1])))
+        if o.target is not None:
+            ends.append(o.target.pose)
+    return ends
+
+
 def _ends_near(o: FleetRobot, pose: Point, radius: float) -> bool:
     near = o.radius + radius
-    ends = [o.pos] + ([tuple(o.leg.path.waypoints[-1, :2])] if o.leg is not None and not o.immobile else [])
-    return any(math.dist(p, pose) < near for p in ends)
+    return any(math.dist(p, pose) < near for p in _ends(o))
