@@ -290,3 +290,27 @@ def test_a_leg_the_robot_cannot_take_stops_it_and_is_planned_again_from_where_it
     assert agent.model.speed == 0.0  # it stopped rather than drive on a leg nobody keeps clear of
     assert sim.run_until(lambda: sim.legs[rid][-1].path_id > fake.path_id, limit=10)
     assert sim.run_until(lambda: sim.last("J1") == "done", limit=300)
+
+
+def test_a_leg_that_comes_before_its_record_waits_for_it_and_is_joined_where_the_robot_drove_to():
+    """A re-planned leg that starts behind a driving robot and comes before its gate record (two
+    topics: under load the leg often came first): the robot holds until the record comes, then
+    joins the leg where it is (taken at once, it refused the leg and stood until a re-plan reached it)."""
+    a, path = gated_agent()
+    a.on_gate(record([], path_id=10))
+    a.on_path(path, 0.0, 10)
+    for k in range(1, 31):
+        st = a.tick(k * 0.1)
+    here = (a.model.x, a.model.y)
+    assert st.path_id == 10 and st.travelled_m > 1.5
+    x, y = path.waypoints[0, :2]
+    later = TimedPath("me", R, np.array([[x, y - 1.0, 3.0], [x, y - 6.0, 8.0]]))  # from 1 m along, behind it
+    a.on_path(later, 0.0, 11)
+    for k in range(31, 41):
+        st = a.tick(k * 0.1)
+    assert st.rejected_path_id is None and st.path_id == 10 and st.mode == "waiting"
+    assert math.dist(here, (a.model.x, a.model.y)) < 0.5   # it held (no record for leg 11 yet)
+    a.on_gate(record([], path_id=11))
+    for k in range(41, 120):
+        st = a.tick(k * 0.1)
+    assert st.rejected_path_id is None and st.path_id == 11 and st.progress == 1.0

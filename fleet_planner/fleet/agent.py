@@ -76,6 +76,7 @@ class RobotAgent:
         self.planner = planner
         self.hand = OperatorHand(model, warehouse)  # e-stop and manual drive (.manual)
         self.rejected: int | None = None          # the last leg it could not take
+        self._pending: tuple[TimedPath, float, int] | None = None  # a leg waiting for its gate record
         self._kind = model.kind
         self._scale = 1.0
 
@@ -195,6 +196,10 @@ class RobotAgent:
         In manual drive legs are ignored (the planner sends none; a late one must not take over)."""
         if self.hand.manual:
             return
+        if self.driver.awaits_record(path, path_id):   # gated: taken when its record comes (on_gate); it holds
+            self._pending = (path, t0, path_id)
+            return
+        self._pending = None
         try:
             self.driver.follow(path, t0, path_id, self._last, self.heard)
         except ValueError:
@@ -203,9 +208,22 @@ class RobotAgent:
             raise
 
     def on_gate(self, record: GateRecord) -> None:
-        """A gate record on the wire: kept if it is for this robot and newer than the one it has."""
-        if record.robot_id == self.model.id:
-            self.driver.on_gate(record)
+        """A gate record on the wire: kept if it is for this robot and newer than the one it has. A
+        leg that came before it is taken now (or refused, as :meth:`on_path` says); one that a record
+        for a later leg overtook is dropped (the later leg comes)."""
+        if record.robot_id != self.model.id:
+            return
+        self.driver.on_gate(record)
+        pending, gate = self._pending, self.gate
+        if pending is None or gate is None or gate.path_id < pending[2]:
+            return
+        self._pending = None
+        if gate.path_id > pending[2]:
+            return   # (it holds all the same: its record is for a leg it does not drive yet)
+        try:
+            self.on_path(*pending)
+        except ValueError:
+            pass   # its statuses name the leg rejected; the planner plans it again from where it stands
 
     def tick(self, now: float) -> RobotStatus:
         """Advance to ``now``, start what is due where the robot stands, and report."""

@@ -117,6 +117,11 @@ class Driver(ABC):
     def refused(self, path_id: int) -> None:  # noqa: B027 - a hook most drivers ignore
         """A leg the robot could not take (it stops where it is, central coordination); ignored by default."""
 
+    def awaits_record(self, path: TimedPath, path_id: int) -> bool:
+        """Whether a leg ``path_id`` that came now waits for its gate record before the robot takes it
+        (it holds meanwhile, central coordination when gated); False by default."""
+        return False
+
 
 class Coordination(ABC):
     """A coordination mode: what differs between the modes on the planner's end and the robot's."""
@@ -308,6 +313,9 @@ class CentralDriver(Driver):
         self.gated = gated
         self.gate: GateRecord | None = None
         self.stopped = False
+        #: a leg that came before its gate record: the robot holds until the record comes (its agent
+        #: then takes the leg, joining it where it is by the record's links: :meth:`awaits_record`)
+        self.awaiting: int | None = None
         self._arc: tuple[TimedPath, np.ndarray, np.ndarray] | None = None   # its path's arc lengths (_way)
 
     def follow(self, path: TimedPath, t0: float, path_id: int, now: float | None,
@@ -342,18 +350,41 @@ class CentralDriver(Driver):
                                      f"from the robot, towards robot {blocker.id!r}")
         self.model.follow(path, t0, path_id, at=at)
         self.stopped = False
+        self.awaiting = None
 
     def refused(self, path_id: int) -> None:
         self.stopped = True  # the planner no longer keeps the others clear of the old leg's rest
+        self.awaiting = None
+
+    def awaits_record(self, path: TimedPath, path_id: int) -> bool:
+        """Gated, a leg that starts farther than the robot's radius from it (it must join it where it
+        is, :func:`join_at`, short of where the leg's gate record holds it) and whose record has not
+        come yet waits for the record, and the robot holds meanwhile (as it does when the record comes
+        first: its record is then for a leg it does not drive). Ours: the record and the leg travel on
+        two topics, and under load the leg often came first; taken at once, a robot that had driven on
+        past the leg's start could not join it (no record: nothing to join short of) and refused it,
+        standing in others' way until a re-plan reached it (bench_dispatch --delay 6: 12 of 17
+        refusals in the first 200 s)."""
+        m = self.model
+        if not self.gated or (self.gate is not None and self.gate.path_id >= path_id):
+            return False
+        x, y = path.waypoints[0, :2]
+        if math.hypot(x - m.x, y - m.y) <= m.kind.radius:
+            return False   # it takes it where it stands, and waits there for the record
+        self.awaiting = path_id
+        return True
 
     def on_gate(self, record: GateRecord) -> None:
-        """Keep the newest record (by path, then ``seq``)."""
+        """Keep the newest record (by path, then ``seq``); one for a later leg than the one it awaits
+        overtook that leg (dropped by its agent: the later leg comes)."""
         if self.gate is None or (record.path_id, record.seq) >= (self.gate.path_id, self.gate.seq):
             self.gate = record
+        if self.awaiting is not None and record.path_id > self.awaiting:
+            self.awaiting = None
 
     def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
         hold = self.must_wait(t, dt, heard)
-        if not hold and (self.stopped or self.gate_holds(dt, heard)):
+        if not hold and (self.stopped or self.awaiting is not None or self.gate_holds(dt, heard)):
             hold = True
         self.model.step(t, dt, hold=hold)
 
