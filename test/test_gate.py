@@ -13,7 +13,7 @@ from gated_sim import GatedSim, random_slowdowns
 from test_dispatch import FAST, WH, four_robots, status, task
 
 from fleet_planner.fleet.gate import GateBook, Link, gate_limit, links_of, watched_robots
-from fleet_planner.fleet.state import FleetRobot
+from fleet_planner.fleet.state import FleetRobot, Target
 from fleet_planner.model import TimedPath
 from msg_schemas.records import GateRecord, RecordError, RobotStatus
 
@@ -314,3 +314,25 @@ def test_a_leg_that_comes_before_its_record_waits_for_it_and_is_joined_where_the
     for k in range(41, 120):
         st = a.tick(k * 0.1)
     assert st.rejected_path_id is None and st.path_id == 11 and st.progress == 1.0
+
+
+def test_a_standing_robots_leg_that_starts_where_another_may_be_is_refused_and_the_other_re_plans():
+    """A robot that stands (no leg) gets no leg starting in a region another robot may be in: taken, it
+    ranked the other first, whose way passes where it stands (late messages: the other was behind the
+    schedule the leg was planned around), and each waited for the other for good. It stands, tries
+    again later, and the other re-plans around it."""
+    from fleet_planner.fleet.legs import Decisions, Leg
+    from test_dispatch import manager
+    fm = manager()
+    fm.on_status(status("a", "cargo", 0.0, 5.0), 0.0)
+    fm.on_status(status("b", "cargo", 5.0, 5.5), 0.0)
+    a, b = fm.robots["a"], fm.robots["b"]
+    pa = straight("a", (0.0, 5.0), (10.0, 5.0), 0.0)
+    assert fm._give(a, Leg("a", pa, 1, "park", "x"), Decisions(), 0.0)
+    a.target = b.target = Target("park", "x", (10.0, 5.0))
+    a.status = RobotStatus.from_dict({**said("a", 1, 4.0).to_dict(), "x": 4.0, "y": 5.0, "stamp": 5.0})
+    pb = straight("b", (5.0, 5.5), (5.0, 10.0), 5.0)          # b leaves north from beside a's way
+    d = Decisions()
+    assert not fm._give(b, Leg("b", pb, 2, "park", "x"), d, 5.0)
+    assert b.leg is None and b.leg_retry_at > 5.0 and a.replan
+    assert fm.gates.records["a"].path_id == 1 and "b" not in fm.gates.records
