@@ -378,6 +378,28 @@ def test_a_robot_late_on_its_schedule_re_plans_from_where_it_is():
     assert len(replans) > 2  # more legs than the two of the job
 
 
+@pytest.mark.parametrize("took", [4.0, 0.0])
+def test_a_robot_that_took_its_leg_late_re_plans_only_once_later_than_that_by_the_tolerance(took):
+    """A leg that reached its robot late (its first status on it says so) is not re-planned for that
+    lateness, which the robot cannot make up (re-planned, the new leg reached it late again: under late
+    messages robots spent their time halted between legs); only for lateness beyond it."""
+    from fleet_planner.fleet.legs import Decisions, Leg
+    fm = manager(lateness_tolerance_s=3.0)
+    fm.on_status(status("r1", "cargo", 5.25, 9.25), 0.0)
+    r = fm.robots["r1"]
+    path = TimedPath("r1", r.radius, np.array([[5.25, 9.25, 1.0], [12.25, 9.25, 8.0]]))
+    r.leg, r.target = Leg("r1", path, 1_000_000_000, "park", "x"), Target("park", "x", (12.25, 9.25))
+
+    def late(s, stamp):
+        fm.on_status(status("r1", "cargo", 5.5, 9.25, mode="driving", stamp=stamp, path_id=1_000_000_000,
+                            progress=0.1, lateness_s=s), stamp)
+        fm._find_late(Decisions())
+        return r.replan
+    assert not late(took, 1.0 + took) and not late(took + 2.5, 2.0 + took)
+    assert late(5.0, 3.0 + took) == (took == 0.0)        # 5 s late: 2 s beyond the tolerance, 2 s within it
+    assert late(took + 3.5, 4.0 + took)
+
+
 def test_a_free_robot_blocking_the_only_way_is_sent_off_first():
     rows = ["@@@@@@@@@@@@@@@@@@@@@@@@",
             "@.........@@@@.........@",

@@ -375,6 +375,8 @@ class FleetManager:
             raise ValueError(f"robot {status.id!r}: reports kind {status.kind!r}, earlier {r.kind.name!r}")
         if status.stamp < r.status.stamp:
             return  # an old status overtaken by a newer one
+        if r.leg is not None and status.path_id == r.leg.path_id != r.status.path_id:
+            r.took_late = status.lateness_s   # the first word that it took its leg: late by so much already
         r.status, r.seen = status, now
         if not r.online:
             r.online, r.immobile, r.idle_since = True, status.mode == "error", now
@@ -709,9 +711,13 @@ class FleetManager:
         return True
 
     def _find_late(self, d: Decisions) -> None:
+        """Robots more than ``lateness_tolerance_s`` behind their legs re-plan, beyond the lateness they
+        took their leg with (ours: a leg that reached its robot late, which the robot cannot make up,
+        was re-planned at once, and its new leg reached it late again: under late messages robots
+        spent their time halted between legs; bench_dispatch --delay 6)."""
         for r in self.robots.values():
             if (r.target is not None and not r.replan and r.on_leg and r.status.mode != "error"
-                    and self.strategy.is_late(r, self.params.lateness_tolerance_s)):
+                    and self.strategy.is_late(r, self.params.lateness_tolerance_s + r.took_late)):
                 r.replan = True
                 d.notes.append(f"robot {r.id} is {r.status.lateness_s:.1f} s late: re-planning its leg")
 

@@ -73,6 +73,7 @@ class FleetRobot:
     leg_retry_at: float = -math.inf   # a leg that could not be planned is tried again from then on
     evade_retry_at: float = -math.inf  # no refuge from a moving obstacle could be reached: tried again from then on
     leg_failures: int = 0             # legs refused in a row (the wait before the next try doubles)
+    took_late: float = 0.0            # how late (s) its first status on its leg said it was (it took it late)
 
     @property
     def id(self) -> str:
