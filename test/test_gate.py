@@ -321,8 +321,9 @@ def test_a_standing_robots_leg_that_starts_where_another_may_be_is_refused_and_t
     ranked the other first, whose way passes where it stands (late messages: the other was behind the
     schedule the leg was planned around), and each waited for the other for good. It stands, tries
     again later, and the other re-plans around it."""
-    from fleet_planner.fleet.legs import Decisions, Leg
     from test_dispatch import manager
+
+    from fleet_planner.fleet.legs import Decisions, Leg
     fm = manager()
     fm.on_status(status("a", "cargo", 0.0, 5.0), 0.0)
     fm.on_status(status("b", "cargo", 5.0, 5.5), 0.0)
