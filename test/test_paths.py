@@ -491,79 +491,28 @@ def test_threads_sharing_a_move_graph_get_the_answers_of_sequential_calls():
             assert polyline_length(got) == pytest.approx(polyline_length(want), abs=1e-9)
 
 
-def test_compiled_search_finds_the_shortest_grid_path_around_discs():
-    # oracle: SciPy's Dijkstra over the same moves, those passing within a disc removed up front
+def _compare_with_dijkstra(finder: PathFinder, rng: np.random.Generator, trials: int, discs_n: int,
+                           radii: tuple[float, float]) -> int:
+    """Shortest grid paths round random discs against SciPy's Dijkstra over the same moves, those
+    passing within a disc removed up front (the oracle); returns how many pairs had a path."""
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import dijkstra
 
     from fleet_planner.geometry import segment_point_distance
 
-    rng = np.random.default_rng(5)
-    grid = GridMap(rng.random((16, 22)) < 0.18)
-    finder = PathFinder(grid, 0.3)
     graph = finder._move_graph()
-    free = np.argwhere(finder.free)
-    tails, dirs = np.nonzero(np.isfinite(graph.weights))
-    heads = graph.heads[tails, dirs]
-    centre = np.column_stack([graph.col - 0.5, graph.row - 0.5])
-    compared = 0
-    for _ in range(40):
-        (r0, c0), (r1, c1) = free[rng.choice(len(free), 2, replace=False)]
-        start, goal = (c0 + 0.5, r0 + 0.5), (c1 + 0.5, r1 + 0.5)
-        discs = [((float(x), float(y)), float(k)) for x, y, k in
-                 zip(rng.random(6) * 22, rng.random(6) * 16, rng.uniform(0.3, 0.9, 6))]
-        discs = [d for d in discs if np.hypot(*np.subtract(d[0], start)) > d[1]
-                 and np.hypot(*np.subtract(d[0], goal)) > d[1]]
-        keep = np.ones(len(tails), dtype=bool)
-        for (x, y), k in discs:
-            keep &= segment_point_distance(centre[tails], centre[heads], np.array([x, y])) > k
-        w = np.where(dirs >= 4, np.sqrt(2.0), 1.0)[keep]
-        matrix = csr_matrix((w, (tails[keep], heads[keep])), shape=(graph.n_cells, graph.n_cells))
-        s, g = (graph.node_of[(r + 1) * graph.wp + c + 1] for r, c in ((r0, c0), (r1, c1)))
-        want = dijkstra(matrix, indices=s)[g]
-        path = finder.find(start, goal, avoid=discs, smooth=False)
-        if not np.isfinite(want):
-            assert path is None
-            continue
-        compared += 1
-        assert abs(polyline_length(path) - want) < 1e-6
-    assert compared > 20
-
-
-def test_landmark_bounds_keep_the_search_exact_on_a_warehouse_map():
-    # the landmarks (ALT) are made only on maps of LANDMARKS_FROM traversable cells or more: a
-    # warehouse of racks and aisles (where the octile distance misses the detours round the racks),
-    # with discs cut out of it; oracle: SciPy's Dijkstra over the same moves, cut moves removed up front
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import dijkstra
-
-    from fleet_planner import _path_kernels as K
-    from fleet_planner._pathgraph import LANDMARKS
-    from fleet_planner.geometry import segment_point_distance
-
-    blocked = np.zeros((46, 73), dtype=bool)
-    for top in range(3, 43, 4):               # racks 2 rows high, 10 cells wide, 2-cell aisles
-        for left in range(3, 69, 12):
-            blocked[top:top + 2, left:left + 10] = True
-    rng = np.random.default_rng(8)
-    blocked |= rng.random(blocked.shape) < 0.02
-    grid = GridMap(blocked)
-    finder = PathFinder(grid, 0.4)
-    graph = finder._move_graph()
-    assert graph.landmarks().shape == (graph.n_cells, LANDMARKS)
+    rows, cols = finder.free.shape
     tails, dirs = np.nonzero(np.isfinite(graph.weights))
     heads = graph.heads[tails, dirs]
     w_all = np.where(dirs >= 4, np.sqrt(2.0), 1.0)
-    full = csr_matrix((w_all, (tails, heads)), shape=(graph.n_cells, graph.n_cells))
-    assert np.array_equal(K.distances(graph.heads, graph.weights, 7), dijkstra(full, indices=7))
     centre = np.column_stack([graph.col - 0.5, graph.row - 0.5])
     free = np.argwhere(finder.free)
     compared = 0
-    for _ in range(30):
+    for _ in range(trials):
         (r0, c0), (r1, c1) = free[rng.choice(len(free), 2, replace=False)]
         start, goal = (c0 + 0.5, r0 + 0.5), (c1 + 0.5, r1 + 0.5)
         discs = [((float(x), float(y)), float(k)) for x, y, k in
-                 zip(rng.random(12) * 73, rng.random(12) * 46, rng.uniform(0.5, 1.5, 12))]
+                 zip(rng.random(discs_n) * cols, rng.random(discs_n) * rows, rng.uniform(*radii, discs_n))]
         discs = [d for d in discs if np.hypot(*np.subtract(d[0], start)) > d[1]
                  and np.hypot(*np.subtract(d[0], goal)) > d[1]]
         keep = np.ones(len(tails), dtype=bool)
@@ -578,4 +527,36 @@ def test_landmark_bounds_keep_the_search_exact_on_a_warehouse_map():
             continue
         compared += 1
         assert abs(polyline_length(path) - want) < 1e-6
-    assert compared > 20
+    return compared
+
+
+def test_compiled_search_finds_the_shortest_grid_path_around_discs():
+    rng = np.random.default_rng(5)
+    finder = PathFinder(GridMap(rng.random((16, 22)) < 0.18), 0.3)
+    assert _compare_with_dijkstra(finder, rng, 40, 6, (0.3, 0.9)) > 20
+
+
+def test_landmark_bounds_keep_the_search_exact_on_a_warehouse_map():
+    # the landmarks (ALT) are made only on maps of LANDMARKS_FROM traversable cells or more: a
+    # warehouse of racks and aisles (where the octile distance misses the detours round the racks),
+    # with discs cut out of it; oracle: SciPy's Dijkstra over the same moves, cut moves removed up front
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from fleet_planner import _path_kernels as K
+    from fleet_planner._pathgraph import LANDMARKS
+
+    blocked = np.zeros((46, 73), dtype=bool)
+    for top in range(3, 43, 4):               # racks 2 rows high, 10 cells wide, 2-cell aisles
+        for left in range(3, 69, 12):
+            blocked[top:top + 2, left:left + 10] = True
+    rng = np.random.default_rng(8)
+    blocked |= rng.random(blocked.shape) < 0.02
+    finder = PathFinder(GridMap(blocked), 0.4)
+    graph = finder._move_graph()
+    assert graph.landmarks().shape == (graph.n_cells, LANDMARKS)
+    tails, dirs = np.nonzero(np.isfinite(graph.weights))
+    full = csr_matrix((np.where(dirs >= 4, np.sqrt(2.0), 1.0), (tails, graph.heads[tails, dirs])),
+                      shape=(graph.n_cells, graph.n_cells))
+    assert np.array_equal(K.distances(graph.heads, graph.weights, 7), dijkstra(full, indices=7))
+    assert _compare_with_dijkstra(finder, rng, 30, 12, (0.5, 1.5)) > 20
