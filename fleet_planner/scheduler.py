@@ -103,9 +103,6 @@ class DelayScheduler:
         for x in range(len(model.paths)):
             self.set_timing(x, 0.0)
         self._done: set[int] = set()   # robots whose delay is up to date
-        #: piece tables with the pair's robots swapped (:meth:`_facing`, for tests; the hold search reads
-        #: the tables swapped in place), by (i, j) with i > j
-        self._swapped: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         #: called after robot x is scheduled (holds); True if it changed x's path (route choice)
         self.after: Callable[[int], bool] | None = None
 
@@ -333,20 +330,6 @@ class DelayScheduler:
         G = g_key, g_lo, g_hi, g_own
         F = f_key, f_lo, f_hi, f_own
         return G, F
-
-    def _facing(self, i: int, j: int) -> np.ndarray:
-        """The pieces of the pair (i, j) with i in the x columns and j in the y columns (the model
-        lists the smaller index first; the swapped table is kept while the model's is the same)."""
-        raw = self.model.pieces(i, j)
-        if i < j:
-            return raw
-        got = self._swapped.get((i, j))
-        if got is not None and got[0] is raw:
-            return got[1]
-        out = raw[:, _SWAP]
-        out[:, C.P_PHI_LO], out[:, C.P_PHI_HI] = -raw[:, C.P_PHI_HI], -raw[:, C.P_PHI_LO]
-        self._swapped[(i, j)] = (raw, out)
-        return out
 
     def _schedule_holds(self, j: int, rank: dict[int, int]) -> Blocked | None:
         """Earliest arrival of j along its fixed path with waits at its vertices (safe-interval

@@ -378,8 +378,17 @@ def ref_hold_constraints(sched, j: int, higher: list[int]):
     transcription: rows seen from j, candidates of each kind stacked in order, then kept when
     lo < hi and hi > 0)."""
     from fleet_planner import collision as C
+    from fleet_planner.scheduler import _SWAP
 
-    tables = [sched._facing(i, j) for i in higher]
+    def facing(i: int) -> np.ndarray:   # the pair's pieces with i in the x columns and j in the y columns
+        raw = sched.model.pieces(i, j)
+        if i < j:
+            return raw
+        out = raw[:, _SWAP]
+        out[:, C.P_PHI_LO], out[:, C.P_PHI_HI] = -raw[:, C.P_PHI_HI], -raw[:, C.P_PHI_LO]
+        return out
+
+    tables = [facing(i) for i in higher]
     sizes = [len(t) for t in tables]
     P = np.vstack(tables)
     who = np.repeat(np.asarray(higher, dtype=np.int64), sizes)
