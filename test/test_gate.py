@@ -337,3 +337,32 @@ def test_a_standing_robots_leg_that_starts_where_another_may_be_is_refused_and_t
     assert not fm._give(b, Leg("b", pb, 2, "park", "x"), d, 5.0)
     assert b.leg is None and b.leg_retry_at > 5.0 and a.replan
     assert fm.gates.records["a"].path_id == 1 and "b" not in fm.gates.records
+
+
+# -- records that fit on the wire ------------------------------------------------------------------
+def test_links_go_on_the_wire_in_whole_millimetres_rounded_the_safe_way():
+    assert Link("a", 5, 4.0001, 2.4999).to_dict() == {"robot": "a", "path_id": 5, "exit": 4.001, "entry": 2.499}
+    assert Link("a", 5, 4.0, 2.5).to_dict() == {"robot": "a", "path_id": 5, "exit": 4.0, "entry": 2.5}
+    assert Link("a", 5, None, 0.0000004).to_dict()["entry"] == 0.0
+
+
+def test_a_record_too_big_for_the_wire_has_its_links_merged_so_that_the_robot_waits_at_least_as_long():
+    # a robot following "a" 500 m down an aisle: a link every 0.1 m, and two on "b" (path ids in ns, as sent)
+    pa, pb = 161690934100, 97879994084
+    stair = [Link("a", pa, 0.1 * k + 0.05, 0.1 * k + 2.0) for k in range(5000)]
+    others = [Link("b", pb, 3.0, 1.0), Link("b", pb, None, 600.0)]
+    whole = record(stair + others, watch={"a": pa, "b": pb})
+    with pytest.raises(RecordError, match="too long"):     # the control: as it was, an agent refuses it
+        GateRecord.from_json(whole.to_json())
+    book = GateBook()
+    sent = book._set(whole)
+    assert GateRecord.from_json(sent.to_json()) == sent    # it fits, and parses
+    assert len(sent.links) < len(whole.links)
+    assert {(d["exit"], d["entry"]) for d in sent.links if d["robot"] == "b"} == {(3.0, 1.0), (None, 600.0)}
+    rng = random.Random(1)
+    for _ in range(300):
+        heard = {"a": said("a", pa, rng.uniform(0.0, 520.0)), "b": said("b", pb, rng.uniform(0.0, 4.0))}
+        assert gate_limit(sent, 10, heard) <= gate_limit(whole, 10, heard)
+    # merged, not dropped: with "a" 100 m along, the robot still waits behind it
+    heard = {"a": said("a", pa, 100.0), "b": said("b", pb, 4.0)}
+    assert 100.0 < gate_limit(sent, 10, heard) <= gate_limit(whole, 10, heard) < 102.1

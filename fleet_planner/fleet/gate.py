@@ -31,14 +31,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from scipy import ndimage
 from scipy.spatial.distance import cdist
 
-from msg_schemas.records import GateRecord, RobotStatus
+from msg_schemas.records import MAX_RECORD_BYTES, GateRecord, RobotStatus
 
 from ..geometry import polyline_passes_near
 from ..model import TimedPath
@@ -59,6 +59,9 @@ REACH_S = 1.0
 #: spacing (m) of the fine samples that tell whether a robot may already be in a region: its disc
 #: comes within the pad of the other path there (less twice this, the fine samples' own error)
 FINE_M = 0.01
+#: a gate record's links take at most this many characters of JSON (links merged the safe way
+#: beyond it, :func:`compact`): well within what a record may be (``MAX_RECORD_BYTES``)
+RECORD_BUDGET = MAX_RECORD_BYTES * 3 // 4
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,12 @@ class Link:
     entry: float
 
     def to_dict(self) -> dict[str, object]:
-        return {"robot": self.robot, "path_id": self.path_id, "exit": self.exit, "entry": self.entry}
+        """The link as a record holds it: in whole millimetres, rounded the safe way (the exit up,
+        the entry down). A long shared aisle gives hundreds of links, and full floats made the
+        records of 100 robots on ``large`` outgrow what an agent takes (a 281,072-character one)."""
+        ex = None if self.exit is None else math.ceil(self.exit * 1000 - 1e-6) / 1000
+        return {"robot": self.robot, "path_id": self.path_id, "exit": ex,
+                "entry": max(0.0, math.floor(self.entry * 1000 + 1e-6) / 1000)}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Link:
@@ -97,6 +105,41 @@ def links_of(record: GateRecord) -> tuple[Link, ...]:
 #: links_of's parsed records by id (the record kept with them, so that its id is not reused meanwhile)
 _LINKS: dict[int, tuple[GateRecord, tuple[Link, ...]]] = {}
 _LINKS_MAX = 4096
+
+
+def _link_chars(d: Mapping[str, Any]) -> int:
+    """At most how many characters of JSON the link ``d`` takes (its robot id and 96 for the rest)."""
+    return len(d["robot"]) + 96
+
+
+def compact(links: tuple[dict[str, Any], ...], budget: int | None = None) -> tuple[dict[str, Any], ...]:
+    """``links`` merged the safe way until they take at most ``budget`` characters of JSON (ours):
+    the robot with the most links on one path of another robot has them halved, neighbours by
+    entry merged into one that stops at the earlier entry until the other robot is beyond both
+    exits (never: if either is never). The robot waits at least as long as before: a robot that
+    follows another down a long aisle gets a link every 0.1 m (over 700 on ``large``), and halving
+    them there only keeps it a little farther back when the one ahead is late. ``budget``: by
+    default :data:`RECORD_BUDGET`."""
+    budget = RECORD_BUDGET if budget is None else budget
+    size = sum(_link_chars(d) for d in links)
+    if size <= budget:
+        return links
+    groups: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    for d in links:
+        groups.setdefault((d["robot"], d["path_id"]), []).append(d)
+    while size > budget:
+        key = max(groups, key=lambda k: len(groups[k]))
+        g = sorted(groups[key], key=lambda d: d["entry"])
+        if len(g) < 2:
+            break   # one link per path of each robot: nothing left to merge (never near the budget)
+        merged = []
+        for a, b in zip(g[0::2], g[1::2]):
+            ex = None if a["exit"] is None or b["exit"] is None else max(a["exit"], b["exit"])
+            merged.append({**a, "exit": ex, "entry": min(a["entry"], b["entry"])})
+        merged += g[len(g) - len(g) % 2:]
+        size -= sum(_link_chars(d) for d in g) - sum(_link_chars(d) for d in merged)
+        groups[key] = merged
+    return tuple(d for g in groups.values() for d in g)
 
 
 # -------------------------------------------------------------------------------------------------
@@ -425,6 +468,9 @@ class GateBook:
         return gate_limit(rec, st.path_id, {o.id: o.status for o in fleet})
 
     def _set(self, rec: GateRecord) -> GateRecord:
+        links = compact(rec.links)
+        if links is not rec.links:
+            rec = replace(rec, links=links)
         self.records[rec.robot_id] = rec
         for d in rec.links:
             self._named_by.setdefault(d["robot"], set()).add(rec.robot_id)
