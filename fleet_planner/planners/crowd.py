@@ -62,7 +62,7 @@ import numpy as np
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
 from . import crowd_kernels as kern
-from . import crowd_sipp, crowd_st
+from . import crowd_sipp, crowd_smooth, crowd_st
 from .base import Planner, Progress, incremental_problem
 from .crowd_lns import MAX_HORIZON, Refiner, prioritized_first
 from .crowd_pibt import NIL, CellGraph, ConfigSearch, SearchFailed, remove_loops
@@ -107,7 +107,8 @@ class CrowdPlanner(Planner):
 
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
                  network: bool = True, time_limit_s: float | None = None, margin: float = 0.02,
-                 timed_refine_s: float | None = None, first: str = "auto", cutoff: float | None = None):
+                 timed_refine_s: float | None = None, first: str = "auto", cutoff: float | None = None,
+                 diagonal: bool = True):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
@@ -121,6 +122,7 @@ class CrowdPlanner(Planner):
         if first not in ("auto", "discrete", "lacam"):
             raise ValueError(f"first: 'auto', 'discrete' or 'lacam' (got {first!r})")
         self.first = first
+        self.diagonal = bool(diagonal)
         if cutoff is not None and not (isinstance(cutoff, (int, float)) and math.isfinite(cutoff)):
             raise ValueError(f"cutoff: must be a finite number or None (got {cutoff!r})")
         self.cutoff = None if cutoff is None else float(cutoff)
@@ -189,7 +191,8 @@ class CrowdPlanner(Planner):
                                               centres, radii, res, accels, self.margin, self.seed)
                 timed_info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
                               "search_s": round(t_first, 3), **stats}
-                return self._finish(timing, centres, starts, robots, res, t_start, timed_info, progress)
+                return self._finish(timing, centres, starts, robots, res, t_start, timed_info, progress, graph,
+                                    durations)
         configs = None
         if self.first in ("auto", "discrete") and not hopeless:
             configs = prioritized_first(graph, search.fields, search.grow, starts, search.goals, durations,
@@ -234,11 +237,18 @@ class CrowdPlanner(Planner):
                                           radii, res, accels, self.margin, self.seed, timing)
             info.update(stats)
         info.update(steps=int(configs.shape[0] - 1))
-        return self._finish(timing, centres, starts, robots, res, t_start, info, progress)
+        return self._finish(timing, centres, starts, robots, res, t_start, info, progress, graph, durations)
 
-    def _finish(self, timing, centres, starts, robots, res, t_start, info, progress) -> Plan:
-        """The timed paths (and the network) of ``timing``."""
+    def _finish(self, timing, centres, starts, robots, res, t_start, info, progress, graph, durations) -> Plan:
+        """The timed paths (and the network) of ``timing``, with diagonal steps where they fit
+        (:mod:`.crowd_smooth`; only without acceleration limits and for radii <= half the cell step)."""
         radii = [r.radius for r in robots]
+        if self.diagonal and all(r.max_accel is None for r in robots) and max(radii) <= res / 2 + 1e-12:
+            c0 = time.process_time()
+            before = _arrival_sum(timing)
+            timing = crowd_smooth.smooth(timing, starts, graph, durations, centres, radii, res, self.margin)
+            info.update(diagonal_s=round(time.process_time() - c0, 3),
+                        diagonal_gain_s=round(before - _arrival_sum(timing), 3))
         paths = timed_paths(timing, centres, starts, [r.id for r in robots], radii)
         net = network(timing, [r.id for r in robots], res) if self.with_network else None
         if progress:
@@ -333,6 +343,13 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
         if now < best_sum - 1e-9:
             best, best_sum = timing, now
     return best, {"timed_lns_iterations": iterations, "timed_lns_accepted": accepted}
+
+
+def _arrival_sum(timing) -> float:
+    """The sum of the robots' last move ends (robots without moves count 0)."""
+    arrival = np.zeros(len(timing.first) - 1)
+    np.maximum.at(arrival, timing.robot, timing.end)
+    return float(arrival.sum())
 
 
 def _check_radii(grid: GridMap, robots: Sequence[RobotSpec]) -> None:
