@@ -302,7 +302,7 @@ class CrowdPlanner(Planner):
 #: warehouse-10-20-10-2-1, seeds 0/1/2, SoC/free mean: the default ~1.15 s 1.176, 2.3 s 1.168, 4.6 s 1.163,
 #: 9.2 s 1.158): a faster LNS alone cannot bring it to 1.15; the first plan's robots parked in 1-cell aisles
 #: are most of the excess (robots vanishing on arrival: first plan 1.10 instead of 1.19, floor 1.064)
-TIMED_BUDGET_S = 1.5
+TIMED_BUDGET_S = 1.2
 #: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
 #: re-planned ones move up, which gives the next round room)
 TIMED_ROUNDS = 3

@@ -27,6 +27,7 @@ ones; :data:`ROUNDS` rounds, each from the last one's re-timed plan.
 """
 from __future__ import annotations
 
+import gc
 import math
 from collections.abc import Sequence
 
@@ -36,7 +37,7 @@ from .crowd_kernels import NIL
 from .crowd_timing import Timing, time_move_list
 
 #: the longest window of moves replaced by one octile path (measured on bench_dense, see crowd.py)
-WINDOW = 6
+WINDOW = 14
 #: smoothing rounds, each from the precedence pass's timing of the last
 ROUNDS = 2
 SQRT2 = math.sqrt(2.0)
@@ -61,26 +62,46 @@ def _drop(hold: list[list], who: int, lo: float) -> None:
 
 
 class _Paths:
-    """Every robot's cells, moves (start, end, sides) and the cells' holdings, editable."""
+    """Every robot's cells and moves (start, end, sides), editable, and the holdings of the roomy cells
+    (the only ones a rewrite can touch)."""
 
-    def __init__(self, timing: Timing, starts: Sequence[int]):
-        self.cells: list[list[int]] = []
-        self.t0: list[list[float]] = []
-        self.t1: list[list[float]] = []
-        self.side: list[list[tuple[int, int] | None]] = []
+    def __init__(self, timing: Timing, starts: Sequence[int], roomy: np.ndarray):
+        first = timing.first
+        n = len(first) - 1
+        m = len(timing.robot)
+        starts = np.asarray(starts, dtype=np.int64)
+        sides = timing.sides if timing.sides is not None else np.full((m, 2), NIL, dtype=np.int64)
+        cut = first[1:-1].tolist()
+        dst, t0, t1 = timing.dst.tolist(), timing.start.tolist(), timing.end.tolist()
+        self.cells = [[int(s)] for s in starts.tolist()]
+        for i, (a, b) in enumerate(zip([0] + cut, cut + [m])):
+            self.cells[i] += dst[a:b]
+        self.t0 = [t0[a:b] for a, b in zip([0] + cut, cut + [m])]
+        self.t1 = [t1[a:b] for a, b in zip([0] + cut, cut + [m])]
+        diag = (sides[:, 0] != NIL).tolist()
+        pairs = sides.tolist()
+        self.side: list[list[tuple[int, int] | None]] = [
+            [(pairs[k][0], pairs[k][1]) if diag[k] else None for k in range(a, b)] for a, b in zip([0] + cut, cut + [m])]
+        # holdings (module docstring of crowd_timing): starts from 0, every move's destination from the move's
+        # start to the end of the robot's next move (for ever after its last), sides during their move
+        idx = np.arange(m)
+        last = np.zeros(m, dtype=bool)
+        last[first[1:][first[1:] > first[:-1]] - 1] = True
+        nxt_end = np.where(last, np.inf, timing.end[np.minimum(idx + 1, max(m - 1, 0))] if m else 0.0)
+        has = first[1:] > first[:-1]
+        s_end = np.where(has, timing.end[np.minimum(first[:-1], max(m - 1, 0))] if m else 0.0, np.inf)
+        sk, sj = np.nonzero(sides != NIL)
+        cell = np.concatenate([starts, timing.dst, sides[sk, sj]])
+        lo = np.concatenate([np.zeros(n), timing.start, timing.start[sk]])
+        hi = np.concatenate([s_end, nxt_end, timing.end[sk]])
+        who = np.concatenate([np.arange(n), timing.robot, timing.robot[sk]])
+        keep = roomy[cell]
+        cell, lo, hi, who = cell[keep], lo[keep], hi[keep], who[keep]
+        order = np.argsort(cell, kind="stable")
         self.hold: dict[int, list[list]] = {}
-        first, dst = timing.first, timing.dst.tolist()
-        start, end = timing.start.tolist(), timing.end.tolist()
-        sides = timing.sides.tolist() if timing.sides is not None else None
-        for i, s in enumerate(starts):
-            a, b = int(first[i]), int(first[i + 1])
-            self.cells.append([int(s)] + dst[a:b])
-            self.t0.append(start[a:b])
-            self.t1.append(end[a:b])
-            self.side.append([None if sides is None or sides[k][0] == NIL else (sides[k][0], sides[k][1])
-                              for k in range(a, b)])
-            for c, lo, hi in self._holdings(i, 0, b - a):
-                self.hold.setdefault(c, []).append([lo, hi, i])
+        for c, a, b, w in zip(cell[order].tolist(), lo[order].tolist(), hi[order].tolist(), who[order].tolist()):
+            self.hold.setdefault(c, []).append([a, b, w])
+        self.roomy = roomy
 
     def _holdings(self, i: int, j0: int, j1: int):
         """(cell, from, to) of robot i's cells j0..j1 on its path and the sides of its moves j0..j1 - 1."""
@@ -95,52 +116,58 @@ class _Paths:
 
     def replace(self, i: int, j0: int, j1: int, cells: list[int], t0: list[float], t1: list[float],
                 side: list[tuple[int, int] | None]) -> bool:
-        """Replace robot i's moves j0..j1 - 1 by the moves along ``cells`` (from its cell j0 to its cell
-        j1) timed ``t0``/``t1`` with swept ``side``s, if its new holdings fit; True when done."""
-        old = list(self._holdings(i, j0, j1))
-        keep = (self.cells[i], self.t0[i], self.t1[i], self.side[i])
-        self.cells[i] = keep[0][:j0 + 1] + cells + keep[0][j1 + 1:]
-        self.t0[i] = keep[1][:j0] + t0 + keep[1][j1:]
-        self.t1[i] = keep[2][:j0] + t1 + keep[2][j1:]
-        self.side[i] = keep[3][:j0] + side + keep[3][j1:]
-        new = list(self._holdings(i, j0, j0 + len(t0)))
+        """Replace robot i's moves j0..j1 - 1 by the moves along ``cells`` (after its cell j0, to its cell
+        j1) timed ``t0``/``t1`` with swept ``side``s, if its new holdings fit; True when done. All
+        cells involved are roomy."""
+        hold, n_new = self.hold, len(t0)
+        k_old = len(self.t0[i])
+        new = [(self.cells[i][j0], 0.0 if j0 == 0 else self.t0[i][j0 - 1], t1[0])]
+        new += [(cells[k], t0[k], t1[k + 1]) for k in range(n_new - 1)]
+        new.append((cells[-1], t0[-1], self.t1[i][j1] if j1 < k_old else math.inf))
+        for k in range(n_new):
+            if side[k] is not None:
+                new += [(side[k][0], t0[k], t1[k]), (side[k][1], t0[k], t1[k])]
         for c, lo, hi in new:
-            if _overlaps(self.hold.get(c, ()), i, lo, hi):
-                self.cells[i], self.t0[i], self.t1[i], self.side[i] = keep
+            if _overlaps(hold.get(c, ()), i, lo, hi):
                 return False
-        for c, lo, _hi in old:
-            _drop(self.hold[c], i, lo)
+        for c, lo, _hi in list(self._holdings(i, j0, j1)):
+            _drop(hold[c], i, lo)
         for c, lo, hi in new:
-            self.hold.setdefault(c, []).append([lo, hi, i])
+            hold.setdefault(c, []).append([lo, hi, i])
+        self.cells[i][j0 + 1:j1 + 1] = cells
+        self.t0[i][j0:j1] = t0
+        self.t1[i][j0:j1] = t1
+        self.side[i][j0:j1] = side
         return True
 
 
-def _octile(graph, p: int, q: int, diagonal_first: bool) -> tuple[list[int], list[tuple[int, int] | None]] | None:
+def _octile(grid_cells: list[list[int]], rows: list[int], cols: list[int], p: int, q: int,
+            diagonal_first: bool) -> tuple[list[int], list[tuple[int, int] | None]] | None:
     """The cells of an octile path from cell p to cell q (after p) and the sides each move sweeps; None
-    where a cell or a swept side is not free."""
-    r, c = int(graph.rows[p]), int(graph.cols[p])
-    dr, dc = int(graph.rows[q]) - r, int(graph.cols[q]) - c
+    where a cell or a swept side is not roomy (``grid_cells[row][col]``: the roomy cell there, else NIL)."""
+    r, c = rows[p], cols[p]
+    dr, dc = rows[q] - r, cols[q] - c
     sr, sc = (dr > 0) - (dr < 0), (dc > 0) - (dc < 0)
     n_diag = min(abs(dr), abs(dc))
+    n_straight = max(abs(dr), abs(dc)) - n_diag
     straight = (sr, 0) if abs(dr) > abs(dc) else (0, sc)
-    steps = [(sr, sc)] * n_diag
-    steps = steps + [straight] * (max(abs(dr), abs(dc)) - n_diag) if diagonal_first else \
-        [straight] * (max(abs(dr), abs(dc)) - n_diag) + steps
-    index = graph.index
-    h, w = index.shape
-    cells, sides = [], []
-    for a, b in steps:
+    steps = [(sr, sc)] * n_diag + [straight] * n_straight if diagonal_first else \
+        [straight] * n_straight + [(sr, sc)] * n_diag
+    cells: list[int] = []
+    sides: list[tuple[int, int] | None] = []
+    for a, b in steps:     # (all inside the map: p and q are, and so is their bounding box)
         nr, nc = r + a, c + b
-        if not (0 <= nr < h and 0 <= nc < w) or index[nr, nc] == NIL:
+        z = grid_cells[nr][nc]
+        if z == NIL:
             return None
         if a and b:
-            s1, s2 = index[r, nc], index[nr, c]
+            s1, s2 = grid_cells[r][nc], grid_cells[nr][c]
             if s1 == NIL or s2 == NIL:
                 return None
-            sides.append((int(s1), int(s2)))
+            sides.append((s1, s2))
         else:
             sides.append(None)
-        cells.append(int(index[nr, nc]))
+        cells.append(z)
         r, c = nr, nc
     return cells, sides
 
@@ -151,7 +178,18 @@ def smooth(timing: Timing, starts: Sequence[int], graph, durations: Sequence[flo
     """``timing`` with diagonal steps where they fit (module docstring), re-timed by the precedence
     pass; ``timing`` itself where nothing changed. Robots without acceleration limits only, radii
     <= half the cell step (the caller checks)."""
-    # cells with a free 2x2 block round them: where a diagonal step can start or end
+    collecting = gc.isenabled()
+    gc.disable()   # 10^5 small lists, none cyclic: the collector would only re-scan them
+    try:
+        return _smooth(timing, starts, graph, durations, centres, radii, step_m, gap_m, rounds, window)
+    finally:
+        if collecting:
+            gc.enable()
+
+
+def _smooth(timing: Timing, starts: Sequence[int], graph, durations, centres: np.ndarray, radii: Sequence[float],
+            step_m: float, gap_m: float, rounds: int, window: int) -> Timing:
+    # roomy cells: in a free 2x2 block, where a diagonal step can start or end
     free = graph.index != NIL
     block = free[:-1, :-1] & free[1:, :-1] & free[:-1, 1:] & free[1:, 1:]
     near = np.zeros_like(free)
@@ -160,49 +198,77 @@ def smooth(timing: Timing, starts: Sequence[int], graph, durations: Sequence[flo
             near[dr:dr + block.shape[0], dc:dc + block.shape[1]] |= block
     roomy = near[graph.rows, graph.cols]
     rows, cols = graph.rows.tolist(), graph.cols.tolist()
+    grid_cells = np.where(graph.index != NIL, graph.index, NIL)
+    grid_cells[graph.rows[~roomy], graph.cols[~roomy]] = NIL
+    grid_cells = grid_cells.tolist()
     dur = np.asarray(durations, dtype=float).tolist()
+    ways: dict[tuple[int, int, bool], tuple[list[int], list[tuple[int, int] | None]] | None] = {}
     for _ in range(rounds):
-        paths = _Paths(timing, starts)
+        robot_c, j_c, w_c = _windows(timing, graph, roomy, window)
+        if not len(robot_c):
+            break
         changed = False
-        for i in range(len(starts)):
-            j = 0
-            while j < len(paths.t0[i]):
-                cells = paths.cells[i]
-                if not roomy[cells[j]]:
-                    j += 1
+        paths = _Paths(timing, starts, roomy)
+        # (windows robot-major, by start, longest first; an accepted rewrite shifts the robot's later windows)
+        i_now, shift, skip_to = -1, 0, -1
+        for i, j_old, w in zip(robot_c.tolist(), j_c.tolist(), w_c.tolist()):
+            if i != i_now:
+                i_now, shift, skip_to = i, 0, -1
+            if j_old < skip_to:
+                continue
+            j = j_old + shift
+            p, q = paths.cells[i][j], paths.cells[i][j + w]
+            for diagonal_first in (True, False):
+                key = (p, q, diagonal_first)
+                way = ways[key] if key in ways else \
+                    ways.setdefault(key, _octile(grid_cells, rows, cols, p, q, diagonal_first))
+                if way is None:
                     continue
-                done = False
-                for w in range(min(window, len(paths.t0[i]) - j), 1, -1):
-                    p, q = cells[j], cells[j + w]
-                    if not roomy[q]:
-                        continue
-                    dr, dc = abs(rows[q] - rows[p]), abs(cols[q] - cols[p])
-                    new_len = max(dr, dc) + (SQRT2 - 1.0) * min(dr, dc)
-                    side = paths.side[i]
-                    old_len = sum(1.0 if side[k] is None else SQRT2 for k in range(j, j + w))
-                    if new_len > old_len - 1e-6:
-                        continue
-                    for diagonal_first in (True, False):
-                        way = _octile(graph, p, q, diagonal_first)
-                        if way is None:
-                            continue
-                        t, t0s, t1s = paths.t0[i][j], [], []
-                        for s in way[1]:
-                            t0s.append(t)
-                            t += dur[i] * (1.0 if s is None else SQRT2)
-                            t1s.append(t)
-                        if paths.replace(i, j, j + w, way[0], t0s, t1s, way[1]):
-                            done = changed = True
-                            j += len(t0s)
-                            break
-                    if done:
-                        break
-                if not done:
-                    j += 1
+                t, t0s, t1s = paths.t0[i][j], [], []
+                for sd in way[1]:
+                    t0s.append(t)
+                    t += dur[i] * (1.0 if sd is None else SQRT2)
+                    t1s.append(t)
+                if paths.replace(i, j, j + w, way[0], t0s, t1s, way[1]):
+                    changed = True
+                    shift += len(t0s) - w
+                    skip_to = j_old + w
+                    break
         if not changed:
             break
         timing = _retime(paths, starts, durations, centres, radii, step_m, gap_m)
     return timing
+
+
+def _windows(timing: Timing, graph, roomy: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every window of 2..``window`` consecutive moves of one robot on roomy cells whose octile path
+    is shorter than it (and ends elsewhere than it starts): robot, index of its first move in the
+    robot's moves, length; robot-major, by first move, longest first."""
+    m = len(timing.robot)
+    if m == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    robot, src, dst, first = timing.robot, timing.src, timing.dst, timing.first
+    length = np.ones(m) if timing.sides is None else np.where(timing.sides[:, 0] != NIL, SQRT2, 1.0)
+    cum_len = np.concatenate([[0.0], np.cumsum(length)])
+    cum_bad = np.concatenate([[0], np.cumsum(~roomy[dst])])
+    k = np.arange(m)
+    out = []
+    for w in range(2, window + 1):
+        e = k + w - 1
+        ok = e < m
+        kk, ee = k[ok], e[ok]
+        ok = (robot[ee] == robot[kk]) & roomy[src[kk]] & (cum_bad[ee + 1] == cum_bad[kk])
+        kk, ee = kk[ok], ee[ok]
+        p, q = src[kk], dst[ee]
+        dr = np.abs(graph.rows[q] - graph.rows[p])
+        dc = np.abs(graph.cols[q] - graph.cols[p])
+        octile = np.maximum(dr, dc) + (SQRT2 - 1.0) * np.minimum(dr, dc)
+        ok = (octile < cum_len[ee + 1] - cum_len[kk] - 1e-6) & (p != q)
+        kk = kk[ok]
+        out.append(np.column_stack([robot[kk], kk - first[robot[kk]], np.full(len(kk), w)]))
+    rows = np.concatenate(out)
+    rows = rows[np.lexsort((-rows[:, 2], rows[:, 1], rows[:, 0]))]
+    return rows[:, 0], rows[:, 1], rows[:, 2]
 
 
 def _retime(paths: _Paths, starts: Sequence[int], durations, centres, radii, step_m: float, gap_m: float) -> Timing:
