@@ -4,11 +4,12 @@ When every driven trajectory lies on the lattice of cell centres (the dense solv
 robots standing on cell centres: waypoints on centres, axis-aligned or diagonal moves), each of them
 is turned into *exactly* the cell holdings of the timing rule (:mod:`.crowd_timing`: a robot holds a
 cell from the start of its move into it to its arrival in the next one, for ever on its last
-waypoint; a diagonal step of :mod:`.crowd_smooth` holds its two side cells while it drives). The new robots are then planned one after another by safe-interval path planning at
-their own top speeds (:func:`.crowd_sipp.sipp`, compiled) against those holdings and the ones
-already planned; a robot not planned yet keeps its start cell for its first move. The safety
-argument is the timing's: no cell held by two robots at once, so two robots are at least one cell
-step >= r_i + r_j apart - the checker is the judge in the tests.
+waypoint; a diagonal step of :mod:`.crowd_smooth` holds its two side cells while it drives). The
+new robots are then planned one after another by safe-interval path planning at their own top speeds
+(:func:`.crowd_sipp.sipp`, compiled) against those holdings and the ones already planned; a robot not
+planned yet keeps its start cell for its first move. The safety argument is the timing's: no cell
+held by two robots at once, so two robots are at least one cell step >= r_i + r_j apart - the checker
+is the judge in the tests.
 
 What is not on the lattice (md's and PRIOR's any-angle legs, robots between cell centres) has no
 exact cell holdings: :func:`lattice_holdings` says so (None) and the planner hands those legs to

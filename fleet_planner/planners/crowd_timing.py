@@ -27,6 +27,11 @@ their gap is computed exactly, while every other robot keeps off that cell as be
 robots thus drive down an aisle one step apart instead of two.
 
 Collinear moves driven without a stop in between are merged into one segment.
+
+Diagonal steps (:mod:`.crowd_smooth`, ``sides`` of :func:`time_move_list`) hold their two side cells
+while they drive: a robot is then inside the axis-aligned unit square of the four cells it holds, and
+two such lattice boxes (points, unit edges, unit squares) that share no lattice point are still at
+least one step apart.
 """
 from __future__ import annotations
 
