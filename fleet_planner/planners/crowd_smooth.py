@@ -72,11 +72,11 @@ class _Paths:
         first = timing.first
         n = len(first) - 1
         m = len(timing.robot)
-        starts = np.asarray(starts, dtype=np.int64)
+        start_cells = np.asarray(starts, dtype=np.int64)
         sides = timing.sides if timing.sides is not None else np.full((m, 2), NIL, dtype=np.int64)
         cut = first[1:-1].tolist()
         dst, t0, t1 = timing.dst.tolist(), timing.start.tolist(), timing.end.tolist()
-        self.cells = [[int(s)] for s in starts.tolist()]
+        self.cells = [[int(s)] for s in start_cells.tolist()]
         for i, (a, b) in enumerate(zip([0] + cut, cut + [m])):
             self.cells[i] += dst[a:b]
         self.t0 = [t0[a:b] for a, b in zip([0] + cut, cut + [m])]
@@ -94,7 +94,7 @@ class _Paths:
         has = first[1:] > first[:-1]
         s_end = np.where(has, timing.end[np.minimum(first[:-1], max(m - 1, 0))] if m else 0.0, np.inf)
         sk, sj = np.nonzero(sides != NIL)
-        cell = np.concatenate([starts, timing.dst, sides[sk, sj]])
+        cell = np.concatenate([start_cells, timing.dst, sides[sk, sj]])
         lo = np.concatenate([np.zeros(n), timing.start, timing.start[sk]])
         hi = np.concatenate([s_end, nxt_end, timing.end[sk]])
         who = np.concatenate([np.arange(n), timing.robot, timing.robot[sk]])
@@ -113,9 +113,10 @@ class _Paths:
         for j in range(j0, j1 + 1):
             yield cells[j], (0.0 if j == 0 else t0[j - 1]), (t1[j] if j < k else math.inf)
         for j in range(j0, j1):
-            if side[j] is not None:
-                yield side[j][0], t0[j], t1[j]
-                yield side[j][1], t0[j], t1[j]
+            swept = side[j]
+            if swept is not None:
+                yield swept[0], t0[j], t1[j]
+                yield swept[1], t0[j], t1[j]
 
     def replace(self, i: int, j0: int, j1: int, cells: list[int], t0: list[float], t1: list[float],
                 side: list[tuple[int, int] | None]) -> bool:
@@ -128,10 +129,11 @@ class _Paths:
         new += [(cells[k], t0[k], t1[k + 1]) for k in range(n_new - 1)]
         new.append((cells[-1], t0[-1], self.t1[i][j1] if j1 < k_old else math.inf))
         for k in range(n_new):
-            if side[k] is not None:
-                new += [(side[k][0], t0[k], t1[k]), (side[k][1], t0[k], t1[k])]
+            swept = side[k]
+            if swept is not None:
+                new += [(swept[0], t0[k], t1[k]), (swept[1], t0[k], t1[k])]
         for c, lo, hi in new:
-            if _overlaps(hold.get(c, ()), i, lo, hi):
+            if c in hold and _overlaps(hold[c], i, lo, hi):
                 return False
         for c, lo, _hi in list(self._holdings(i, j0, j1)):
             _drop(hold[c], i, lo)
