@@ -34,6 +34,16 @@ def test_a_robot_crosses_open_floor_on_the_diagonal():
     assert _plan(["." * 5] * 5, robot, diagonal=False).paths[0].arrival_time == pytest.approx(8.0)
 
 
+def test_diagonal_steps_only_up_to_their_crowd_size(monkeypatch):
+    """Beyond ``DIAGONAL_MAX`` robots the plan keeps its unit steps (they cost too much there)."""
+    from fleet_planner.planners import crowd
+
+    robot = [RobotSpec("a", 0.45, 1.0, (0.5, 0.5), (4.5, 4.5))]
+    monkeypatch.setattr(crowd, "DIAGONAL_MAX", 0)
+    plan = _plan(["." * 5] * 5, robot)
+    assert plan.paths[0].arrival_time == pytest.approx(8.0) and "diagonal_s" not in plan.info
+
+
 @pytest.mark.parametrize("rows, arrival", [(["..", ".."], math.sqrt(2)), (["..", "@."], 2.0), (["@.", ".."], 2.0)])
 def test_a_diagonal_step_never_cuts_a_wall_corner(rows, arrival):
     """From the top-left cell to the bottom-right one: diagonal only when both side cells are free

@@ -104,7 +104,8 @@ class CrowdPlanner(Planner):
     steps: every plan moves along the graph's edges, one cell step each, at most at top speed) already
     sum to at least it, the solver gives up at once with PlanningError (md's comparison: its plan
     cannot lose, up to what diagonal steps in open floor would have saved).
-    ``diagonal``: shorten the timed plan by diagonal steps where they fit (:mod:`.crowd_smooth`).
+    ``diagonal``: shorten the timed plan by diagonal steps where they fit (:mod:`.crowd_smooth`; up to
+    :data:`DIAGONAL_MAX` robots).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
@@ -250,7 +251,8 @@ class CrowdPlanner(Planner):
         """The timed paths (and the network) of ``timing``, with diagonal steps where they fit
         (:mod:`.crowd_smooth`; only without acceleration limits and for radii <= half the cell step)."""
         radii = [r.radius for r in robots]
-        if self.diagonal and all(r.max_accel is None for r in robots) and max(radii) <= res / 2 + 1e-12:
+        if self.diagonal and len(robots) <= DIAGONAL_MAX and all(r.max_accel is None for r in robots) \
+                and max(radii) <= res / 2 + 1e-12:
             c0 = time.process_time()
             before = _arrival_sum(timing)
             timing = crowd_smooth.smooth(timing, starts, graph, durations, centres, radii, res, self.margin,
@@ -314,8 +316,13 @@ class CrowdPlanner(Planner):
 #: 0.3 s of LNS bought ~0.003)
 TIMED_BUDGET_S = 1.2
 #: CPU seconds of the diagonal steps' search for rewrites (crowd_smooth; the re-timing of what it found comes
-#: on top): at 400 robots it needs ~0.3 s; LaCAM's long plans at 1000 robots took 2.4 s for SoC/free -0.04
+#: on top): at 400 robots it needs ~0.3 s
 DIAGONAL_S = 0.4
+#: diagonal steps up to this many robots (like the timed LNS's default). Beyond, unbounded they cost too much
+#: (seed 0, load 15: LaCAM's long plans at 1000 robots on warehouse-10-20-10-2-1 2.4 s for SoC/free 3.338 ->
+#: 3.297; 2000 on warehouse-20-40-10-2-2 8.9 s for 1.116 -> 1.090), and within DIAGONAL_S they gained
+#: nothing (2000: 10.74 s against 9.92, SoC/free 1.116 either way; 1000: 7.44 s against 6.61, 3.330 -> 3.327)
+DIAGONAL_MAX = 500
 #: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
 #: re-planned ones move up, which gives the next round room)
 TIMED_ROUNDS = 3
