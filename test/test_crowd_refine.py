@@ -4,6 +4,7 @@ The independent checker is the oracle of every case."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -46,10 +47,12 @@ def test_the_timed_refinement_is_valid_and_never_worse(case, first):
     if len(robots) < 2:
         return
     try:
-        plain = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0, first=first).plan(grid, robots)
+        plain = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0, first=first, diagonal=False).plan(
+            grid, robots)
     except Exception:   # noqa: BLE001 - unreachable goals: not this test's business
         return
-    refined = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0.05, first=first).plan(grid, robots)
+    refined = CrowdPlanner(time_limit_s=5.0, refine_s=0, timed_refine_s=0.05, first=first, diagonal=False).plan(
+        grid, robots)
     assert refined.info["first_plan"] == plain.info["first_plan"]
     assert check_plan(grid, robots, refined) == []
     assert _soc(refined) <= _soc(plain) + 1e-6
@@ -80,8 +83,8 @@ def test_a_crowd_on_a_shelf_floor_gets_a_valid_timed_first_plan_unless_robots_ra
     pipeline plans (the safe intervals are at constant top speed)."""
     rows = ["." * 23] + [".." + "@@@@@@@@@@" + "." + "@@@@@@@@@@"] * 2 + ["." * 23]
     grid, robots, _free, _pick = _crowd(rows * 3 + ["." * 23], 20, seed=1, slowest=0.7)
-    first = CrowdPlanner(timed_refine_s=0).plan(grid, robots)
-    refined = CrowdPlanner(timed_refine_s=0.2).plan(grid, robots)
+    first = CrowdPlanner(timed_refine_s=0, diagonal=False).plan(grid, robots)
+    refined = CrowdPlanner(timed_refine_s=0.2, diagonal=False).plan(grid, robots)
     for plan in (first, refined):
         assert plan.info["first_plan"] == "timed" and check_plan(grid, robots, plan) == []
     assert _soc(refined) <= _soc(first) + 1e-6
@@ -139,14 +142,17 @@ def test_a_burst_of_new_legs_in_a_crowd_is_planned_on_the_lattice_and_checked():
     assert check_plan(grid, specs, Plan("dense", [whole[k] for k in range(n)], 0.0, {})) == []
 
 
-def test_legs_around_any_angle_trajectories_go_to_prior():
-    """A driven trajectory off the lattice (a diagonal) has no exact cell holdings: PRIOR plans."""
+@pytest.mark.parametrize("end, answer", [((3.5, 2.5), "prior"), ((3.5, 3.5), "dense")])
+def test_legs_around_any_angle_trajectories_go_to_prior(end, answer):
+    """A driven trajectory off the lattice (a line at 34 degrees) has no exact cell holdings: PRIOR
+    plans; one of diagonal steps (the dense solver's own, crowd_smooth) has them, side cells included:
+    the lattice planner plans, and the checker passes both."""
     grid = GridMap.from_rows(["." * 6] * 4)
-    driven = TimedPath("a", 0.4, np.array([[0.5, 0.5, 0.0], [3.5, 3.5, 5.0]]))
+    driven = TimedPath("a", 0.4, np.array([[0.5, 0.5, 0.0], [*end, 5.0]]))
     planner = CrowdPlanner()
     legs = planner.plan_incremental(grid, [RobotSpec("b", 0.4, 1.0, (5.5, 0.5), (0.5, 3.5))], [driven], 0.0)
-    assert planner.last_incremental == "prior"
-    assert check_plan(grid, [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), (3.5, 3.5)),
+    assert planner.last_incremental == answer
+    assert check_plan(grid, [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), end),
                              RobotSpec("b", 0.4, 1.0, (5.5, 0.5), (0.5, 3.5))],
                       Plan("x", [driven] + legs, 0.0, {})) == []
 

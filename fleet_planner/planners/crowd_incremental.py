@@ -1,14 +1,15 @@
 """New legs for the dense-crowd solver around trajectories being driven (``plan_incremental``).
 
 When every driven trajectory lies on the lattice of cell centres (the dense solver's own plans, or
-robots standing on cell centres: waypoints on centres, axis-aligned moves), each of them is turned
-into *exactly* the cell holdings of the timing rule (:mod:`.crowd_timing`: a robot holds a cell
-from the start of its move into it to its arrival in the next one, for ever on its last
-waypoint). The new robots are then planned one after another by safe-interval path planning at
-their own top speeds (:func:`.crowd_sipp.sipp`, compiled) against those holdings and the ones
-already planned; a robot not planned yet keeps its start cell for its first move. The safety
-argument is the timing's: no cell held by two robots at once, so two robots are at least one cell
-step >= r_i + r_j apart - the checker is the judge in the tests.
+robots standing on cell centres: waypoints on centres, axis-aligned or diagonal moves), each of them
+is turned into *exactly* the cell holdings of the timing rule (:mod:`.crowd_timing`: a robot holds a
+cell from the start of its move into it to its arrival in the next one, for ever on its last
+waypoint; a diagonal step of :mod:`.crowd_smooth` holds its two side cells while it drives). The
+new robots are then planned one after another by safe-interval path planning at their own top speeds
+(:func:`.crowd_sipp.sipp`, compiled) against those holdings and the ones already planned; a robot not
+planned yet keeps its start cell for its first move. The safety argument is the timing's: no cell
+held by two robots at once, so two robots are at least one cell step >= r_i + r_j apart - the checker
+is the judge in the tests.
 
 What is not on the lattice (md's and PRIOR's any-angle legs, robots between cell centres) has no
 exact cell holdings: :func:`lattice_holdings` says so (None) and the planner hands those legs to
@@ -43,18 +44,23 @@ def lattice_holdings(fixed: Sequence[TimedPath], graph, t0: float) -> list[tuple
         col, row = col.astype(np.int64), row.astype(np.int64)
         # cells with the time the robot is on each centre: (col, row, arrive, leave)
         seq: list[list[float]] = [[col[0], row[0], -np.inf, wp[0, 2]]]
+        swept: list[tuple[int, int, float, float]] = []   # (col, row, from, to): sides of diagonal steps
         for k in range(1, len(wp)):
             dc, dr = col[k] - col[k - 1], row[k] - row[k - 1]
             if dc == 0 and dr == 0:
                 seq[-1][3] = wp[k, 2]
                 continue
-            if dc != 0 and dr != 0:
-                return None                       # not axis-aligned
-            steps = int(abs(dc) + abs(dr))
+            if dc != 0 and dr != 0 and abs(dc) != abs(dr):
+                return None                       # neither axis-aligned nor diagonal
+            steps = int(max(abs(dc), abs(dr)))
             ta, tb = wp[k - 1, 2], wp[k, 2]
             for m in range(1, steps + 1):
                 t = ta + (tb - ta) * m / steps
-                seq.append([col[k - 1] + np.sign(dc) * m, row[k - 1] + np.sign(dr) * m, t, t])
+                c_to, r_to = col[k - 1] + np.sign(dc) * m, row[k - 1] + np.sign(dr) * m
+                if dc != 0 and dr != 0:           # a diagonal step (crowd_smooth) holds its two side cells
+                    t_from = ta + (tb - ta) * (m - 1) / steps
+                    swept += [(c_to, r_to - np.sign(dr), t_from, t), (c_to - np.sign(dc), r_to, t_from, t)]
+                seq.append([c_to, r_to, t, t])
         for m, (c, r, _arrive, _leave) in enumerate(seq):
             lo = -np.inf if m == 0 else seq[m - 1][3]            # start of the move into it
             hi = np.inf if m == len(seq) - 1 else seq[m + 1][2]  # arrival in the next cell
@@ -62,6 +68,10 @@ def lattice_holdings(fixed: Sequence[TimedPath], graph, t0: float) -> list[tuple
             if cell == NIL or hi - t0 < 0:
                 continue
             out.append((cell, max(lo - t0, 0.0), hi - t0))
+        for c, r, lo, hi in swept:
+            cell = int(graph.index[int(r), int(c)])
+            if cell != NIL and hi - t0 >= 0:
+                out.append((cell, max(lo - t0, 0.0), hi - t0))
     return out
 
 

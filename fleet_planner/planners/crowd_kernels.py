@@ -410,10 +410,12 @@ def remove_loops_inplace(out, ncells):
 # the timing's longest-path pass
 # ---------------------------------------------------------------------------------------------
 @_jit
-def precedence_pass(order, after_own, after_cell, slack, dur, start, end):
+def precedence_pass(order, after_own, after_cell, slack, dur, start, end, after_side):
     """Earliest start and end of every move, taken in ``order`` (a topological order of the
-    precedences): after its robot's previous move ``after_own`` ended, and after the move
-    ``after_cell`` out of its cell started and ended at most ``slack`` before (NIL: none)."""
+    precedences): after its robot's previous move ``after_own`` ended, after the move
+    ``after_cell`` out of its cell started and ended at most ``slack`` before (NIL: none), and
+    after the moves ``after_side[k, :]`` (NIL: none; (moves, 0) when no move sweeps a cell) out of
+    the cells a diagonal move sweeps ended."""
     for q in range(len(order)):
         k = order[q]
         t = 0.0
@@ -426,6 +428,10 @@ def precedence_pass(order, after_own, after_cell, slack, dur, start, end):
                 t = start[c]
             if end[c] - slack[k] > t:
                 t = end[c] - slack[k]
+        for j in range(after_side.shape[1]):
+            c = after_side[k, j]
+            if c != NIL and end[c] > t:
+                t = end[c]
         start[k] = t
         end[k] = t + dur[k]
 
@@ -459,5 +465,8 @@ def warm_up() -> None:
     plan = np.array([[0, 2], [1, 5], [2, 4], [2, 3], [2, 0]], dtype=np.int32)
     remove_loops_inplace(plan.astype(np.int64), 6)
     z = np.zeros(2)
-    precedence_pass(np.arange(2), np.array([NIL, 0]), np.array([NIL, NIL]), z, np.ones(2), z.copy(), z.copy())
+    side = np.full((2, 2), NIL, dtype=np.int64)
+    precedence_pass(np.arange(2), np.array([NIL, 0]), np.array([NIL, NIL]), z, np.ones(2), z.copy(), z.copy(), side)
+    precedence_pass(np.arange(2), np.array([NIL, 0]), np.array([NIL, NIL]), z, np.ones(2), z.copy(), z.copy(),
+                    np.full((2, 0), NIL, dtype=np.int64))
     _WARM = True

@@ -27,6 +27,11 @@ their gap is computed exactly, while every other robot keeps off that cell as be
 robots thus drive down an aisle one step apart instead of two.
 
 Collinear moves driven without a stop in between are merged into one segment.
+
+Diagonal steps (:mod:`.crowd_smooth`, ``sides`` of :func:`time_move_list`) hold their two side cells
+while they drive: a robot is then inside the axis-aligned unit square of the four cells it holds, and
+two such lattice boxes (points, unit edges, unit squares) that share no lattice point are still at
+least one step apart.
 """
 from __future__ import annotations
 
@@ -60,6 +65,10 @@ class Timing:
     after_cell: np.ndarray
     first: np.ndarray      # (robots + 1,) robot i's moves are first[i]:first[i + 1]
     visits: list[tuple[int, int]]   # consecutive visits of a cell by two robots: (move out, move in)
+    #: (moves, 2) the cells a diagonal move sweeps (its two side cells; NIL for straight moves), or None
+    sides: np.ndarray | None = None
+    #: per visit pair: whether the earlier / the later visit is a sweep (the move in is the move out), or None
+    sweeps: list[tuple[bool, bool]] | None = None
 
 
 def time_moves(configs: np.ndarray, durations: Sequence[float] | np.ndarray, centres: np.ndarray | None = None,
@@ -92,12 +101,20 @@ def time_move_list(starts: np.ndarray, robot: np.ndarray, step: np.ndarray, src:
                    durations: Sequence[float] | np.ndarray, centres: np.ndarray | None = None,
                    radii: Sequence[float] | None = None, step_m: float = 1.0,
                    accels: Sequence[float | None] | None = None, gap_m: float = GAP_M,
-                   consecutive: bool = False) -> Timing:
+                   consecutive: bool = False, sides: np.ndarray | None = None) -> Timing:
     """:func:`time_moves` for a plan given as its moves: move k of robot ``robot[k]`` from cell
     ``src[k]`` to ``dst[k]``, robot-major, each robot's moves in its order; ``step[k]`` orders the
     moves in time (a discrete step, or a start time: only its order counts), so that each cell is
     visited in the order of the steps of the moves into it. ``consecutive``: steps are discrete
-    steps (a robot's moves at consecutive steps can form one run of a trapezoid)."""
+    steps (a robot's moves at consecutive steps can form one run of a trapezoid).
+
+    ``sides`` ((moves, 2), with ``centres``; ours, :mod:`.crowd_smooth`): move k may be a diagonal
+    step between two cells with a common corner, and ``sides[k]`` the two cells it sweeps (NIL for a
+    straight move). The move takes sqrt 2 times as long; it holds its two side cells from its start
+    to its end (a visit whose move in is its move out), and every precedence of a diagonal move or a
+    sweep is a plain hand-over (no follower slack). The steps must order each cell's visits without
+    overlap for those (the smoothing's schedule does): such a precedence then starts strictly later,
+    so the level order stays topological. Without acceleration limits only."""
     n = len(starts)
     starts = np.asarray(starts)
     robot = np.asarray(robot, dtype=np.int64)
@@ -115,6 +132,20 @@ def time_move_list(starts: np.ndarray, robot: np.ndarray, step: np.ndarray, src:
     v_entry_move = np.concatenate([np.full(n, NIL), idx])
     v_exit_move = np.concatenate([np.where(has_moves, first[:-1], NIL), next_own])
     v_robot = np.concatenate([np.arange(n), robot])
+    v_slot = np.zeros(len(v_cell), dtype=np.int64)     # 0: a cell the robot is on, 1 / 2: a side swept
+    length = np.ones(m)
+    if sides is not None:
+        if centres is None or (accels is not None and any(a is not None for a in accels)):
+            raise ValueError("time_move_list: sides need centres and no acceleration limits")
+        sides = np.asarray(sides, dtype=np.int64).reshape(m, 2)
+        length = np.hypot(*(centres[dst] - centres[src]).T) / step_m if m else length
+        sk, sj = np.nonzero(sides != NIL)
+        v_cell = np.concatenate([v_cell, sides[sk, sj]])
+        v_entry_step = np.concatenate([v_entry_step, step[sk]])
+        v_entry_move = np.concatenate([v_entry_move, sk])
+        v_exit_move = np.concatenate([v_exit_move, sk])
+        v_robot = np.concatenate([v_robot, robot[sk]])
+        v_slot = np.concatenate([v_slot, 1 + sj])
     order = np.lexsort((v_entry_step, v_cell))
     same = v_cell[order[1:]] == v_cell[order[:-1]]
     a, b = order[:-1][same], order[1:][same]                   # a visited the cell just before b
@@ -122,8 +153,15 @@ def time_move_list(starts: np.ndarray, robot: np.ndarray, step: np.ndarray, src:
         raise AssertionError("discrete plan: a cell is visited after a robot parked on it for good")
     after_cell = np.full(m, NIL)
     other = v_robot[a] != v_robot[b]
-    after_cell[v_entry_move[b]] = np.where(other, v_exit_move[a], NIL)
+    plain = v_slot[b] == 0
+    after_cell[v_entry_move[b[plain]]] = np.where(other[plain], v_exit_move[a[plain]], NIL)
+    after_side = np.full((m, 2 if sides is not None else 0), NIL, dtype=np.int64)
+    if sides is not None:
+        swept = ~plain & other
+        after_side[v_entry_move[b[swept]], v_slot[b[swept]] - 1] = v_exit_move[a[swept]]
     visits = list(zip(v_exit_move[a][other].tolist(), v_entry_move[b][other].tolist()))
+    sweeps = list(zip((v_slot[a][other] > 0).tolist(), (v_slot[b][other] > 0).tolist())) if sides is not None \
+        else None
     # levels: by step, then by depth in the chains of robots following each other within a step
     depth = np.zeros(m, dtype=np.int64)
     chained = (after_cell != NIL) & (step[np.maximum(after_cell, 0)] == step)
@@ -133,7 +171,8 @@ def time_move_list(starts: np.ndarray, robot: np.ndarray, step: np.ndarray, src:
         if np.all(depth[src_c] >= new):
             break
         depth[src_c] = np.maximum(depth[src_c], new)
-    base = np.asarray(durations, dtype=float)[robot]
+    base = np.asarray(durations, dtype=float)[robot] * length
+    straight = np.abs(length - 1.0) < 1e-9
 
     def schedule(dur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # slack[m]: how long before the previous holder's arrival move m may start (it follows that robot)
@@ -159,20 +198,20 @@ def time_move_list(starts: np.ndarray, robot: np.ndarray, step: np.ndarray, src:
             a0 = np.clip((reach * np.hypot(v_out, v_in) - v_out) / v_in, 0.0, 1.0)
             # the follower may start once the leader has done a0 of its move: (1 - a0) dur_j before its end
             corner = (1.0 - a0) * dur[p]
-            slack[mine] = np.where(same_way, ahead, np.where(turn, corner, 0.0))
+            slack[mine] = np.where(same_way, ahead, np.where(turn, corner, 0.0)) * (straight[mine] & straight[p])
         start = np.zeros(m)
         end = np.zeros(m)
         level = step * (int(depth.max(initial=0)) + 1) + depth
         by_level = np.argsort(level, kind="stable")
         # the longest-path pass, one move at a time in level order (compiled: 10^5 moves)
-        kern.precedence_pass(by_level, after_own, after_cell, slack, dur, start, end)
+        kern.precedence_pass(by_level, after_own, after_cell, slack, dur, start, end, after_side)
         return start, end
 
     acc = np.array([np.inf if a is None else float(a) for a in accels], dtype=float) if accels is not None \
         else np.full(n, np.inf)
     if not np.any(np.isfinite(acc)) or m == 0:
         start, end = schedule(base)
-        return Timing(robot, step, src, dst, start, end, after_cell, first, visits)
+        return Timing(robot, step, src, dst, start, end, after_cell, first, visits, sides, sweeps)
     # runs: a robot's moves at consecutive steps in one direction
     direction = (centres[dst] - centres[src]) if centres is not None else (dst - src)[:, None]
     breaks = np.ones(m, dtype=bool)
@@ -269,22 +308,30 @@ def network(timing: Timing, ids: Sequence[str], step_m: float) -> Network:
     cell (inf when the cell is j's goal)."""
     first, robot = timing.first, timing.robot
     start, end = timing.start, timing.end
+    # metres along a robot's path: a diagonal move (one with swept sides) is sqrt 2 steps long
+    length = np.ones(len(robot)) if timing.sides is None else np.where(timing.sides[:, 0] != NIL, math.sqrt(2), 1.0)
+    before = np.cumsum(length) - length                  # path length before each move, over all robots
     if timing.visits:
-        pairs = np.asarray(sorted(timing.visits, key=lambda p: p[1]), dtype=np.int64)
+        flags = timing.sweeps if timing.sweeps is not None else [(False, False)] * len(timing.visits)
+        rows = sorted(zip(timing.visits, flags), key=lambda p: p[0][1])
+        pairs = np.asarray([v for v, _ in rows], dtype=np.int64)
+        swept = np.asarray([f for _, f in rows], dtype=bool).reshape(-1, 2)
         out_move, in_move = pairs[:, 0], pairs[:, 1]
         hi, lo = robot[out_move], robot[in_move]
         # k: 1, 2, ... along each lower robot's path (pairs are sorted by its move, robot-major)
         new_lo = np.concatenate([[True], lo[1:] != lo[:-1]])
         run_start = np.maximum.accumulate(np.where(new_lo, np.arange(len(lo)), 0))
         k = np.arange(len(lo)) - run_start + 1
-        entry_hi = out_move - 1
-        t1 = np.where(out_move > first[hi], start[np.maximum(entry_hi, 0)], 0.0)
+        # (a sweep's move in is its move out: the earlier visitor's T1 is that move's start, the later's T3 its end)
+        entry_hi = np.where(swept[:, 0], out_move, out_move - 1)
+        t1 = np.where(swept[:, 0] | (out_move > first[hi]), start[np.maximum(entry_hi, 0)], 0.0)
         t4 = end[out_move]
         t2 = start[in_move]
-        has_next = in_move + 1 < first[lo + 1]
-        t3 = np.where(has_next, end[np.minimum(in_move + 1, len(end) - 1)], math.inf)
-        ls = (in_move - first[lo]) * step_m
-        le = ls + np.where(has_next, 2.0, 1.0) * step_m
+        has_next = (in_move + 1 < first[lo + 1]) & ~swept[:, 1]
+        nxt = np.minimum(in_move + 1, len(end) - 1)
+        t3 = np.where(swept[:, 1], end[in_move], np.where(has_next, end[nxt], math.inf))
+        ls = (before[in_move] - before[first[lo]]) * step_m
+        le = ls + (length[in_move] + np.where(has_next, length[nxt], 0.0)) * step_m
         collecting = gc.isenabled()
         gc.disable()   # 10^5 small objects, none cyclic: the collector would only re-scan them
         try:
