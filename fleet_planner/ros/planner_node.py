@@ -86,6 +86,7 @@ _HELP = {
     "low_battery": "battery fraction below which a free robot goes to a charger",
     "min_task_battery": "battery fraction a robot needs to take a job",
     "idle_s": "s a free robot waits before it goes to a charger",
+    "lease_s": "s a robot the planner does not hear drives on before it stops (0: offline_timeout_s / 2)",
 }
 
 _OBSTACLE_HELP = {
@@ -194,6 +195,9 @@ class PlannerNode(Node):
         self._schedule = self.create_publisher(String, topics.SCHEDULE, topics.SCHEDULE_QOS)
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
+        # whom it hears, for the robots' leases (fleet/lease.py): after every step and between them
+        self._heard = self.create_publisher(String, topics.HEARD, topics.HEARD_QOS)
+        self._heard_timer = self.create_timer(relay_period, self._refresh)
         self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
         self._gates: dict[str, Publisher] = {}
         self._inbox = StatusInbox()  # only the latest status of each robot is parsed (fleet/inbox.py)
@@ -233,6 +237,18 @@ class PlannerNode(Node):
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds / 1e9
+
+    def _refresh(self) -> None:
+        """Between steps (every ``neighbour_period_s``): the statuses waiting now, and whom the planner hears."""
+        self._take_statuses()
+        self._publish_heard(self._now())
+
+    def _publish_heard(self, now: float) -> None:
+        """Whom the planner hears (``fleet/heard@1``, signed with keys): the robots' leases (fleet/lease.py)."""
+        try:
+            self._heard.publish(record_to_string(self.keys.sign(self.fleet.heard(now), self._heard.topic_name)))
+        except Exception as exc:  # (never out of a callback; the robots then stop: their leases run out)
+            self.get_logger().error(f"heard record not sent: {exc!r}", throttle_duration_sec=5.0)
 
     def destroy_node(self) -> None:
         """Also lets go of the job store (its lock: another planner may open it then)."""
@@ -429,6 +445,7 @@ class PlannerNode(Node):
             except ValueError as exc:
                 log.error(f"robot {leg.robot_id}: timed path not sent: {exc}")
         self._publish_events(d.events)
+        self._publish_heard(now)
         if d.legs:
             self._schedule.publish(record_to_string(self.fleet.schedule(now)))
         wall = time.monotonic()
