@@ -381,6 +381,8 @@ class FleetManager:
             r.took_late = status.lateness_s   # the first word that it took its leg: late by so much already
         r.status, r.seen = status, now
         if not r.online:
+            if r.unheard is not None and not r.immobile:  # back before it must have stopped: it kept its job
+                r.replan = r.target is not None         # (fleet/lease.py), re-planned from where it holds
             r.online, r.immobile, r.idle_since = True, status.mode == "error", now
             r.unheard, r.reach = None, None
             r.stop = not r.immobile  # it may still drive a leg the others no longer keep clear of
@@ -604,8 +606,8 @@ class FleetManager:
                 r.online = False
                 why = f"offline: no status for {silent:.1f} s"
                 until = stopped_by(r, self.params.lease)
-                if r.leg is not None and until > now:  # it may still drive its leg: kept (fleet/lease.py)
-                    r.unheard = (until, why)
+                r.unheard = (until, why) if r.leg is not None else None   # it may drive its leg unheard until then
+                if r.unheard is not None and until > now:  # its leg is kept meanwhile (fleet/lease.py)
                     d.notes.append(f"robot {r.id} {why}; its leg is kept clear until it must have stopped "
                                    f"(t = {until:.1f} s, its lease {self.params.lease:g} s and braking)")
                 else:

@@ -196,7 +196,7 @@ class PlannerNode(Node):
         self._markers = self.create_publisher(MarkerArray, topics.MARKERS, topics.MARKERS_QOS)
         self._map = self.create_publisher(OccupancyGrid, topics.MAP, topics.MAP_QOS)
         # whom it hears, for the robots' leases (fleet/lease.py): after every step and between them
-        self._heard = self.create_publisher(String, topics.HEARD, topics.HEARD_QOS)
+        self._heard_pub = self.create_publisher(String, topics.HEARD, topics.HEARD_QOS)
         self._heard_timer = self.create_timer(relay_period, self._refresh)
         self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
         self._gates: dict[str, Publisher] = {}
@@ -246,7 +246,7 @@ class PlannerNode(Node):
     def _publish_heard(self, now: float) -> None:
         """Whom the planner hears (``fleet/heard@1``, signed with keys): the robots' leases (fleet/lease.py)."""
         try:
-            self._heard.publish(record_to_string(self.keys.sign(self.fleet.heard(now), self._heard.topic_name)))
+            self._heard_pub.publish(record_to_string(self.keys.sign(self.fleet.heard(now), self._heard_pub.topic_name)))
         except Exception as exc:  # (never out of a callback; the robots then stop: their leases run out)
             self.get_logger().error(f"heard record not sent: {exc!r}", throttle_duration_sec=5.0)
 
