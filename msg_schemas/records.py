@@ -703,10 +703,6 @@ class GateRecord(Record):
                 raise RecordError(f"gate.links[{n}].robot: a robot does not wait for itself ({self.robot_id!r})")
 
 
-#: the most robots one heard record names
-MAX_HEARD = MAX_ITEMS
-
-
 @dataclass(frozen=True)
 class Heard(Record):
     """Whom the planner hears (``/fleet/heard``, at every step; fleet_planner/fleet/lease.py): per robot
@@ -774,10 +770,10 @@ RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, Wai
                                      Heard)
 
 __all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Check", "Command", "CommandReply",
-           "EVENTS_NEEDING_REASON", "GATE_LINK", "GateRecord", "Heard", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS",
-           "MAX_HEARD", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS", "MAX_OBSTACLE_SPEED",
-           "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours", "OBSTACLE_KINDS", "ObstacleRecord",
-           "OperatorState", "PathAuth", "RECORDS", "Record", "RecordError", "RobotCommand", "RobotStatus", "Schedule",
-           "TASK_EVENTS", "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer",
-           "list_of", "load_json", "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id",
-           "spec", "text", "unsigned_json"]
+           "EVENTS_NEEDING_REASON", "GATE_LINK", "GateRecord", "Heard", "INT_MAX", "INT_MIN", "MAX_DEPTH",
+           "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS",
+           "MAX_OBSTACLE_SPEED", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours",
+           "OBSTACLE_KINDS", "ObstacleRecord", "OperatorState", "PathAuth", "RECORDS", "Record", "RecordError",
+           "RobotCommand", "RobotStatus", "Schedule", "TASK_EVENTS", "Task", "TaskEvent", "WaitMessageRecord",
+           "boolean", "choice", "dict_of", "integer", "list_of", "load_json", "nonempty", "number", "obj", "optional",
+           "point", "robot_id_problem", "ros_id", "spec", "text", "unsigned_json"]

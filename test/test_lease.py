@@ -98,7 +98,8 @@ def test_heard_records_are_checked_field_by_field():
     with pytest.raises(RecordError, match=r"heard.robots\['r1'\]"):
         Heard.from_json('{"schema": "fleet/heard@1", "stamp": 1, "lease_s": 1, "robots": {"r1": null}}')
     with pytest.raises(RecordError, match=r"heard.legs.r2: a leg kept for a robot not heard"):
-        Heard.from_json('{"schema": "fleet/heard@1", "stamp": 1, "lease_s": 1, "robots": {"r1": 0.5}, "legs": {"r2": 3}}')
+        Heard.from_json('{"schema": "fleet/heard@1", "stamp": 1, "lease_s": 1, "robots": {"r1": 0.5}, '
+                        '"legs": {"r2": 3}}')
     lease = Lease("r1")
     lease.on_heard(Heard(stamp=1.0, lease_s=1.0, robots={"r2": 1.0}))   # another robot's: no lease for r1
     assert not lease.holds(100.0, None)

@@ -41,8 +41,8 @@ import numpy as np
 
 from msg_schemas.records import (
     MAX_NAME_CHARS,
-    Heard,
     MAX_RECORD_BYTES,
+    Heard,
     ObstacleRecord,
     RecordError,
     RobotStatus,
