@@ -351,8 +351,14 @@ class AgentNode(Node):
                                                   f"gate record {gate.path_id}/{gate.seq}")
             if self._path_pending is not None:
                 self._path_pending = self._settle(self._path_pending, self._path_origin, self._follow, "timed path")
+            was = self.agent.lease.stopped
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_compact_json()))  # fleet/robot_status@2
+            if self.agent.lease.stopped != was:   # its lease ran out / it drives on (fleet/lease.py)
+                lease = self.agent.lease
+                self.get_logger().warning(
+                    f"not heard by the planner since t = {lease.heard:.1f} s (lease {lease.lease_s:g} s): stopping"
+                    if lease.stopped else "heard again on a leg the planner keeps: driving on")
             for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any
                 if self._waits is not None:
                     self._waits.publish(String(data=wait.to_json()))

@@ -84,6 +84,7 @@ class FleetSimNode(Node):
         subscribe(String, topics.HEARD, self._on_heard, topics.HEARD_QOS)   # the robots' leases (fleet/lease.py)
         #: robots whose statuses are not published (a test's radio dead spot: the planner cannot hear them)
         self.unheard: set[str] = set()
+        self.lease_stops = 0   # leases run out so far
         self._waits = None
         if self.sim.agents and next(iter(self.sim.agents.values())).strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
@@ -140,9 +141,17 @@ class FleetSimNode(Node):
 
     def _on_timer(self) -> None:
         try:
+            was = {rid for rid, a in self.sim.agents.items() if a.lease.stopped}
             for status in self.sim.step(self.get_clock().now().nanoseconds / 1e9):
                 if status.id not in self.unheard:
                     self._status.publish(String(data=status.to_compact_json()))
+            now_stopped = {rid for rid, a in self.sim.agents.items() if a.lease.stopped}
+            if now_stopped != was:   # leases that ran out / robots heard again (fleet/lease.py): one line a step
+                self.lease_stops += len(now_stopped - was)
+                self.get_logger().warning(
+                    f"not heard by the planner (lease run out), stopping: {sorted(now_stopped - was)}; heard "
+                    f"again, driving on: {sorted(was - now_stopped)} ({len(now_stopped)} stopped, "
+                    f"{self.lease_stops} stops so far)")
             if self._waits is not None:
                 for wait in self.sim.take_wait_messages():
                     self._waits.publish(String(data=wait.to_json()))
