@@ -195,3 +195,25 @@ def test_the_heard_record_names_the_online_robots_and_the_legs_kept_for_them():
     rec = heard_record(fm.robots.values(), 1.0, fm.params.lease)
     assert rec.robots == {"r1": 0.123} and rec.legs is None and rec.lease_s == 1.0
     assert fm.heard(1.0) == rec
+
+
+@pytest.mark.parametrize("net", [True, pytest.param(False, marks=pytest.mark.xfail(strict=True, reason="control"))])
+def test_braking_never_takes_a_robot_past_where_its_gate_holds_it(monkeypatch, net):
+    """Its lease runs out 0.5 m before the entry of a region it must wait at, at 1 m/s (1 m to stop):
+    it holds at the entry as driving would. Control: braking by the model alone passes the entry."""
+    from fleet_planner.fleet.coordination import CentralDriver, Driver
+    from fleet_planner.fleet.gate import Link
+    from msg_schemas.records import GateRecord
+    if not net:
+        monkeypatch.setattr(CentralDriver, "brake", Driver.brake)
+    a = RobotAgent(RobotModel("me", CARGO, 2.0, 6.25), WH, gated=True)
+    a.tick(0.0)
+    a.on_gate(GateRecord(robot_id="me", path_id=10, seq=0, stamp=0.0, links=(Link("other", 5, 4.0, 2.0).to_dict(),),
+                         watch={"other": 5}))
+    a.on_path(TimedPath("me", R, np.array([[2.0, 6.25, 0.0], [14.0, 6.25, 12.0]])), 0.0, 10)
+    a.on_heard(heard(1.0, legs=10), 1.0)
+    sts = run(a, 0.0, 2.5)
+    assert 1.3 < sts[-1].travelled_m < 1.6 and a.model.speed > 0.9 and not a.lease.stopped   # not yet run out
+    sts = run(a, 2.5, 7.0)
+    assert a.lease.stopped and sts[-1].vx == 0.0
+    assert max(s.travelled_m for s in sts) <= 2.0 + 1e-6

@@ -244,7 +244,7 @@ class RobotAgent:
         if self._last is not None and now > self._last and not self.hand.drive(self._last, now - self._last,
                                                                                 self.heard):
             if self.lease.holds(now, m.path_id):  # not heard: it brakes and stands (.lease)
-                m.step(self._last, now - self._last, brake=True)
+                self.driver.brake(self._last, now - self._last, self.heard)
             elif self._scale > 0.0:
                 self.driver.drive(self._last, now - self._last, self.heard)
             else:  # halted: it stands (and the clock goes on)

@@ -99,6 +99,11 @@ class Driver(ABC):
     def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
         """Step the robot's model from ``t`` by ``dt``, given the others' last statuses."""
 
+    def brake(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
+        """Step the robot's model from ``t`` by ``dt`` slowing down to a stop (its lease ran out: the
+        planner does not hear it, fleet/lease.py): along its path at its ``max_accel`` by default."""
+        self.model.step(t, dt, brake=True)
+
     @abstractmethod
     def behavior_state(self) -> dict[str, Any] | None:
         """The ``behavior`` field of the robot's status (None: it does not coordinate by behaviours)."""
@@ -387,6 +392,13 @@ class CentralDriver(Driver):
         if not hold and (self.stopped or self.awaiting is not None or self.gate_holds(dt, heard)):
             hold = True
         self.model.step(t, dt, hold=hold)
+
+    def brake(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
+        """Slow down to a stop along the path, but hold at once where driving would (the safety net, the
+        gate, a refused leg, a leg awaiting its record): braking never takes it where driving may not."""
+        hold = (self.must_wait(t, dt, heard) or self.stopped or self.awaiting is not None
+                or self.gate_holds(dt, heard))
+        self.model.step(t, dt, hold=hold, brake=not hold)
 
     def gate_holds(self, dt: float, heard: Mapping[str, RobotStatus]) -> bool:
         """Whether this step could take the robot beyond where its gate lets it drive (the nearest
