@@ -705,11 +705,12 @@ class GateRecord(Record):
 
 @dataclass(frozen=True)
 class Heard(Record):
-    """Whom the planner hears (``/fleet/heard``, at every step; fleet_planner/fleet/lease.py): per robot
-    it counts online, the stamp of the latest status of it that it took in (``robots``) and the leg
-    it keeps the others clear of for it (``legs``: its path id; a robot without an entry has none).
-    ``lease_s``: a robot whose latest status the planner heard is older than this by the robot's own
-    clock stops, and drives on only once heard again on a leg the planner keeps (or a new leg).
+    """Whom the planner hears (``/fleet/heard``, three times a lease; fleet_planner/fleet/lease.py): per
+    robot it counts online, the stamp of the latest status of it that it took in (``robots``) and the
+    leg it keeps the others clear of for it (``legs``: its path id; a robot without an entry has none).
+    A robot whose stamp here is older than ``lease_s`` behind the newest stamp here (the planner hears
+    others but not it), or that is left out, or that heard no record stamped within ``silence_s`` of
+    its clock, stops, and drives on only once heard again on a leg the planner keeps (or a new leg).
     Signed by the planner where keys are configured (``auth``), like gate records."""
 
     SCHEMA: ClassVar[str] = "fleet/heard@1"
@@ -717,6 +718,7 @@ class Heard(Record):
 
     stamp: float = spec(number())
     lease_s: float = spec(number(0.01, 3600.0))
+    silence_s: float = spec(number(0.01, 3600.0))
     robots: dict[str, float] = spec(dict_of(number()))
     legs: dict[str, int] | None = spec(optional(dict_of(integer(lo=0))), default=None)
     auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with keys)

@@ -3,17 +3,22 @@
 A robot in a dead spot of the network keeps driving its leg while the planner, not hearing it, marks
 it offline and plans the others round where it was last heard. Both ends close that gap here:
 
-- **The robot's end** (:class:`Lease`, held by :class:`~.agent.RobotAgent`): at every step the planner
-  says whom it hears (``fleet/heard@1``, :class:`~msg_schemas.records.Heard`): per robot, the stamp of
-  the latest status it took in and the leg it keeps the others clear of. A robot whose latest heard
-  status is older than ``lease_s`` by its own clock brakes to a stop (within its acceleration limit)
-  and stays stopped until it is heard again and drives a leg the planner keeps (or a new leg: the
-  planner gives one to a robot back online).
+- **The robot's end** (:class:`Lease`, held by :class:`~.agent.RobotAgent`): three times a lease the
+  planner says whom it hears (``fleet/heard@1``, :class:`~msg_schemas.records.Heard`): per robot, the
+  stamp of the latest status it took in and the leg it keeps the others clear of. A robot stops (it
+  brakes within its acceleration limit, holding where driving would hold) when the latest record
+  says the planner hears others but not it - its stamp more than ``lease_s`` behind the newest stamp
+  in the record, or left out - or when it heard no record stamped within ``silence_s`` of its clock
+  (the planner is silent). It stays stopped until it is heard again and drives a leg the planner
+  keeps (or a new leg: the planner gives one to a robot back online). Measured against the newest
+  stamp, not the clock, so a planner whose input runs late for everyone (a loaded machine) does not
+  stop the fleet: it takes nobody offline then either (``DEAF_FACTOR`` in :mod:`.manager`).
 - **The planner's end** (:func:`heard_record`, :func:`stopped_by`, :func:`reachable`, used by
-  :class:`~.manager.FleetManager`): until the robot must have stopped (its last heard status's
-  stamp + ``lease_s`` + its braking time + :data:`LEASE_SLACK_S`), a robot marked offline keeps its
-  leg and the links of the others on it; after that it is an obstacle wherever it can be: the stretch
-  of its leg it could have reached by then, not only its last heard point.
+  :class:`~.manager.FleetManager`): a robot must have stopped by the first heard record that showed
+  it unheard (``stale_since``; the next record if none did yet) + ``silence_s`` (had it missed that
+  record and every later one) + its braking time + :data:`LEASE_SLACK_S`. Until then a robot marked
+  offline keeps its leg and the others' links on it; after that it is an obstacle wherever it can be:
+  the stretch of its leg it could have reached by then, not only its last heard point.
 
 Times are seconds on one clock (ROS time): ``now`` is always passed in.
 """
@@ -45,36 +50,51 @@ HEARD_DECIMALS = 3
 # the robot's end
 # -------------------------------------------------------------------------------------------------
 class Lease:
-    """Whether robot ``robot_id`` may drive: it is heard by the planner (its heard records), or no
-    planner ever named it (no lease yet: a planner without leases, or one that has not heard it)."""
+    """Whether robot ``robot_id`` may drive: the planner hears it (its heard records), or no planner
+    ever named it (no lease yet: a planner without leases, or one that has not heard it)."""
 
     def __init__(self, robot_id: str, max_clock_skew_s: float = MAX_CLOCK_SKEW_S):
         self.robot_id = robot_id
         self.max_clock_skew_s = max_clock_skew_s
+        self.record: Heard | None = None    # the newest heard record since one named it (None: no lease)
         self.heard: float | None = None     # the latest stamp of its statuses the planner took in
-        self.lease_s: float | None = None   # None: no lease (no planner named it yet)
         self.kept: int | None = None        # the leg the planner keeps the others clear of for it
         self.stopped = False                # its lease ran out: it stands until heard on a good leg
         self.stopped_on: int | None = None  # the leg it drove when its lease ran out
         self.lapses = 0                     # how often its lease ran out
 
+    @property
+    def lease_s(self) -> float | None:
+        return None if self.record is None else self.record.lease_s
+
     def on_heard(self, record: Heard, now: float | None = None) -> None:
-        """A heard record; ValueError (naming the field) if it says the robot was heard at a stamp more
-        than ``max_clock_skew_s`` ahead of ``now`` (it would hold the lease for good)."""
-        stamp = record.robots.get(self.robot_id)
-        if stamp is None:
-            return   # not heard (offline to the planner, or not known yet): its lease runs out
-        if now is not None and stamp > now + self.max_clock_skew_s:
-            raise ValueError(f"heard.robots.{self.robot_id}: stamped {stamp - now:.3g} s ahead of the robot's "
-                             f"clock (at most {self.max_clock_skew_s:g} s)")
-        if self.heard is not None and stamp < self.heard:
+        """A heard record (older ones than the newest are ignored); ValueError (naming the field) if it is
+        stamped, or says the robot was heard at a stamp, more than ``max_clock_skew_s`` ahead of ``now``."""
+        mine = record.robots.get(self.robot_id)
+        if now is not None:
+            for name, t in (("stamp", record.stamp), (f"robots.{self.robot_id}", mine)):
+                if t is not None and t > now + self.max_clock_skew_s:
+                    raise ValueError(f"heard.{name}: stamped {t - now:.3g} s ahead of the robot's clock "
+                                     f"(at most {self.max_clock_skew_s:g} s)")
+        if self.record is None and mine is None:
+            return   # no planner named it yet: no lease
+        if self.record is not None and record.stamp < self.record.stamp:
             return   # an older record overtaken by a newer one
-        self.heard, self.lease_s = float(stamp), float(record.lease_s)
-        self.kept = (record.legs or {}).get(self.robot_id)
+        self.record = record
+        if mine is not None:
+            self.heard = max(mine, self.heard) if self.heard is not None else float(mine)
+        self.kept = (record.legs or {}).get(self.robot_id) if mine is not None else None
 
     def expired(self, now: float) -> bool:
-        """The lease ran out at ``now`` (never without one)."""
-        return self.lease_s is not None and self.heard is not None and now - self.heard > self.lease_s
+        """The lease ran out at ``now``: the newest record says the planner hears others but not this
+        robot, or no record came for ``silence_s`` (never without a lease)."""
+        rec = self.record
+        if rec is None:
+            return False
+        mine = rec.robots.get(self.robot_id)
+        if mine is None or now - rec.stamp > rec.silence_s:
+            return True
+        return max(rec.robots.values()) - mine > rec.lease_s
 
     def holds(self, now: float, path_id: int | None) -> bool:
         """Whether the robot, on leg ``path_id`` (None: none), must brake / stand at ``now``: its lease ran
@@ -92,17 +112,27 @@ class Lease:
 # -------------------------------------------------------------------------------------------------
 # the planner's end
 # -------------------------------------------------------------------------------------------------
-def heard_record(robots: Iterable[FleetRobot], now: float, lease_s: float) -> Heard:
+def heard_record(robots: Iterable[FleetRobot], now: float, lease_s: float, silence_s: float) -> Heard:
     """Whom the planner hears now: every robot it counts online, with the stamp of its latest status
-    (rounded down to ms) and the leg it keeps for it (if any)."""
+    (rounded down to ms) and the leg it keeps for it (if any). A robot the record shows unheard (left
+    out, or its stamp more than ``lease_s`` behind the newest) gets ``stale_since`` (when first so)."""
     scale = 10 ** HEARD_DECIMALS
+    robots = list(robots)
     heard, legs = {}, {}
     for r in robots:
         if r.online:
             heard[r.id] = math.floor(r.status.stamp * scale) / scale
             if r.leg is not None and not r.immobile:
                 legs[r.id] = r.leg.path_id
-    return Heard(stamp=float(now), lease_s=float(lease_s), robots=heard, legs=legs or None)
+    newest = max(heard.values(), default=now)
+    for r in robots:
+        stale = r.id not in heard or newest - heard[r.id] > lease_s
+        if not stale:
+            r.stale_since = None
+        elif r.stale_since is None:
+            r.stale_since = float(now)
+    return Heard(stamp=float(now), lease_s=float(lease_s), silence_s=float(silence_s), robots=heard,
+                 legs=legs or None)
 
 
 def braking_s(kind: RobotKind) -> float:
@@ -110,10 +140,13 @@ def braking_s(kind: RobotKind) -> float:
     return kind.max_speed / kind.max_accel if math.isfinite(kind.max_accel) and kind.max_accel > 0 else 0.0
 
 
-def stopped_by(r: FleetRobot, lease_s: float, slack_s: float = LEASE_SLACK_S) -> float:
-    """When robot ``r`` must stand, whatever it does unheard: the stamp of its latest status the planner
-    heard (it never echoes a newer one) plus its lease, its braking time and ``slack_s``."""
-    return r.status.stamp + lease_s + braking_s(r.kind) + slack_s
+def stopped_by(r: FleetRobot, now: float, silence_s: float, slack_s: float = LEASE_SLACK_S) -> float:
+    """When robot ``r``, unheard, must stand whatever it did: the first heard record that showed it unheard
+    (``r.stale_since``; if none did yet, the next one, from ``now`` on) stops it when it comes; had it
+    missed that record and every later one, its silence does ``silence_s`` after the last record it had,
+    sent before that one. Then its braking time and ``slack_s``."""
+    shown = r.stale_since if r.stale_since is not None else now
+    return shown + silence_s + braking_s(r.kind) + slack_s
 
 
 def _arc(path: TimedPath) -> np.ndarray:

@@ -605,11 +605,12 @@ class FleetManager:
             if r.online and silent > timeout and (not deaf or silent > DEAF_FACTOR * timeout):
                 r.online = False
                 why = f"offline: no status for {silent:.1f} s"
-                until = stopped_by(r, self.params.lease)
+                until = stopped_by(r, now, self.params.silence)
                 r.unheard = (until, why) if r.leg is not None else None   # it may drive its leg unheard until then
                 if r.unheard is not None and until > now:  # its leg is kept meanwhile (fleet/lease.py)
                     d.notes.append(f"robot {r.id} {why}; its leg is kept clear until it must have stopped "
-                                   f"(t = {until:.1f} s, its lease {self.params.lease:g} s and braking)")
+                                   f"(t = {until:.1f} s: lease {self.params.lease:g} s, silence "
+                                   f"{self.params.silence:g} s, braking)")
                 else:
                     self._immobilise(r, now, d, why)
             elif not r.online and not r.immobile and r.unheard is not None and now >= r.unheard[0]:
@@ -1168,7 +1169,7 @@ class FleetManager:
 
     def heard(self, now: float) -> Heard:
         """Whom the planner hears now, for the robots' leases (``fleet/heard@1``; fleet/lease.py)."""
-        return heard_record(self.robots.values(), now, self.params.lease)
+        return heard_record(self.robots.values(), now, self.params.lease, self.params.silence)
 
     def _out_of_time(self) -> bool:
         """This step has spent its leg-planning budget (``step_budget_s`` wall seconds)."""

@@ -74,6 +74,8 @@ class FleetRobot:
     evade_retry_at: float = -math.inf  # no refuge from a moving obstacle could be reached: tried again from then on
     leg_failures: int = 0             # legs refused in a row (the wait before the next try doubles)
     took_late: float = 0.0            # how late (s) its first status on its leg said it was (it took it late)
+    #: when a heard record first showed it unheard (fleet/lease.py; None: heard)
+    stale_since: float | None = None
     #: offline, it may still drive its leg until then (fleet/lease.py), and why it is offline
     unheard: tuple[float, str] | None = None
     #: immobile after it was unheard: every point it may stand at (n x 2; None: its status's position)

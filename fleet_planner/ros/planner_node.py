@@ -89,7 +89,9 @@ _HELP = {
     "low_battery": "battery fraction below which a free robot goes to a charger",
     "min_task_battery": "battery fraction a robot needs to take a job",
     "idle_s": "s a free robot waits before it goes to a charger",
-    "lease_s": "s a robot the planner does not hear drives on before it stops (0: offline_timeout_s / 2)",
+    "lease_s": "s a robot the planner does not hear (while it hears others) drives on before it stops "
+               "(0: offline_timeout_s / 2)",
+    "silence_s": "s a robot that hears no heard record drives on before it stops (0: 3 x offline_timeout_s)",
 }
 
 _OBSTACLE_HELP = {
