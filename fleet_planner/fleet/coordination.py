@@ -82,6 +82,8 @@ class Driver(ABC):
     """How one robot drives under a coordination mode; its :class:`~.agent.RobotAgent` hands it
     the legs it is sent, the other robots' statuses and the wait messages addressed to it."""
 
+    #: the robot it drives
+    model: RobotModel
     #: the robot it holds for this step (the safety net of a central robot), if any
     waits_for: str | None = None
     #: its behaviour controller (behaviour coordination), else None
