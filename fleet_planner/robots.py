@@ -267,13 +267,14 @@ class RobotModel:
         return float(self.path.waypoints[k, 0]), float(self.path.waypoints[k, 1])
 
     def step(self, t: float, dt: float, *, hold: bool = False, to: Point | None = None,
-             progress: float | None = None) -> None:
+             progress: float | None = None, brake: bool = False) -> None:
         """Advance the state from time ``t`` to ``t + dt``.
 
         On a timed path, ``hold`` keeps the robot where it is for this step (an emergency stop: the
-        schedule goes on, so the robot gets late). Steered (:meth:`steer`), the robot drives
-        straight to ``to`` (ValueError if that is beyond its top speed) and ``progress`` (0..1) is
-        the fraction of its leg done.
+        schedule goes on, so the robot gets late); ``brake`` slows it down along its path at its
+        ``max_accel`` until it stands (a controlled stop; never ahead of its schedule). Steered
+        (:meth:`steer`), the robot drives straight to ``to`` (ValueError if that is beyond its top
+        speed) and ``progress`` (0..1) is the fraction of its leg done; braking, a steered robot stands.
         """
         if not dt > 0:
             raise ValueError(f"robot {self.id!r}: dt must be > 0, got {dt!r}")
@@ -288,6 +289,8 @@ class RobotModel:
                 self._action = None
         elif self.battery <= 0.0 or hold:  # an empty robot stands still
             pass
+        elif brake:
+            moved = self._brake(end, dt) if self.path is not None else 0.0
         elif self.path is not None:
             moved = self._track(end, dt)
         elif self._steered is not None and to is not None:
@@ -328,6 +331,20 @@ class RobotModel:
                 gap = max(0.0, float(ahead[:, 0].min()) - s)
                 v = min(v, math.sqrt(2 * a * gap), gap / dt)
         s_new = min(s + v * dt, s_due, float(self._S[-1]))
+        if s_new <= s:
+            return 0.0
+        x, y = self._point_at(s_new)
+        self.vx, self.vy = (x - self.x) / dt, (y - self.y) / dt
+        self.x, self.y, self._s = x, y, s_new
+        return s_new - s
+
+    def _brake(self, end: float, dt: float) -> float:
+        """Slow down along the path at ``max_accel`` (at once without a limit); the distance driven."""
+        self._pre = None
+        a = self.kind.max_accel
+        v = max(0.0, self.speed - a * dt) if math.isfinite(a) else 0.0
+        s = self._s
+        s_new = min(s + v * dt, float(np.interp(end, self._T, self._S)), float(self._S[-1]))
         if s_new <= s:
             return 0.0
         x, y = self._point_at(s_new)

@@ -704,6 +704,32 @@ class GateRecord(Record):
 
 
 @dataclass(frozen=True)
+class Heard(Record):
+    """Whom the planner hears (``/fleet/heard``, three times a lease; fleet_planner/fleet/lease.py): per
+    robot it counts online, the stamp of the latest status of it that it took in (``robots``) and the
+    leg it keeps the others clear of for it (``legs``: its path id; a robot without an entry has none).
+    A robot whose stamp here is older than ``lease_s`` behind the newest stamp here (the planner hears
+    others but not it), or that is left out, or that heard no record stamped within ``silence_s`` of
+    its clock, stops, and drives on only once heard again on a leg the planner keeps (or a new leg).
+    Signed by the planner where keys are configured (``auth``), like gate records."""
+
+    SCHEMA: ClassVar[str] = "fleet/heard@1"
+    NAME: ClassVar[str] = "heard"
+
+    stamp: float = spec(number())
+    lease_s: float = spec(number(0.01, 3600.0))
+    silence_s: float = spec(number(0.01, 3600.0))
+    robots: dict[str, float] = spec(dict_of(number()))
+    legs: dict[str, int] | None = spec(optional(dict_of(integer(lo=0))), default=None)
+    auth: dict[str, Any] | None = spec(optional(obj(AUTH)), default=None)  # signature (with keys)
+
+    def _check_together(self) -> None:
+        for rid in self.legs or {}:
+            if rid not in self.robots:
+                raise RecordError(f"heard.legs.{rid}: a leg kept for a robot not heard")
+
+
+@dataclass(frozen=True)
 class OperatorState(Record):
     """What the operator has set on the planner (latched, for consoles): the e-stop, a paused
     fleet, the robots paused and those in manual drive."""
@@ -742,13 +768,14 @@ class RobotCommand(Record):
 
 
 RECORDS: tuple[type[Record], ...] = (Task, TaskEvent, RobotStatus, Schedule, WaitMessageRecord, PathAuth, Neighbours,
-                                     Command, CommandReply, ObstacleRecord, GateRecord, OperatorState, RobotCommand)
+                                     Command, CommandReply, ObstacleRecord, GateRecord, OperatorState, RobotCommand,
+                                     Heard)
 
 __all__ = ["AUTH", "BEHAVIORS", "BEHAVIOR_STATE", "COMMANDS", "COMMAND_NEEDS", "Check", "Command", "CommandReply",
-           "EVENTS_NEEDING_REASON", "GATE_LINK", "GateRecord", "INT_MAX", "INT_MIN", "MAX_DEPTH", "MAX_INT_DIGITS",
-           "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS", "MAX_OBSTACLE_SPEED",
-           "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours", "OBSTACLE_KINDS", "ObstacleRecord",
-           "OperatorState", "PathAuth", "RECORDS", "Record", "RecordError", "RobotCommand", "RobotStatus", "Schedule",
-           "TASK_EVENTS", "Task", "TaskEvent", "WaitMessageRecord", "boolean", "choice", "dict_of", "integer",
-           "list_of", "load_json", "nonempty", "number", "obj", "optional", "point", "robot_id_problem", "ros_id",
-           "spec", "text", "unsigned_json"]
+           "EVENTS_NEEDING_REASON", "GATE_LINK", "GateRecord", "Heard", "INT_MAX", "INT_MIN", "MAX_DEPTH",
+           "MAX_INT_DIGITS", "MAX_ITEMS", "MAX_NAME_CHARS", "MAX_NEIGHBOURS", "MAX_OBSTACLE_RADIUS",
+           "MAX_OBSTACLE_SPEED", "MAX_REASON_CHARS", "MAX_RECORD_BYTES", "MAX_TEXT_CHARS", "Neighbours",
+           "OBSTACLE_KINDS", "ObstacleRecord", "OperatorState", "PathAuth", "RECORDS", "Record", "RecordError",
+           "RobotCommand", "RobotStatus", "Schedule", "TASK_EVENTS", "Task", "TaskEvent", "WaitMessageRecord",
+           "boolean", "choice", "dict_of", "integer", "list_of", "load_json", "nonempty", "number", "obj", "optional",
+           "point", "robot_id_problem", "ros_id", "spec", "text", "unsigned_json"]

@@ -45,6 +45,9 @@ MARKERS = "fleet/markers"
 MAP = "map"
 WAIT_MESSAGES = "fleet/wait_messages"
 OBSTACLES = "fleet/obstacles"  # fleet/obstacle@1: people, vehicles, pallets (fleet_planner/fleet/obstacles.py)
+#: fleet/heard@1: whom the planner hears (each robot's latest status stamp it took in, the leg it keeps clear
+#: for it), at every step and between (fleet_planner/fleet/lease.py); best effort: each supersedes the last
+HEARD = "fleet/heard"
 
 
 def timed_path_topic(robot_id: str) -> str:
@@ -93,6 +96,7 @@ MARKERS_QOS = LATCHED_QOS
 MAP_QOS = LATCHED_QOS
 WAIT_MESSAGES_QOS = _qos(100)
 NEIGHBOURS_QOS = _qos(10, reliable=False)
+HEARD_QOS = _qos(5, reliable=False)
 
 # -- the operator (fleet_planner/fleet/operator.py; docs/ARCHITECTURE.md, "Topics and QoS") ------------
 #: ``fleet/command@1`` (commands with arguments) in, ``fleet/command_reply@1`` (same ``id``) out:

@@ -50,6 +50,7 @@ from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
 from msg_schemas.records import (
     GateRecord,
+    Heard,
     Neighbours,
     ObstacleRecord,
     PathAuth,
@@ -157,6 +158,8 @@ class AgentNode(Node):
         events = subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
         self._path_origin, self._event_origin = OriginCheck(self, paths, planner), OriginCheck(self, events, planner)
         self._gate_origin = OriginCheck(self, gates, planner)
+        heard = subscribe(String, topics.HEARD, self._on_heard, topics.HEARD_QOS)   # its lease (fleet/lease.py)
+        self._heard_origin, self._heard_topic = OriginCheck(self, heard, planner), heard.topic_name
         # a record refused only because its publisher had no known name yet, and until when it may be taken
         self._gate_pending: tuple[GateRecord, float] | None = None
         self._path_pending: tuple[Path, float] | None = None
@@ -241,6 +244,20 @@ class AgentNode(Node):
             self.agent.on_gate(record)
         except RecordError as exc:
             self.get_logger().error(printable(f"gate record ignored: {exc}", 300), throttle_duration_sec=1.0)
+
+    def _on_heard(self, msg: String) -> None:
+        # whom the planner hears renews the robot's lease: only the planner's word counts (with keys, signed)
+        try:
+            record = string_to_record(msg, Heard)
+            if self.keys.checks:
+                problem = self.keys.problem(record, self._heard_topic)
+                if problem:
+                    raise RecordError(f"heard.auth: {problem} ({self.keys.refused} refused so far)")
+            elif problem := self._heard_origin.problem():
+                raise RecordError(f"heard: not from the planner: {problem}")
+            self.agent.on_heard(record, self._now())
+        except (RecordError, ValueError) as exc:
+            self.get_logger().warning(printable(f"heard record ignored: {exc}", 300), throttle_duration_sec=5.0)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         for p in params:
@@ -334,8 +351,14 @@ class AgentNode(Node):
                                                   f"gate record {gate.path_id}/{gate.seq}")
             if self._path_pending is not None:
                 self._path_pending = self._settle(self._path_pending, self._path_origin, self._follow, "timed path")
+            was = self.agent.lease.stopped
             status = self.agent.tick(self.get_clock().now().nanoseconds / 1e9)
             self._status.publish(String(data=status.to_compact_json()))  # fleet/robot_status@2
+            if self.agent.lease.stopped != was:   # its lease ran out / it drives on (fleet/lease.py)
+                lease = self.agent.lease
+                self.get_logger().warning(
+                    f"not heard by the planner since t = {lease.heard:.1f} s (lease {lease.lease_s:g} s): stopping"
+                    if lease.stopped else "heard again on a leg the planner keeps: driving on")
             for wait in self.agent.take_wait_messages():  # only robots coordinating by behaviours send any
                 if self._waits is not None:
                     self._waits.publish(String(data=wait.to_json()))

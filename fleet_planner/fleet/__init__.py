@@ -11,6 +11,8 @@ Where each concept lives:
   events out;
 * :mod:`.agent` - the robot's end, :class:`RobotAgent`: a robot model following its legs and
   picking, placing and charging where they end;
+* :mod:`.lease` - a robot the planner cannot hear stops: :class:`~.lease.Lease` (the robot's end) and
+  the planner's heard records and the way it keeps for a robot marked offline until it must have stopped;
 * :mod:`.coordination` - the coordination mode, a strategy used on both ends: :class:`Coordination`
   (:class:`CentralCoordination`, :class:`BehaviorCoordination`), looked up by name with
   :func:`get_coordination`; how a robot drives under it, a :class:`Driver`;

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import replace
 
-from msg_schemas.records import GateRecord, ObstacleRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import GateRecord, Heard, ObstacleRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..behavior import BehaviorController, BehaviorParams
 from ..model import TimedPath
@@ -18,6 +18,7 @@ from ..robots import RobotModel
 from ..warehouse import Warehouse
 from .coordination import AGENT_BEHAVIOR, Coordination, get_coordination
 from .gate import watched_robots
+from .lease import Lease
 from .legs import MAX_CLOCK_SKEW_S, station_at
 from .manual import OperatorHand
 from .obstacles import ObstacleMap
@@ -55,6 +56,10 @@ class RobotAgent:
     job and whether it carries the job's goods (``task_id``, ``loaded``) and the last job whose goods
     it placed (``placed_task_id``): a planner restarted mid-job re-adopts it from them.
     :attr:`speed_scale` slows it down (a speed limit: 0 halts it).
+
+    Its :attr:`lease` (:mod:`.lease`): once a planner's heard record (:meth:`on_heard`) named it, a
+    robot that planner has not heard for longer than the record's ``lease_s`` brakes to a stop and
+    stands until it is heard again on a leg the planner keeps clear (or gets a new leg).
     """
 
     KEEP_TASKS = 10_000  # task details remembered
@@ -79,6 +84,7 @@ class RobotAgent:
         self._pending: tuple[TimedPath, float, int] | None = None  # a leg waiting for its gate record
         self._kind = model.kind
         self._scale = 1.0
+        self.lease = Lease(model.id)
 
     @property
     def speed_scale(self) -> float:
@@ -180,6 +186,12 @@ class RobotAgent:
         clock = now if now is not None else self._last
         self.obstacles.update(ob, clock if clock is not None else ob.stamp)
 
+    def on_heard(self, record: Heard, now: float | None = None) -> None:
+        """Whom the planner hears (``fleet/heard@1``): renews this robot's lease if it names it; ValueError
+        (naming the field) for a stamp of it more than ``MAX_CLOCK_SKEW_S`` ahead of ``now`` (by default
+        the last tick)."""
+        self.lease.on_heard(record, now if now is not None else self._last)
+
     def on_wait_message(self, msg: WaitMessageRecord) -> None:
         """A wait message on the topic: taken at the next tick if it is addressed to this robot."""
         if msg.receiver == self.model.id:
@@ -231,7 +243,9 @@ class RobotAgent:
         self.obstacles.expire(now)
         if self._last is not None and now > self._last and not self.hand.drive(self._last, now - self._last,
                                                                                 self.heard):
-            if self._scale > 0.0:
+            if self.lease.holds(now, m.path_id):  # not heard: it brakes and stands (.lease)
+                self.driver.brake(self._last, now - self._last, self.heard)
+            elif self._scale > 0.0:
                 self.driver.drive(self._last, now - self._last, self.heard)
             else:  # halted: it stands (and the clock goes on)
                 m.step(self._last, now - self._last, hold=True)

@@ -82,6 +82,8 @@ class Driver(ABC):
     """How one robot drives under a coordination mode; its :class:`~.agent.RobotAgent` hands it
     the legs it is sent, the other robots' statuses and the wait messages addressed to it."""
 
+    #: the robot it drives
+    model: RobotModel
     #: the robot it holds for this step (the safety net of a central robot), if any
     waits_for: str | None = None
     #: its behaviour controller (behaviour coordination), else None
@@ -98,6 +100,11 @@ class Driver(ABC):
     @abstractmethod
     def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
         """Step the robot's model from ``t`` by ``dt``, given the others' last statuses."""
+
+    def brake(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
+        """Step the robot's model from ``t`` by ``dt`` slowing down to a stop (its lease ran out: the
+        planner does not hear it, fleet/lease.py): along its path at its ``max_accel`` by default."""
+        self.model.step(t, dt, brake=True)
 
     @abstractmethod
     def behavior_state(self) -> dict[str, Any] | None:
@@ -387,6 +394,13 @@ class CentralDriver(Driver):
         if not hold and (self.stopped or self.awaiting is not None or self.gate_holds(dt, heard)):
             hold = True
         self.model.step(t, dt, hold=hold)
+
+    def brake(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
+        """Slow down to a stop along the path, but hold at once where driving would (the safety net, the
+        gate, a refused leg, a leg awaiting its record): braking never takes it where driving may not."""
+        hold = (self.must_wait(t, dt, heard) or self.stopped or self.awaiting is not None
+                or self.gate_holds(dt, heard))
+        self.model.step(t, dt, hold=hold, brake=not hold)
 
     def gate_holds(self, dt: float, heard: Mapping[str, RobotStatus]) -> bool:
         """Whether this step could take the robot beyond where its gate lets it drive (the nearest

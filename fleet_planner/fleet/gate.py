@@ -432,10 +432,13 @@ class GateBook:
             return done
         return gate_limit(rec, pid, heard)
 
-    def forget(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float) -> tuple[list[GateRecord], list[str]]:
-        """``r`` stopped for good where its status says: the records of robots whose way from where
-        they are does not pass near it drop their links on it (re-sent); the ids of the robots
-        whose way does are returned (they keep waiting for it: re-plan them)."""
+    def forget(self, r: FleetRobot, fleet: Iterable[FleetRobot], now: float,
+               where: np.ndarray | None = None) -> tuple[list[GateRecord], list[str]]:
+        """``r`` stopped for good where its status says (or anywhere on ``where``, n x 2 points: a robot
+        that stopped unheard, fleet/lease.py): the records of robots whose way from where they are does
+        not pass near it drop their links on it (re-sent); the ids of the robots whose way does are
+        returned (they keep waiting for it: re-plan them)."""
+        points = [r.pos] if where is None else [(float(x), float(y)) for x, y in where.tolist()]
         self.paths.pop(r.id, None)
         self.records.pop(r.id, None)
         out, stuck = [], []
@@ -449,7 +452,8 @@ class GateBook:
                 done = travelled(o.status) if o.status.path_id == rec.path_id else 0.0
                 ahead = sample(path, 0.0 if done is None else done, step=self.sample_m)
                 clear = o.radius + r.radius + self.pad_m + self.sample_m
-                if polyline_passes_near(np.vstack([ahead.xy, ahead.xy[-1:]]), r.pos, clear):
+                way = np.vstack([ahead.xy, ahead.xy[-1:]])
+                if any(polyline_passes_near(way, p, clear) for p in points):
                     stuck.append(oid)
                     continue
             out.append(self._set(GateRecord(robot_id=oid, path_id=rec.path_id, seq=rec.seq + 1, stamp=float(now),

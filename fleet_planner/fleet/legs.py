@@ -42,13 +42,27 @@ class DispatchParams:
     low_battery: float = 0.25         # below this a free robot goes to a charger
     min_task_battery: float = 0.3     # a robot takes a job only with at least this much
     idle_s: float = 5.0               # a free robot idle this long goes to a charger
+    lease_s: float = 0.0              # a robot not heard this long stops (fleet/lease.py); 0: offline_timeout_s / 2
+    silence_s: float = 0.0            # ... and one that hears no planner this long; 0: 3 x offline_timeout_s
 
     RANGES = {"speed_factor": (0.05, 1.0), "safety_margin": (0.0, 5.0), "lead_s": (0.0, 60.0),
               "offline_timeout_s": (0.01, 3600.0), "lateness_tolerance_s": (0.01, 3600.0),
-              "low_battery": (0.0, 1.0), "min_task_battery": (0.0, 1.0), "idle_s": (0.0, 3600.0)}
+              "low_battery": (0.0, 1.0), "min_task_battery": (0.0, 1.0), "idle_s": (0.0, 3600.0),
+              "lease_s": (0.0, 3600.0), "silence_s": (0.0, 3600.0)}
 
     def __post_init__(self) -> None:
         check_ranges(self, self.RANGES)
+
+    @property
+    def lease(self) -> float:
+        """A robot not heard this long (s) stops: ``lease_s``, or half of ``offline_timeout_s`` if 0."""
+        return self.lease_s if self.lease_s > 0.0 else self.offline_timeout_s / 2
+
+    @property
+    def silence(self) -> float:
+        """A robot that hears no heard record this long (s) stops: ``silence_s``, or 3 x ``offline_timeout_s``
+        if 0 (a planner that stalls for less does not stop the fleet)."""
+        return self.silence_s if self.silence_s > 0.0 else 3.0 * self.offline_timeout_s
 
 
 def lag_allowance(kind: RobotKind, speed_factor: float) -> float:

@@ -42,6 +42,7 @@ import numpy as np
 from msg_schemas.records import (
     MAX_NAME_CHARS,
     MAX_RECORD_BYTES,
+    Heard,
     ObstacleRecord,
     RecordError,
     RobotStatus,
@@ -56,11 +57,12 @@ from ..model import Point, TimedPath
 from ..planners import Planner, get_planner
 from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
-from .coordination import Coordination, LegNotPlanned, get_coordination
+from .coordination import Coordination, LegNotPlanned, get_coordination, room_to_leave
 from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, queue_spots, staging_spots
 from .gate import GateBook
 from .intake import Roster
 from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
+from .lease import STRETCH_STEP_M, heard_record, reachable, stopped_by
 from .legs import ACTING, AT_STATION_M, EVADE, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import OBSTACLE_LOOKAHEAD, ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Occupancy, Target, can_do
@@ -379,7 +381,10 @@ class FleetManager:
             r.took_late = status.lateness_s   # the first word that it took its leg: late by so much already
         r.status, r.seen = status, now
         if not r.online:
+            if r.unheard is not None and not r.immobile:  # back before it must have stopped: it kept its job
+                r.replan = r.target is not None         # (fleet/lease.py), re-planned from where it holds
             r.online, r.immobile, r.idle_since = True, status.mode == "error", now
+            r.unheard, r.reach = None, None
             r.stop = not r.immobile  # it may still drive a leg the others no longer keep clear of
             self._notes.append(f"robot {r.id} is back online at ({status.x:.2f}, {status.y:.2f})")
             return
@@ -599,7 +604,17 @@ class FleetManager:
             silent = now - r.seen
             if r.online and silent > timeout and (not deaf or silent > DEAF_FACTOR * timeout):
                 r.online = False
-                self._immobilise(r, now, d, f"offline: no status for {silent:.1f} s")
+                why = f"offline: no status for {silent:.1f} s"
+                until = stopped_by(r, now, self.params.silence)
+                r.unheard = (until, why) if r.leg is not None else None   # it may drive its leg unheard until then
+                if r.unheard is not None and until > now:  # its leg is kept meanwhile (fleet/lease.py)
+                    d.notes.append(f"robot {r.id} {why}; its leg is kept clear until it must have stopped "
+                                   f"(t = {until:.1f} s: lease {self.params.lease:g} s, silence "
+                                   f"{self.params.silence:g} s, braking)")
+                else:
+                    self._immobilise(r, now, d, why)
+            elif not r.online and not r.immobile and r.unheard is not None and now >= r.unheard[0]:
+                self._immobilise(r, now, d, r.unheard[1])
             elif r.online and not r.immobile and r.status.mode == "error":
                 self._immobilise(r, now, d, "out of battery")
             elif r.immobile and r.job is not None:  # its job could not be released (the store failed): again
@@ -621,16 +636,32 @@ class FleetManager:
 
     def _immobilise(self, r: FleetRobot, now: float, d: Decisions, why: str) -> None:
         """``r`` stays where it was last seen for good: an obstacle. Its job goes back to the queue
-        (or fails, if it holds the goods and is out of battery) and legs passing near it re-plan."""
+        (or fails, if it holds the goods and is out of battery) and legs passing near it re-plan.
+        One that went unheard on a leg is an obstacle wherever it may be: the stretch of its leg it
+        could have driven before it must have stopped (fleet/lease.py), not only its last heard point."""
+        where = np.array([r.pos])
+        if r.unheard is not None and r.leg is not None:
+            paths = dict(self.gates.paths.get(r.id, {})) if self.gates is not None else {}
+            paths[r.leg.path_id] = r.leg.path
+            where = reachable(r, paths, r.unheard[0])
+        r.reach, r.unheard = (where if len(where) > 1 else None), None
         r.immobile = True
         r.leg, r.target, r.replan, r.conflict, r.arrived_at = None, None, False, False, None
         self._changed(r)
-        d.notes.append(f"robot {r.id} {why}; it is an obstacle at ({r.status.x:.2f}, {r.status.y:.2f})")
+        if r.reach is None:
+            d.notes.append(f"robot {r.id} {why}; it is an obstacle at ({r.status.x:.2f}, {r.status.y:.2f})")
+        else:
+            (x0, y0), (x1, y1) = where.min(axis=0).tolist(), where.max(axis=0).tolist()
+            d.notes.append(f"robot {r.id} {why}; it is an obstacle anywhere it could have driven unheard "
+                           f"(in x {x0:.2f}..{x1:.2f}, y {y0:.2f}..{y1:.2f})")
         self._release(r, now, d, why)
-        for o in self._replan_around(r, r.pos, now):
+        marked: dict[str, FleetRobot] = {}
+        for point in where[::5]:   # (points 0.5 m apart: the clearance covers the rest)
+            marked.update((o.id, o) for o in self._replan_around(r, (float(point[0]), float(point[1])), now))
+        for o in marked.values():
             d.notes.append(f"robot {o.id} re-plans around {r.id}")
         if self.gates is not None:  # robots waiting for it that do not pass it go on; the others re-plan
-            records, stuck = self.gates.forget(r, self.robots.values(), now)
+            records, stuck = self.gates.forget(r, self.robots.values(), now, where)
             d.gates += records
             for oid in stuck:
                 o = self.robots[oid]
@@ -1115,11 +1146,30 @@ class FleetManager:
 
     def _leg_path(self, r: FleetRobot, start: Point, target: Target, t0: float, now: float) -> TimedPath:
         """``r``'s timed path from ``start`` at ``t0`` to ``target``, as the coordination mode plans it
-        round the fleet and the obstacles (followed OBSTACLE_LOOKAHEAD horizons); LegNotPlanned if none."""
+        round the fleet, the obstacles (followed OBSTACLE_LOOKAHEAD horizons) and the stretches robots
+        that stopped unheard may stand on; LegNotPlanned if none."""
         return self.strategy.plan_leg(r, start, target, t0, grid=self.warehouse.grid, planner=self.planner,
                                       speed=r.kind.max_speed * self.params.speed_factor, fleet=self.robots.values(),
-                                      obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD),
-                                      margin=self.margin)
+                                      obstacles=self.obstacles.trajectories(now, OBSTACLE_LOOKAHEAD)
+                                      + self._reaches(start, r.radius, t0), margin=self.margin)
+
+    def _reaches(self, start: Point, radius: float, t0: float) -> list[TimedPath]:
+        """Every point robots that stopped unheard may stand on (fleet/lease.py), as standing discs (a
+        leg starting near one keeps at least the distance of now from it, as from a robot)."""
+        out = []
+        gap = 2 * STRETCH_STEP_M   # discs this far apart, grown by the sag between two of them, cover the stretch
+        for o in self.robots.values():
+            if o.immobile and o.reach is not None:
+                grown = o.radius + o.radius - math.sqrt(max(0.0, o.radius ** 2 - (gap / 2) ** 2))
+                pts = o.reach[1:]   # (the first is its status: the robot itself)
+                for k, (x, y) in enumerate(np.vstack([pts[::2], pts[-1:]]).tolist()):
+                    disc = TimedPath(f"{o.id}~{k}", grown, np.array([[x, y, t0]]))
+                    out.append(room_to_leave(disc, start, radius, self.margin, t0))
+        return out
+
+    def heard(self, now: float) -> Heard:
+        """Whom the planner hears now, for the robots' leases (``fleet/heard@1``; fleet/lease.py)."""
+        return heard_record(self.robots.values(), now, self.params.lease, self.params.silence)
 
     def _out_of_time(self) -> bool:
         """This step has spent its leg-planning budget (``step_budget_s`` wall seconds)."""

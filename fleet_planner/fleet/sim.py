@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 
-from msg_schemas.records import GateRecord, RobotStatus, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import GateRecord, Heard, RobotStatus, Task, TaskEvent, WaitMessageRecord
 
 from ..model import TimedPath
 from ..robots import RobotKind, RobotModel, TrackBatch
@@ -85,6 +85,18 @@ class SimFleet:
         agent = self.agents.get(record.robot_id)
         if agent is not None:
             agent.on_gate(record)
+
+    def on_heard(self, record: Heard) -> None:
+        """Whom the planner hears (fleet/lease.py), for every robot it simulates (each reads its own
+        entry; ValueError, naming the field, if one is stamped too far ahead: the others took it)."""
+        problems = []
+        for a in self.agents.values():
+            try:
+                a.on_heard(record, self._now)
+            except ValueError as exc:
+                problems.append(str(exc))
+        if problems:
+            raise ValueError(f"{problems[0]}" + (f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""))
 
     def on_task(self, task: Task) -> None:
         for a in self.agents.values():

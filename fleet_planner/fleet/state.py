@@ -74,6 +74,12 @@ class FleetRobot:
     evade_retry_at: float = -math.inf  # no refuge from a moving obstacle could be reached: tried again from then on
     leg_failures: int = 0             # legs refused in a row (the wait before the next try doubles)
     took_late: float = 0.0            # how late (s) its first status on its leg said it was (it took it late)
+    #: when a heard record first showed it unheard (fleet/lease.py; None: heard)
+    stale_since: float | None = None
+    #: offline, it may still drive its leg until then (fleet/lease.py), and why it is offline
+    unheard: tuple[float, str] | None = None
+    #: immobile after it was unheard: every point it may stand at (n x 2; None: its status's position)
+    reach: np.ndarray | None = None
 
     @property
     def id(self) -> str:
@@ -153,6 +159,8 @@ def _ends(o: FleetRobot) -> list[Point]:
     leg (late messages) went to a second robot, which parked on it; the first then could never get
     a leg there ("blocked by ..., which parks on its goal") and stood in the way of others for good."""
     ends = [o.pos]
+    if o.immobile and o.reach is not None:  # anywhere on the stretch it could reach unheard (fleet/lease.py)
+        ends += [(float(x), float(y)) for x, y in o.reach[::5]]
     if not o.immobile:
         if o.leg is not None:
             ends.append((float(o.leg.path.waypoints[-1, 0]), float(o.leg.path.waypoints[-1, 1])))

@@ -29,7 +29,7 @@ from fleet_planner.ros.entry import run_node
 from fleet_planner.warehouse import Warehouse, load_warehouse
 from msg_schemas import topics
 from msg_schemas.convert import msg_to_timed_path, stamp_to_ns, string_to_record
-from msg_schemas.records import GateRecord, Neighbours, RecordError, Task, TaskEvent, WaitMessageRecord
+from msg_schemas.records import GateRecord, Heard, Neighbours, RecordError, Task, TaskEvent, WaitMessageRecord
 
 
 def _fixed(description: str) -> ParameterDescriptor:
@@ -81,6 +81,10 @@ class FleetSimNode(Node):
                           event_callbacks=quiet)
         subscribe(String, topics.TASKS, self._on_task, topics.TASKS_QOS)
         subscribe(String, topics.TASK_EVENTS, self._on_event, topics.TASK_EVENTS_QOS)
+        subscribe(String, topics.HEARD, self._on_heard, topics.HEARD_QOS)   # the robots' leases (fleet/lease.py)
+        #: robots whose statuses are not published (a test's radio dead spot: the planner cannot hear them)
+        self.unheard: set[str] = set()
+        self.lease_stops = 0   # leases run out so far
         self._waits = None
         if self.sim.agents and next(iter(self.sim.agents.values())).strategy.exchanges_wait_messages:
             self._waits = self.create_publisher(String, topics.WAIT_MESSAGES, topics.WAIT_MESSAGES_QOS)
@@ -117,6 +121,12 @@ class FleetSimNode(Node):
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
 
+    def _on_heard(self, msg: String) -> None:
+        try:
+            self.sim.on_heard(string_to_record(msg, Heard))
+        except (RecordError, ValueError) as exc:
+            self.get_logger().warning(f"heard record ignored: {exc}", throttle_duration_sec=5.0)
+
     def _on_neighbours(self, msg: String) -> None:
         try:
             self.sim.hear(string_to_record(msg, Neighbours).robots)
@@ -131,8 +141,17 @@ class FleetSimNode(Node):
 
     def _on_timer(self) -> None:
         try:
+            was = {rid for rid, a in self.sim.agents.items() if a.lease.stopped}
             for status in self.sim.step(self.get_clock().now().nanoseconds / 1e9):
-                self._status.publish(String(data=status.to_compact_json()))
+                if status.id not in self.unheard:
+                    self._status.publish(String(data=status.to_compact_json()))
+            now_stopped = {rid for rid, a in self.sim.agents.items() if a.lease.stopped}
+            if now_stopped != was:   # leases that ran out / robots heard again (fleet/lease.py): one line a step
+                self.lease_stops += len(now_stopped - was)
+                self.get_logger().warning(
+                    f"not heard by the planner (lease run out), stopping: {sorted(now_stopped - was)}; heard "
+                    f"again, driving on: {sorted(was - now_stopped)} ({len(now_stopped)} stopped, "
+                    f"{self.lease_stops} stops so far)")
             if self._waits is not None:
                 for wait in self.sim.take_wait_messages():
                     self._waits.publish(String(data=wait.to_json()))
