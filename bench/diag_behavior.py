@@ -62,8 +62,15 @@ def load(path: Path):
     from fleet_planner.behavior import BehaviorController
 
     fleet = run.fleet
+    # move graphs of older code: the search's fields added since start empty (made at first use)
+    for graph in getattr(run.problem.grid, "_path_move_graphs", {}).values():
+        graph.__dict__.setdefault("_landmarks", None)
+        graph.__dict__.setdefault("symmetric", None)
     for rid in fleet.ids:
         c = fleet.controller(rid)
+        for graph in getattr(c.grid, "_path_move_graphs", {}).values():
+            graph.__dict__.setdefault("_landmarks", None)
+            graph.__dict__.setdefault("symmetric", None)
         fresh = BehaviorController(c.grid, c.id, c.radius, c.max_speed, c.position, c.params,
                                    finders={c.radius: c.finder})
         for k, v in vars(fresh).items():

@@ -175,6 +175,7 @@ def test_a_robot_leaving_its_station_replans_round_a_waiting_robot_pinned_in_its
     _until_r6_arrives(fleet, 120.0)
     assert fleet.arrived("r6") and fleet.controller("r6").replans >= 1
     monkeypatch.setattr(BehaviorController, "_does_not_give_way", staticmethod(lambda o: not o.travelling))
+    monkeypatch.setattr(BehaviorController, "_given_up_on", lambda self, other: False)   # the later breaker too
     control = _leaving_blocked_by_the_queue()
     _until_r6_arrives(control, 120.0)
     assert not control.arrived("r6") and control.controller("r6").blocked_since is not None
@@ -261,3 +262,56 @@ def test_a_robot_standing_where_it_escaped_to_has_its_way_to_the_goal_left():
                         None)
     assert standing is not None and standing.goal is not None
     assert standing.remaining() == math.dist(standing.position, standing.goal) > 1.0
+
+
+def _pinned_in_a_one_way_aisle() -> BehaviorFleet:
+    """A 2 m aisle whose lanes run east only (the two rows of centres a robot fits in), a station
+    in a niche below it (the scene of ARMO on `large`, 100 robots, chute_5): d leaves the station
+    it still holds, its path climbing to the upper row and on east; p stands pressed against the
+    top wall 0.73 m from it, its way running down into d (it drives round d in Avoid, finds no
+    side, waits, tries again). Escapes off: only a re-plan can break it."""
+    from fleet_planner.roadmap import _BIT, RoadMap, with_lanes
+
+    rows = ["@" * 40] + ["." * 40] * 4 + ["@" * 9 + "..." + "@" * 28] * 3 + ["@" * 40]
+    grid = GridMap.from_rows(rows, resolution=0.5)
+    allowed = RoadMap.open(grid).allowed.copy()
+    allowed[1:5, :] &= ~np.uint8(_BIT[(-1, 0)])      # the aisle: eastbound only
+    grid = with_lanes(grid, RoadMap(allowed, 0.5))
+    d0, p0 = (5.25, 2.95), (4.93, 0.87)
+    fleet = BehaviorFleet(grid, [RobotSpec("d", 0.354, 0.8, d0, d0), RobotSpec("p", 0.354, 0.8, p0, p0)],
+                          BehaviorParams(escape_after=0.0))
+    fleet.assign("d", (5.25, 3.0), station="chute")
+    for _ in range(10):
+        fleet.step(0.1)
+    d = fleet.controller("d")
+    assert d.holds is not None
+    d.pos = np.array([5.05, 1.59])
+    fleet.assign("d", (19.25, 1.25))
+    d._set_path(np.array([[5.39, 1.25], [19.25, 1.25]]))
+    fleet.assign("p", (19.25, 1.75))
+    fleet.controller("p")._set_path(np.array([[4.6, 1.5], [19.25, 1.75]]))
+    return fleet
+
+
+def _until_d_arrives(fleet: BehaviorFleet, limit_s: float) -> None:
+    while fleet.time < limit_s and not fleet.arrived("d"):
+        fleet.step(0.1)
+
+
+def test_a_robot_leaving_its_station_replans_round_a_driving_robot_pinned_in_its_way(monkeypatch):
+    """The paper's re-plan behind a virtual wall (IV.C) cuts both eastbound rows (the wall and the
+    disc's clearance), and p, driving, is no obstacle the leaving robot re-plans round: d stood
+    (control: 200 s, dozens of failed re-plans; the measured lock lasted 1044 s). Ours
+    (``BehaviorController._given_up_on``): a robot in a leaving Dock robot's way that has not
+    given way in ``avoid_timeout`` cannot, and d re-plans round it, without a wall, keeping only
+    the discs apart; it arrives."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _pinned_in_a_one_way_aisle()
+    _until_d_arrives(fleet, 120.0)
+    assert fleet.arrived("d") and fleet.controller("d").holds is None
+    monkeypatch.setattr(BehaviorController, "_given_up_on", lambda self, other: False)
+    control = _pinned_in_a_one_way_aisle()
+    _until_d_arrives(control, 200.0)
+    d = control.controller("d")
+    assert not control.arrived("d") and d.holds is not None and d.replan_failures >= 10

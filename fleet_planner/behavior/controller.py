@@ -400,9 +400,41 @@ class BehaviorController:
         # nor does a waiting one that has no room to (pinned between the leaving robot and a
         # wall: measured, a robot leaving its station blocked 857 s by one queued for it, ARMO on
         # `large`, 20 robots): after ``blocked_timeout`` the leaving robot re-plans round it
-        if rival is None and self._leaving() and self._stalled() and any(
-                self._does_not_give_way(o) and in_critical_area(me, o, self.params) for o in sensed):
-            self._replan(sensed)
+        if rival is None and self._leaving() and self._stalled():
+            in_way = [o for o in sensed if in_critical_area(me, o, self.params)]
+            if any(self._does_not_give_way(o) for o in in_way):
+                self._replan(sensed)
+            elif any(self._given_up_on(o) for o in in_way) and self.time >= self.replan_after:
+                self._replan_round(in_way)
+
+    def _given_up_on(self, other: RobotView) -> bool:
+        """Interpretation (ours, issue 13): a robot in the way of a leaving Dock robot that has
+        not given way in ``avoid_timeout`` (the leaving robot stopped that long) cannot: it is
+        pinned between the Dock robot and a wall, its Avoid finding no side and its re-plans
+        starting into the Dock robot again (measured: ARMO on `large`, 100 robots, r75 in Avoid
+        pressed against the wall above r63 leaving chute_5, both stopped 1044 s). The paper's
+        "the others give way" (IV.B.5) assumes they can; so the Dock robot re-plans round it, as
+        round an obstacle (IV.C.1), whatever its behaviour."""
+        assert self.blocked_since is not None   # only asked of a stalled robot
+        return other.travelling and self.time - self.blocked_since > self.params.avoid_timeout
+
+    def _replan_round(self, in_way: Sequence[RobotView]) -> None:
+        """A leaving Dock robot re-plans round the robots in its way that could not give way
+        (:meth:`_given_up_on`), each an obstacle it must not touch (IV.C.1). Interpretation (ours):
+        without a virtual wall and with keep-out discs only the robots' radii and the safety margin
+        wide: the robot stands within the usual keep-out (radii + critical margin) of the robot
+        pinned next to it, so that disc would be dropped as containing the start, and on one-way
+        lanes the wall cut every lane its way goes on (measured, the scene above: both eastbound
+        rows of the main aisle), so the paper's re-plan found no way in 1044 s."""
+        assert self.goal is not None   # a leaving robot has a path, so a goal
+        self.replan_after = self.time + self.params.blocked_timeout
+        avoid = [(o.position, self.radius + o.radius + self.params.safety_margin) for o in in_way]
+        path = self.finder.find(self.position, self.goal, avoid=avoid)
+        if path is None:
+            self.replan_failures += 1
+            return
+        self.replans += 1
+        self._set_path(path)
 
     @staticmethod
     def _does_not_give_way(other: RobotView) -> bool:
