@@ -185,6 +185,40 @@ def test_the_improvement_search_moves_a_waiting_robot_ahead_and_lowers_the_sum()
     assert _sum(better) < _sum(first) - 10.0
 
 
+def test_the_improvement_search_starts_no_move_once_its_cpu_budget_is_spent(monkeypatch):
+    """The search is anytime within a share of the first plan's CPU: with none, no move is tried and
+    the plan is md's first plan (control: the test above, where the default share keeps a move)."""
+    from fleet_planner.planners import md
+
+    grid, robots = _warehouse(25, 2)
+    first = get_planner("md", improve=0, compare_above=None).plan(grid, robots)
+    monkeypatch.setattr(md, "IMPROVE_CPU_SHARE", 0.0)
+    spent = get_planner("md", compare_above=None).plan(grid, robots)
+    assert spent.info["improved"] == 0
+    assert _sum(spent) == pytest.approx(_sum(first), abs=1e-9)
+
+
+def test_md_budgets_count_cpu_seconds_not_wall_clock_seconds():
+    """A Budget is not spent while its thread waits (wall-clock time passes, no CPU), is spent by
+    computing, and runs out at its wall-clock backstop (WALL_BACKSTOP x its seconds) all the same."""
+    import threading
+    import time
+
+    from fleet_planner.planners.base import WALL_BACKSTOP, Budget
+
+    budget = Budget(0.05)
+    threading.Event().wait(0.1)   # twice the budget in wall-clock time, no CPU
+    assert not budget.passed() and budget.left() > 0.04
+    end = time.perf_counter() + 0.5 * WALL_BACKSTOP   # bounded: 0.05 s of CPU comes well before
+    while not budget.passed() and time.perf_counter() < end:
+        sum(range(1000))
+    assert budget.passed() and budget.left() == 0.0
+    starved = Budget(0.01)
+    threading.Event().wait(0.02 * WALL_BACKSTOP)
+    assert starved.passed()
+    assert not Budget(None).passed()
+
+
 def test_a_move_that_does_not_pay_is_undone_exactly(monkeypatch):
     """Every move refused (the sum never drops): the plan is exactly the plan without the search, so
     everything a move changed (order, paths, collision model, timing) was put back."""

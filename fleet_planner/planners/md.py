@@ -264,12 +264,12 @@ class MDPlanner(Planner):
                     return self._dense(grid, robots, t_start, deadline, 0, f"crowded: {why}", **options)
                 except PlanningError:
                     pass   # e.g. robots off cell centres: md tries with what is left
-        c_start = time.process_time()
+        c_start = time.thread_time()
         try:
             session, search = self._prioritized(grid, robots, progress, deadline)
         except _SearchFailed as failed:
             return self._fallback(grid, robots, failed.error, failed.attempts, t_start, deadline)
-        c_first = time.process_time() - c_start
+        c_first = time.thread_time() - c_start
         first = session._arrivals()
         drive = session.drive()
         other: Plan | None = None
