@@ -88,7 +88,10 @@ class Budget:
         return time.thread_time() > self._cpu_end or time.perf_counter() > self._wall_end
 
     def left(self) -> float:
-        """Seconds left (CPU, or wall-clock with ``wall``; never below 0; infinite without a bound)."""
+        """Seconds left (CPU, or wall-clock with ``wall``; 0 once spent, at the backstop too; infinite
+        without a bound)."""
+        if self.passed():
+            return 0.0
         if self._cpu_end == math.inf:
             return max(self._wall_end - time.perf_counter(), 0.0)
         return max(self._cpu_end - time.thread_time(), 0.0)

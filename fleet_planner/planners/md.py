@@ -171,7 +171,8 @@ class MDPlanner(Planner):
     returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
     solver when its plan won, ``info["compared"]`` its sum when md's did. The live fleet's legs
     (:meth:`plan_incremental`) stop trying detours and re-orderings once
-    ``leg_time_limit`` s of CPU (default 0.5) are spent (a late re-ordering refuses the leg, which the
+    ``leg_time_limit`` s (default 0.5; CPU seconds, or wall-clock seconds with ``leg_clock="wall"``:
+    a live fleet that paces its legs in real time) are spent (a late re-ordering refuses the leg, which the
     fleet manager re-plans later). ``improve`` (default :data:`IMPROVE_TRIES` with holds, else 0;
     one-shot plans only): moves of a large-neighbourhood search over priorities after a plan is
     found (the robot that waits longest goes just ahead of the robot it waits for; kept when the
@@ -186,7 +187,10 @@ class MDPlanner(Planner):
                  detours: int | None = None, detour_min: float = 2.0, early_holds: bool | None = None,
                  time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd",
                  leg_time_limit: float = 0.5, crowded: bool = True, compare_above: float | None = 1.05,
-                 improve: int | None = None):
+                 improve: int | None = None, leg_clock: str = "cpu"):
+        if leg_clock not in ("cpu", "wall"):
+            raise ValueError(f"leg_clock: must be 'cpu' or 'wall' (got {leg_clock!r})")
+        self.leg_clock = leg_clock
         if holds is None:
             holds = "anywhere" if mode == "exact" else "none"
         if detours is None:
@@ -404,7 +408,7 @@ class MDPlanner(Planner):
         without it md's legs waited 4-5x longer than PRIOR's on the same situations (they stay on
         the shortest path and queue behind the traffic in it)."""
         robots = list(robots)
-        deadline = Budget(self.leg_time_limit)
+        deadline = self._leg_budget()
         failure: PlanningError | None = None
         best: list[TimedPath] | None = None
         try:
@@ -416,7 +420,7 @@ class MDPlanner(Planner):
             routes, timed = self._space_time_routes(grid, robots, fixed, t0)
             if routes:
                 try:
-                    other = self._legs(grid, robots, fixed, t0, Budget(self.leg_time_limit), routes)
+                    other = self._legs(grid, robots, fixed, t0, self._leg_budget(), routes)
                 except PlanningError:
                     other = None
                 if other is not None and (best is None or _total_arrival(other) < _total_arrival(best) - 1e-6):
@@ -427,6 +431,9 @@ class MDPlanner(Planner):
             assert failure is not None
             raise failure
         return best
+
+    def _leg_budget(self) -> Budget:
+        return Budget(self.leg_time_limit, wall=self.leg_clock == "wall")
 
     def _legs(self, grid: GridMap, robots: list[RobotSpec], fixed: Sequence[TimedPath], t0: float,
               deadline: Budget, routes: dict[int, np.ndarray] | None = None) -> list[TimedPath]:
@@ -487,8 +494,8 @@ class MDPlanner(Planner):
         searcher = getattr(self, "_route_search", None)
         if searcher is None or searcher.margin != self.margin:
             searcher = self._route_search = PriorPlanner(margin=self.margin)
-            searcher.cpu_time = True   # CPU seconds, like md's own budgets
         searcher.time_limit_s = _LEG_SEARCH_LIMITS * self.leg_time_limit
+        searcher.cpu_time = self.leg_clock == "cpu"   # the clock of md's own leg budgets
         lo, hi = _corridors(self._finders.of(grid), robots)
         near = _fixed_near(robots, lo, hi, fixed, t0, self.margin)
         try:
