@@ -67,8 +67,9 @@ IMPROVE_ABOVE = 0.015
 #: first plan, so that the number of moves tried does not depend on the machine or its load (CPU
 #: seconds grow under load too: the same plan took 0.40 and 0.70 s). Measured at 100 robots on
 #: warehouse-10-20-10-2-2 (first plan about 0.31 s CPU, load 6; moves cost about 0.02 s each):
-#: 0, 2, 4, 8 moves SoC/free 1.053, 1.045, 1.035, 1.025 for 0.31, 0.35, 0.39, 0.46 s CPU
-IMPROVE_CPU_SHARE = 0.5
+#: 0, 2, 4, 8 moves SoC/free 1.053, 1.045, 1.035, 1.025 for 0.31, 0.35, 0.39, 0.46 s CPU: the 8 moves take
+#: about 0.5 of the first plan's CPU (with 0.5, 6-7 of them were tried under load 6-15: 1.027)
+IMPROVE_CPU_SHARE = 0.75
 #: the dense solver's two refinement budgets (CPU s per 100 robots each) when md compares plans
 #: (measured with 0.2: 100 robots on warehouse-10-20-10-2-1, SoC/free 1.0627 against 1.0617 with the
 #: dense solver's defaults, 0.6-0.9 s less CPU; 200 robots on it and on warehouse-10-20-10-2-2: 1.1003 /
