@@ -45,7 +45,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--margin", type=float,
                    help="md, prior: metres added to every pair's sum of radii (default: 0.02)")
     p.add_argument("--time-limit", type=_seconds, dest="time_limit",
-                   help="md: seconds for the priority search when greedy re-ordering gives up, then the "
+                   help="md: CPU seconds for the priority search when greedy re-ordering gives up, then the "
                         "dense fallback (default: 10)")
     p.add_argument("--plot", type=Path, help="also draw the plan to this PNG")
     p.add_argument("--check", action="store_true",

@@ -40,3 +40,45 @@ def test_the_paper_method_keeps_its_departure_delays_only():
     moving = np.hypot(*np.diff(wp[:, :2], axis=0).T) > 1e-9
     first = int(np.argmax(moving))
     assert moving[first:].all()   # once it moves, it never stops before its goal
+
+
+def _no_timing_of_routes(monkeypatch):
+    """md cannot time the search's routes itself (its _legs refuses when given routes)."""
+    own_legs = md.MDPlanner._legs
+
+    def legs(self, grid, robots, fixed, t0, deadline, routes=None):
+        if routes:
+            raise md.PlanningError({r.id: "test: no timing of routes" for r in robots})
+        return own_legs(self, grid, robots, fixed, t0, deadline, routes)
+    monkeypatch.setattr(md.MDPlanner, "_legs", legs)
+
+
+def test_a_leg_takes_the_searchs_own_timing_when_md_has_nothing_sooner(monkeypatch):
+    _no_timing_of_routes(monkeypatch)
+    leg = get_planner("md").plan_incremental(GRID, [R], [F], 0.0)[0]
+    assert check_plan(GRID, [F_SPEC, R], Plan("md", [F, leg])) == []
+    assert leg.arrival_time == pytest.approx(20.0, abs=1e-6)   # the way round, as the search timed it
+    # control: without the search's own timing md's leg waits in the direct corridor
+    monkeypatch.setattr(md, "_LEG_CORRIDOR_M", 0.0)   # the way round now leaves the corridor: not taken
+    own = get_planner("md").plan_incremental(GRID, [R], [F], 0.0)[0]
+    assert own.arrival_time > 46.0
+
+
+def test_the_searchs_own_timing_is_not_taken_outside_the_corridor_where_it_did_not_look(monkeypatch):
+    # g parks for ever in the way round, outside r's corridor when the corridor is only r's own line:
+    # the search does not see g and goes round through it; md must not take that leg
+    g = TimedPath("g", 0.4, np.array([[3.5, 2.5, 0.0]]))
+    g_spec = RobotSpec("g", 0.4, 1.0, (3.5, 2.5), (3.5, 2.5))
+    monkeypatch.setattr(md, "_LEG_CORRIDOR_M", 0.0)
+    leg = get_planner("md").plan_incremental(GRID, [R], [F, g], 0.0)[0]
+    assert check_plan(GRID, [F_SPEC, g_spec, R], Plan("md", [F, g, leg])) == []
+    assert leg.arrival_time > 46.0   # it waits for f in the direct corridor
+    routes, timed = get_planner("md")._space_time_routes(GRID, [R], [F, g], 0.0)
+    assert routes and timed is None and _passes_g(routes[0], g)
+
+
+def _passes_g(route, g) -> bool:
+    """The search's route passes g's disc (what taking its leg unchecked would drive into)."""
+    from fleet_planner.geometry import polyline_passes_near
+
+    return polyline_passes_near(route, tuple(g.waypoints[0, :2]), 0.8)

@@ -185,6 +185,57 @@ def test_the_improvement_search_moves_a_waiting_robot_ahead_and_lowers_the_sum()
     assert _sum(better) < _sum(first) - 10.0
 
 
+def test_the_improvement_search_starts_no_move_once_its_cpu_budget_is_spent(monkeypatch):
+    """The search is anytime within a share of the first plan's CPU: with none, no move is tried and
+    the plan is md's first plan (control: the test above, where the default share keeps a move)."""
+    from fleet_planner.planners import md
+
+    grid, robots = _warehouse(25, 2)
+    first = get_planner("md", improve=0, compare_above=None).plan(grid, robots)
+    monkeypatch.setattr(md, "IMPROVE_CPU_SHARE", 0.0)
+    spent = get_planner("md", compare_above=None).plan(grid, robots)
+    assert spent.info["improved"] == 0
+    assert _sum(spent) == pytest.approx(_sum(first), abs=1e-9)
+
+
+def test_md_budgets_count_cpu_seconds_not_wall_clock_seconds():
+    """A Budget is not spent while its thread waits (wall-clock time passes, no CPU), is spent by
+    computing, and runs out at its wall-clock backstop (WALL_BACKSTOP x its seconds) all the same."""
+    import threading
+    import time
+
+    from fleet_planner.planners.base import WALL_BACKSTOP, Budget
+
+    budget = Budget(0.2)   # (its backstop, 2 s wall, leaves room for a loaded machine)
+    threading.Event().wait(0.3)   # more than the budget in wall-clock time, no CPU
+    assert not budget.passed() and budget.left() > 0.15
+    end = time.perf_counter() + 2 * WALL_BACKSTOP   # bounded: 0.2 s of CPU or the backstop come before
+    while not budget.passed() and time.perf_counter() < end:
+        sum(range(1000))
+    assert budget.passed() and budget.left() == 0.0
+    starved = Budget(0.01)
+    threading.Event().wait(0.02 * WALL_BACKSTOP)
+    assert starved.passed()
+    assert not Budget(None).passed()
+
+
+def test_a_live_fleet_paces_md_legs_in_wall_clock_seconds():
+    """md's leg budget counts CPU seconds, or wall-clock seconds with leg_clock "wall", which the fleet
+    manager's default md uses (its legs are paced in real time)."""
+    import threading
+
+    from fleet_planner.fleet import FleetManager
+    from fleet_planner.robots import load_kinds
+    from fleet_planner.warehouse import generate_warehouse
+
+    cpu, wall = MDPlanner(leg_time_limit=0.2), MDPlanner(leg_time_limit=0.2, leg_clock="wall")
+    budgets = cpu._leg_budget(), wall._leg_budget()
+    threading.Event().wait(0.3)
+    assert [b.passed() for b in budgets] == [False, True]
+    fleet = FleetManager(generate_warehouse(2, 2, 8, 2, 4, 0.5, "small", chutes=2, chargers=4), load_kinds())
+    assert fleet.planner.leg_clock == "wall"
+
+
 def test_a_move_that_does_not_pay_is_undone_exactly(monkeypatch):
     """Every move refused (the sum never drops): the plan is exactly the plan without the search, so
     everything a move changed (order, paths, collision model, timing) was put back."""
@@ -250,6 +301,8 @@ def test_bad_options_are_refused_naming_the_option(capsys, tmp_path):
             MDPlanner(time_limit=bad)
     with pytest.raises(ValueError, match="leg_time_limit"):
         MDPlanner(leg_time_limit=-1)
+    with pytest.raises(ValueError, match="leg_clock: must be 'cpu' or 'wall'"):
+        MDPlanner(leg_clock="sundial")
     with pytest.raises(ValueError, match="fallback: must be"):
         MDPlanner(fallback="lacam")
     for bad in (-1, 1.5, True):

@@ -166,7 +166,8 @@ class FleetManager:
         self.work_stops = {s.name: s.pose for s in warehouse.stations.values() if s.type != "charger"}
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
-        self.planner = planner if planner is not None else get_planner("md", margin=self.margin)
+        # the live fleet paces its legs in wall-clock seconds (paced_budgets, MIN_LEG_LIMIT_S)
+        self.planner = planner if planner is not None else get_planner("md", margin=self.margin, leg_clock="wall")
         self.robots: dict[str, FleetRobot] = {}
         self.jobs: dict[str, Job] = {}
         #: finished jobs still in ``jobs``, oldest first, with why they ended (at most MAX_CLOSED_JOBS)

@@ -41,7 +41,7 @@ from ..model import (
 )
 from ..scheduler import HOLDS, Blocked, DelayScheduler
 from . import md_crowd
-from .base import Planner, Progress
+from .base import Budget, Planner, Progress
 from .md_crowd import crowding, sum_of_arrivals
 from .md_search import PrioritySearch
 
@@ -63,6 +63,13 @@ IMPROVE_GAIN = 0.04
 #: drive: 1.0090 -> 1.0057 and 1.0116 -> 1.0053 for 0.30 and 0.37 s CPU; at 2.2%: 1.0232 -> 1.0066 in 0.19
 #: s; warehouse-10-20-10-2-2 waits 4.7-6.2%: 1.053-1.066 -> 1.025-1.043 in 0.17-0.28 s)
 IMPROVE_ABOVE = 0.015
+#: ... and its CPU budget: this share of the CPU seconds md's first plan took (ours). Relative to the
+#: first plan, so that the number of moves tried does not depend on the machine or its load (CPU
+#: seconds grow under load too: the same plan took 0.40 and 0.70 s). Measured at 100 robots on
+#: warehouse-10-20-10-2-2 (first plan about 0.31 s CPU, load 6; moves cost about 0.02 s each):
+#: 0, 2, 4, 8 moves SoC/free 1.053, 1.045, 1.035, 1.025 for 0.31, 0.35, 0.39, 0.46 s CPU: the 8 moves take
+#: about 0.5 of the first plan's CPU (with 0.5, 6-7 of them were tried under load 6-15: 1.027)
+IMPROVE_CPU_SHARE = 0.75
 #: the dense solver's two refinement budgets (CPU s per 100 robots each) when md compares plans
 #: (measured with 0.2: 100 robots on warehouse-10-20-10-2-1, SoC/free 1.0627 against 1.0617 with the
 #: dense solver's defaults, 0.6-0.9 s less CPU; 200 robots on it and on warehouse-10-20-10-2-2: 1.1003 /
@@ -146,7 +153,8 @@ class MDPlanner(Planner):
     ``detour_min`` s in all is re-planned up to this many times around the stretch after its longest
     wait and takes the candidate with the earliest arrival under holds. ``search`` (default on):
     when greedy re-ordering gives up, the priority search of :mod:`.md_search` tries further orders
-    until ``time_limit`` s have passed since planning began (at most 10 + 2 N attempts);
+    until ``time_limit`` s of CPU have been spent since planning began (at most 10 + 2 N attempts;
+    md's budgets are CPU seconds, :class:`~.base.Budget`, so that its plans do not depend on the load);
     ``fallback`` (default "crowd"; a registered ``dense`` planner is preferred when there is one):
     the dense solver that plans when the search fails, named in the plan's ``info["fallback"]``;
     None refuses instead (and switches off the two uses of the dense solver that follow; so do
@@ -164,11 +172,13 @@ class MDPlanner(Planner):
     returned (md's on a tie); either way under md's name, ``info["fallback"]`` naming the dense
     solver when its plan won, ``info["compared"]`` its sum when md's did. The live fleet's legs
     (:meth:`plan_incremental`) stop trying detours and re-orderings once
-    ``leg_time_limit`` s (default 0.5) are spent (a late re-ordering refuses the leg, which the
+    ``leg_time_limit`` s (default 0.5; CPU seconds, or wall-clock seconds with ``leg_clock="wall"``:
+    a live fleet that paces its legs in real time) are spent (a late re-ordering refuses the leg, which the
     fleet manager re-plans later). ``improve`` (default :data:`IMPROVE_TRIES` with holds, else 0;
     one-shot plans only): moves of a large-neighbourhood search over priorities after a plan is
     found (the robot that waits longest goes just ahead of the robot it waits for; kept when the
-    sum of arrival times drops; ours, not the paper's), within the time budget, when md's first plan's
+    sum of arrival times drops; ours, not the paper's), within the time budget and
+    :data:`IMPROVE_CPU_SHARE` of the CPU seconds the first plan took, when md's first plan's
     robots wait more than :data:`IMPROVE_ABOVE` of their routes' driving time in all."""
 
     name = "md"
@@ -178,7 +188,10 @@ class MDPlanner(Planner):
                  detours: int | None = None, detour_min: float = 2.0, early_holds: bool | None = None,
                  time_limit: float = 10.0, search: bool = True, fallback: str | None = "crowd",
                  leg_time_limit: float = 0.5, crowded: bool = True, compare_above: float | None = 1.05,
-                 improve: int | None = None):
+                 improve: int | None = None, leg_clock: str = "cpu"):
+        if leg_clock not in ("cpu", "wall"):
+            raise ValueError(f"leg_clock: must be 'cpu' or 'wall' (got {leg_clock!r})")
+        self.leg_clock = leg_clock
         if holds is None:
             holds = "anywhere" if mode == "exact" else "none"
         if detours is None:
@@ -238,7 +251,7 @@ class MDPlanner(Planner):
     # ------------------------------------------------------------------------------------------
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         t_start = time.perf_counter()
-        deadline = t_start + self.time_limit
+        deadline = Budget(self.time_limit)
         robots = list(robots)
         _check_endpoints(robots, self.margin)
         # md v2's two uses of the dense solver; the paper's methods (holds "none", boxes) plan alone
@@ -256,10 +269,12 @@ class MDPlanner(Planner):
                     return self._dense(grid, robots, t_start, deadline, 0, f"crowded: {why}", **options)
                 except PlanningError:
                     pass   # e.g. robots off cell centres: md tries with what is left
+        c_start = time.thread_time()
         try:
             session, search = self._prioritized(grid, robots, progress, deadline)
         except _SearchFailed as failed:
             return self._fallback(grid, robots, failed.error, failed.attempts, t_start, deadline)
+        c_first = time.thread_time() - c_start
         first = session._arrivals()
         drive = session.drive()
         other: Plan | None = None
@@ -279,7 +294,8 @@ class MDPlanner(Planner):
         improved = 0
         # (unless the dense plan is far better: the search cannot catch up; or md's robots hardly wait)
         if self.improve and theirs >= (1 - IMPROVE_GAIN) * first and first > (1 + IMPROVE_ABOVE) * drive:
-            improved = session.improve(self.improve, deadline)
+            improved = session.improve(self.improve, deadline, Budget(
+                min(IMPROVE_CPU_SHARE * c_first, deadline.left())))
         plan = self._plan_of(session, search, improved, t_start)
         ours = sum_of_arrivals(plan)
         if other is not None and theirs < ours - 1e-6:
@@ -293,7 +309,7 @@ class MDPlanner(Planner):
         return plan
 
     def _prioritized(self, grid: GridMap, robots: list[RobotSpec], progress: Progress | None,
-                     deadline: float) -> tuple[_Session, tuple[int, int]]:
+                     deadline: Budget) -> tuple[_Session, tuple[int, int]]:
         """md itself: safe paths, holds, route choice, greedy re-ordering, and the priority search when
         that gives up, until ``deadline``; the session that found a plan and (attempts, learnt
         priorities); or _SearchFailed."""
@@ -315,7 +331,7 @@ class MDPlanner(Planner):
                 return session, (attempts, len(search.constraints))
             except PlanningError as exc:
                 blocked = next(iter(exc.blockers.items()), None)
-                if (not self.search or blocked is None or time.perf_counter() >= deadline
+                if (not self.search or blocked is None or deadline.passed()
                         or attempts >= 10 + 2 * len(robots) or blocked[0] not in ids or blocked[1] not in ids):
                     raise _SearchFailed(exc, attempts) from None
                 order = search.next_order(session.order, ids[blocked[0]], ids[blocked[1]])
@@ -336,7 +352,7 @@ class MDPlanner(Planner):
         return Plan("md", session.timed_paths(), time.perf_counter() - t_start, info, network)
 
     def _fallback(self, grid: GridMap, robots: list[RobotSpec], failure: PlanningError, attempts: int,
-                  t_start: float, deadline: float) -> Plan:
+                  t_start: float, deadline: Budget) -> Plan:
         """When prioritized planning finds no plan: the registered dense solver (``dense`` if there
         is one, else ``crowd``) with what is left of the time budget (at least half of it), its
         plan under md's name with ``info["fallback"]`` saying which; or the refusal, saying what
@@ -357,7 +373,7 @@ class MDPlanner(Planner):
 
         return "dense" if "dense" in planner_names() else str(self.fallback)
 
-    def _dense(self, grid: GridMap, robots: list[RobotSpec], t_start: float, deadline: float, attempts: int,
+    def _dense(self, grid: GridMap, robots: list[RobotSpec], t_start: float, deadline: Budget, attempts: int,
                why: str, **options) -> Plan:
         """The dense solver's plan under md's name, with ``info["fallback"]`` naming the solver and
         ``info["why"]`` saying why it planned; with what is left of the time budget (at least half
@@ -365,7 +381,7 @@ class MDPlanner(Planner):
         from . import get_planner
 
         name = self._dense_name()
-        budget = max(deadline - time.perf_counter(), 0.5 * self.time_limit)
+        budget = max(deadline.left(), 0.5 * self.time_limit)
         try:
             dense = get_planner(name, time_limit_s=budget, margin=self.margin, **options)
         except TypeError:
@@ -393,7 +409,7 @@ class MDPlanner(Planner):
         without it md's legs waited 4-5x longer than PRIOR's on the same situations (they stay on
         the shortest path and queue behind the traffic in it)."""
         robots = list(robots)
-        deadline = time.perf_counter() + self.leg_time_limit
+        deadline = self._leg_budget()
         failure: PlanningError | None = None
         best: list[TimedPath] | None = None
         try:
@@ -402,21 +418,26 @@ class MDPlanner(Planner):
             failure = exc
         late = best is None or self._lateness(grid, best, robots, t0) > _LEG_ROUTES_AFTER_S
         if self.holds == "anywhere" and _LEG_ROUTES and late:
-            routes = self._space_time_routes(grid, robots, fixed, t0)
+            routes, timed = self._space_time_routes(grid, robots, fixed, t0)
             if routes:
                 try:
-                    other = self._legs(grid, robots, fixed, t0, time.perf_counter() + self.leg_time_limit, routes)
+                    other = self._legs(grid, robots, fixed, t0, self._leg_budget(), routes)
                 except PlanningError:
                     other = None
                 if other is not None and (best is None or _total_arrival(other) < _total_arrival(best) - 1e-6):
                     best = other
+            if timed is not None and (best is None or _total_arrival(timed) < _total_arrival(best) - 1e-6):
+                best = timed   # the search's own timing arrives sooner than md's timing of its routes
         if best is None:
             assert failure is not None
             raise failure
         return best
 
+    def _leg_budget(self) -> Budget:
+        return Budget(self.leg_time_limit, wall=self.leg_clock == "wall")
+
     def _legs(self, grid: GridMap, robots: list[RobotSpec], fixed: Sequence[TimedPath], t0: float,
-              deadline: float, routes: dict[int, np.ndarray] | None = None) -> list[TimedPath]:
+              deadline: Budget, routes: dict[int, np.ndarray] | None = None) -> list[TimedPath]:
         """One try of :meth:`plan_incremental`: ``routes`` (robot index -> polyline) are taken as
         the first paths of those robots (re-routing, if needed, plans them as usual)."""
         held = [_remaining_held(tp, t0) for tp in fixed] if self.holds == "anywhere" else []
@@ -454,32 +475,44 @@ class MDPlanner(Planner):
         return late
 
     def _space_time_routes(self, grid: GridMap, robots: list[RobotSpec], fixed: Sequence[TimedPath],
-                           t0: float) -> dict[int, np.ndarray]:
+                           t0: float) -> tuple[dict[int, np.ndarray], list[TimedPath] | None]:
         """Routes for the legs from a safe-interval search in space-time against the fixed
-        trajectories (the search's own timing is dropped: md times the routes itself); empty when
-        the search fails or takes longer than ``_LEG_SEARCH_LIMITS`` times ``leg_time_limit``.
+        trajectories (md times the routes itself); empty when the search fails or takes longer than
+        ``_LEG_SEARCH_LIMITS`` times ``leg_time_limit``. Second, the search's own timed legs when
+        they are valid as they are (else None): the robots drive without acceleration ramps (the
+        search has none) and every leg stays inside its corridor (below).
 
         The search sees only the fixed trajectories that come near the legs' corridors
         (:func:`_fixed_near`), so a leg costs what its neighbourhood holds, not the fleet: a route
-        is only a proposal, which :meth:`_legs` times exactly against every fixed trajectory."""
+        is a proposal, which :meth:`_legs` times exactly against every fixed trajectory. A timed leg
+        whose waypoints all lie in its corridor (the box round its start, goal and shortest path,
+        grown by :data:`_LEG_CORRIDOR_M`) is valid against every fixed trajectory: the search kept
+        it clear of those it saw, and one it did not see never comes within the pair's keep-out
+        distance of the corridor (ours: md's timing of the same route was later than the search's own
+        on 8 of 376 delivery legs, 13.7 s each on average)."""
         from .prior import PriorPlanner
 
         searcher = getattr(self, "_route_search", None)
         if searcher is None or searcher.margin != self.margin:
             searcher = self._route_search = PriorPlanner(margin=self.margin)
         searcher.time_limit_s = _LEG_SEARCH_LIMITS * self.leg_time_limit
-        near = _fixed_near(self._finders.of(grid), robots, fixed, t0, self.margin)
+        searcher.cpu_time = self.leg_clock == "cpu"   # the clock of md's own leg budgets
+        lo, hi = _corridors(self._finders.of(grid), robots)
+        near = _fixed_near(robots, lo, hi, fixed, t0, self.margin)
         try:
             found = searcher.plan_incremental(grid, robots, [fixed[k] for k in near], t0)
         except (PlanningError, ValueError):
-            return {}
+            return {}, None
         routes = {}
         for x, tp in enumerate(found):
             pts = tp.waypoints[:, :2]
             keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9])
             if keep.sum() >= 2:
                 routes[x] = pts[keep].copy()
-        return routes
+        inside = all(r.max_accel is None and bool(np.all((tp.waypoints[:, :2] >= lo[x] - 1e-9)
+                                                         & (tp.waypoints[:, :2] <= hi[x] + 1e-9)))
+                     for x, (r, tp) in enumerate(zip(robots, found)))
+        return routes, (found if inside and len(found) == len(robots) else None)
 
     def _initial_order(self, grid: GridMap, robots: list[RobotSpec],
                        shortest: dict[int, np.ndarray] | None = None) -> list[int]:
@@ -535,11 +568,11 @@ class _Session:
 
     def __init__(self, planner: MDPlanner, grid: GridMap, robots: list[RobotSpec], order: list[int],
                  fixed: int, fixed_paths: Sequence[tuple[np.ndarray, np.ndarray]] = (),
-                 hints: dict[int, np.ndarray] | None = None, deadline: float | None = None,
+                 hints: dict[int, np.ndarray] | None = None, deadline: Budget | None = None,
                  must: dict[int, dict[int, list[tuple[tuple[float, float], float]]]] | None = None,
                  incremental: bool = False, free_detours: bool = False):
         self.planner, self.robots, self.order, self.fixed = planner, robots, order, fixed
-        #: perf_counter time after which re-ordering gives up (None: no bound)
+        #: the budget after which re-ordering gives up (CPU seconds; None: no bound)
         self.deadline = deadline
         #: and after which route choice stops trying (``free_detours``: never)
         self.detour_deadline = None if free_detours else deadline
@@ -676,7 +709,7 @@ class _Session:
             j, i = blocked.j, blocked.blocker
             tries[(j, i)] = tries.get((j, i), 0) + 1
             why = f"blocked by {robots[i].id}, which {blocked.why}"
-            late = self.deadline is not None and time.perf_counter() > self.deadline
+            late = self.deadline is not None and self.deadline.passed()
             if tries[(j, i)] > _MAX_TRIES or self.reorders >= limit or late:
                 raise PlanningError({robots[j].id: f"{why}; re-routing and re-ordering did not help"},
                                     {robots[j].id: robots[i].id})
@@ -714,12 +747,13 @@ class _Session:
         return self.sched.schedule(self.order, start_at=pos, dirty=_apply(self.model, changed, j))
 
     # -- improvement of a plan found (ours, not the paper's) -----------------------------------
-    def improve(self, tries: int, deadline: float | None = None) -> int:
+    def improve(self, tries: int, deadline: Budget | None = None, budget: Budget | None = None) -> int:
         """Large-neighbourhood search over the priorities of a plan found (ours): up to ``tries``
         times, the robot that waits longest in all (not tried yet) moves just ahead of the robot
         whose trajectory ends its longest wait, and what that changes is re-planned and
         re-scheduled as in a re-ordering; the move stays when the sum of arrival times drops,
-        else everything is put back as it was. Returns how many moves stayed.
+        else everything is put back as it was. Anytime: no move starts once ``deadline`` or
+        ``budget`` is spent (the plan is the best found so far). Returns how many moves stayed.
 
         Measured at 100 robots (sum of arrivals / free, md's own plan, CPU under load 6-8): 8 tries
         warehouse-10-20-10-2-2 1.059 -> 1.037 (6 moves kept, +0.4 s), warehouse-20-40-10-2-2 1.014
@@ -731,7 +765,7 @@ class _Session:
         kept, tried = 0, set()
         total = self._arrivals()
         for _ in range(tries):
-            if deadline is not None and time.perf_counter() > deadline:
+            if (deadline is not None and deadline.passed()) or (budget is not None and budget.passed()):
                 break
             waits = {x: w for x, w in self._waits().items() if x not in tried}
             if not waits:
@@ -815,7 +849,7 @@ class _Session:
         """Route choice in time: if robot x (just scheduled with holds) waits long, try paths around
         the stretch after its longest wait (keeping what x must avoid) and keep the one with the
         earliest arrival; True if x's path changed."""
-        if x < self.fixed or (self.detour_deadline is not None and time.perf_counter() > self.detour_deadline):
+        if x < self.fixed or (self.detour_deadline is not None and self.detour_deadline.passed()):
             return False
         me, sched = self.robots[x], self.sched
         changed = False
@@ -901,7 +935,7 @@ class _LegSession(_Session):
 _LEG_ROUTES = True
 #: ... later in all than this many seconds after driving their shortest paths on the empty map
 _LEG_ROUTES_AFTER_S = 2.0
-#: the space-time search of a leg may take this many ``leg_time_limit`` (wall clock; measured on the
+#: the space-time search of a leg may take this many ``leg_time_limit`` (CPU seconds; measured on the
 #: delivery benchmark's large map at 20 robots under load 30 on 2 cores: 1.6 s wall, about 0.1 s CPU)
 _LEG_SEARCH_LIMITS = 4
 #: ... and sees the fixed trajectories that come within this much (m, beyond the keep-out distance)
@@ -911,25 +945,30 @@ _LEG_CORRIDOR_M = 4.0
 
 
 
-def _fixed_near(finders: _Finders, robots: list[RobotSpec], fixed: Sequence[TimedPath], t0: float,
-                margin: float) -> list[int]:
-    """Indices of the ``fixed`` trajectories that, from ``t0`` on (parked on their last waypoint
-    for ever after), come within reach of a leg's corridor: the bounding box of its start, its goal
-    and its shortest path on the empty map, grown by :data:`_LEG_CORRIDOR_M` (room for a detour
-    through a neighbouring aisle) and the pair's keep-out distance."""
-    if not fixed or not robots:
-        return list(range(len(fixed)))
-    boxes = []
-    for r in robots:
+def _corridors(finders: _Finders, robots: list[RobotSpec]) -> tuple[np.ndarray, np.ndarray]:
+    """Each leg's corridor as rows of lows and highs (legs, 2): the bounding box of its start, its
+    goal and its shortest path on the empty map, grown by :data:`_LEG_CORRIDOR_M` (room for a detour
+    through a neighbouring aisle)."""
+    lo, hi = np.zeros((len(robots), 2)), np.zeros((len(robots), 2))
+    for x, r in enumerate(robots):
         pts = [np.asarray([r.start, r.goal], dtype=float)]
         path = finders.get(r.radius).find(r.start, r.goal)
         if path is not None:
             pts.append(np.asarray(path, dtype=float)[:, :2])
         xy = np.vstack(pts)
-        grow = _LEG_CORRIDOR_M + r.radius + margin
-        boxes.append((xy.min(axis=0) - grow, xy.max(axis=0) + grow))
-    lo = np.array([b[0] for b in boxes])   # (legs, 2)
-    hi = np.array([b[1] for b in boxes])
+        lo[x], hi[x] = xy.min(axis=0) - _LEG_CORRIDOR_M, xy.max(axis=0) + _LEG_CORRIDOR_M
+    return lo, hi
+
+
+def _fixed_near(robots: list[RobotSpec], corridor_lo: np.ndarray, corridor_hi: np.ndarray,
+                fixed: Sequence[TimedPath], t0: float, margin: float) -> list[int]:
+    """Indices of the ``fixed`` trajectories that, from ``t0`` on (parked on their last waypoint
+    for ever after), come within the pair's keep-out distance of a leg's corridor
+    (:func:`_corridors`)."""
+    if not fixed or not robots:
+        return list(range(len(fixed)))
+    grow = np.array([[r.radius + margin] for r in robots])
+    lo, hi = corridor_lo - grow, corridor_hi + grow   # (legs, 2)
     out = []
     for k, tp in enumerate(fixed):
         wp = tp.waypoints

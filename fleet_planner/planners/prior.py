@@ -48,7 +48,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, dijk
 from ..geometry import segment_point_distance_xy
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
-from .base import Planner, Progress, incremental_problem
+from .base import Budget, Planner, Progress, incremental_problem
 
 ORDERS = ("given", "shortest", "longest")
 
@@ -101,13 +101,16 @@ class PriorPlanner(Planner):
         self.max_wait_s = float(max_wait_s)
         self.margin = float(margin)
         self.max_reorders = max_reorders
+        #: ``time_limit_s`` counts CPU seconds of this process (a :class:`~.base.Budget`), not wall-clock
+        #: seconds: md's route search for legs sets it, so that its legs do not depend on the load
+        self.cpu_time = False
         self._roadmaps: dict[tuple, _Roadmap] = {}
 
     # ------------------------------------------------------------------------------------------
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         t_start = time.perf_counter()
         robots = list(robots)
-        session = _Session(self, grid, robots, [], 0.0, t_start)
+        session = _Session(self, grid, robots, [], 0.0)
         paths, order, reorders = session.run(self._initial_order(robots), progress)
         timed = [TimedPath(r.id, r.radius, _compress(paths[x])) for x, r in enumerate(robots)]
         return Plan("prior", timed, time.perf_counter() - t_start,
@@ -119,9 +122,8 @@ class PriorPlanner(Planner):
         earlier than ``t0``, around the ``fixed`` trajectories (unchanged; each parked on its last
         waypoint for ever). Paths start with the waypoint ``(start, t0)``; raises
         :class:`PlanningError` like :meth:`plan`."""
-        t_start = time.perf_counter()
         robots = incremental_problem(robots, fixed, t0)
-        session = _Session(self, grid, robots, list(fixed), float(t0), t_start)
+        session = _Session(self, grid, robots, list(fixed), float(t0))
         paths, _, _ = session.run(self._initial_order(robots), None)
         return [TimedPath(r.id, r.radius, _compress(paths[x])) for x, r in enumerate(robots)]
 
@@ -402,9 +404,9 @@ class _Session:
     """
 
     def __init__(self, planner: PriorPlanner, grid: GridMap, robots: list[RobotSpec],
-                 fixed: list[TimedPath], t0: float, t_start: float):
+                 fixed: list[TimedPath], t0: float):
         self.p, self.grid, self.robots, self.fixed, self.t0 = planner, grid, robots, fixed, t0
-        self.deadline = _INF if planner.time_limit_s is None else t_start + planner.time_limit_s
+        self.budget = Budget(planner.time_limit_s, wall=not planner.cpu_time)
         self.n = n = len(robots)
         self.names = [r.id for r in robots] + [f.robot_id for f in fixed]
         self.radii = np.array([r.radius for r in robots] + [f.radius for f in fixed], dtype=float)
@@ -785,7 +787,7 @@ class _RobotSearch:
                 return self._waypoints((u, ju))
             expansions += 1
             if expansions % 512 == 0:
-                if time.perf_counter() > session.deadline:
+                if session.budget.passed():
                     raise _Fail(f"time limit of {session.p.time_limit_s:g} s reached", fatal=True)
                 if expansions >= _MAX_EXPANSIONS:
                     reason = f"search gave up after {expansions} expansions"
