@@ -193,6 +193,7 @@ def test_the_improvement_search_starts_no_move_once_its_cpu_budget_is_spent(monk
     grid, robots = _warehouse(25, 2)
     first = get_planner("md", improve=0, compare_above=None).plan(grid, robots)
     monkeypatch.setattr(md, "IMPROVE_CPU_SHARE", 0.0)
+    monkeypatch.setattr(md, "IMPROVE_MIN_CPU_S", 0.0)
     spent = get_planner("md", compare_above=None).plan(grid, robots)
     assert spent.info["improved"] == 0
     assert _sum(spent) == pytest.approx(_sum(first), abs=1e-9)
