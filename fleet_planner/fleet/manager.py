@@ -1108,9 +1108,10 @@ class FleetManager:
 
     @staticmethod
     def _back_off(r: FleetRobot, now: float) -> None:
-        """``r`` was refused a leg: it is tried again after a wait that doubles with each refusal in a row."""
+        """``r`` was refused a leg: it is tried again after a wait that doubles with each refusal in a row,
+        or later if a retry was already set later (a standing robot the gate refused waits ``GATE_RETRY_S``)."""
         # (the exponent capped: 2 ** 1024 failures overflowed a float: every step of the planner then failed)
-        r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
+        r.leg_retry_at = max(r.leg_retry_at, now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16)))
         r.leg_failures += 1
 
     def _leg_path(self, r: FleetRobot, start: Point, target: Target, t0: float, now: float) -> TimedPath:
