@@ -74,6 +74,9 @@ class FleetRobot:
     evade_retry_at: float = -math.inf  # no refuge from a moving obstacle could be reached: tried again from then on
     leg_failures: int = 0             # legs refused in a row (the wait before the next try doubles)
     took_late: float = 0.0            # how late (s) its first status on its leg said it was (it took it late)
+    waits_on: tuple[str, ...] = ()    # the robots its last failed or refused leg named (.waits) ...
+    waits_since: float = -math.inf    # ... and when
+    broken_at: float = -math.inf      # when the wait-cycle breaker last held it (.waits)
 
     @property
     def id(self) -> str:
