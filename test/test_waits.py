@@ -65,3 +65,52 @@ def test_two_gated_robots_standing_within_the_pad_of_each_other_both_get_on_thei
     sim, arrived = _standing_pair(0.04, lambda: monkeypatch.setattr(gate, "STILL_MPS", -1.0))  # (nobody stands)
     assert not arrived
     assert any("a new leg would start in a region" in n for n in sim.notes)
+
+
+def _cycle(break_waits):
+    """b stands (a hold leg) 0.5 m off a's way; a's leg passes it, so a's gate holds a short of b until b
+    has a later path; b's last leg search failed, blocked by a (a's leg drives through b's start disc).
+    Then a step of the manager."""
+    import numpy as np
+    from test_dispatch import manager, status
+
+    from fleet_planner.fleet.gate import gate_limit
+    from fleet_planner.fleet.legs import Leg
+    from fleet_planner.fleet.state import Target
+    from fleet_planner.fleet.waits import wait_for_graph
+    from fleet_planner.model import TimedPath
+
+    fm = manager()
+    fm.break_waits = break_waits
+    fm.on_status(status("a", "cargo", 0.0, 5.0), 0.0)
+    fm.on_status(status("b", "cargo", 5.0, 5.5), 0.0)
+    a, b = fm.robots["a"], fm.robots["b"]
+    assert fm._give(b, Leg("b", TimedPath("b", b.radius, np.array([[5.0, 5.5, 0.0]])), 1, "hold", ""), Decisions(), 0.0)
+    fm.on_status(status("b", "cargo", 5.0, 5.5, path_id=1, progress=1.0, travelled_m=0.0, stamp=0.5), 0.5)
+    way = TimedPath("a", a.radius, np.array([[0.0, 5.0, 1.0], [10.0, 5.0, 11.0]]))
+    assert fm._give(a, Leg("a", way, 2, "park", "x"), Decisions(), 1.0)
+    entry = gate_limit(fm.gates.records["a"], 2, {o.id: o.status for o in fm.robots.values()})
+    assert 3.0 < entry < 5.0   # a waits for b short of it
+    fm.on_status(status("a", "cargo", entry - 0.05, 5.0, path_id=2, progress=0.4, travelled_m=entry - 0.05,
+                        mode="waiting", stamp=9.0), 9.0)
+    fm.on_status(status("b", "cargo", 5.0, 5.5, path_id=1, progress=1.0, travelled_m=0.0, stamp=9.0), 9.0)
+    a.target = Target("park", "x", (10.0, 5.0))
+    b.waits_on, b.waits_since = ("a",), 9.0
+    assert wait_for_graph(fm.gates, fm.robots.values(), 9.0) == {"a": {"b": "gate"}, "b": {"a": "leg"}}
+    return fm, fm.step(9.5)
+
+
+def test_a_robot_its_gate_holds_in_a_wait_cycle_holds_where_it_stands_and_the_other_is_planned_next():
+    """The breaker of wait cycles gives the robot its gate holds a hold leg where it stands (a new record
+    for a new path: the old one's links are not changed), so that the robot whose leg it blocked is planned
+    around it standing, next. Control: without the breaker, nothing changes."""
+    fm, d = _cycle(True)
+    a = fm.robots["a"]
+    assert [(leg.robot_id, leg.purpose) for leg in d.legs if leg.robot_id == "a"] == [("a", "hold")]
+    assert any(n.startswith("wait cycle a -> b: robot a holds") for n in d.notes), d.notes
+    hold = next(leg for leg in d.legs if leg.robot_id == "a").path.waypoints
+    assert len(hold) == 1 and math.dist(hold[0, :2], a.pos) < 1e-6   # where it stands, not a step further
+    assert fm.gates.records["a"].path_id == a.leg.path_id > 2 and a.leg.purpose == "hold"
+    assert a.replan and a.leg_retry_at > 9.5 and a.target is not None   # it goes on later, from there
+    fm, d = _cycle(False)
+    assert not [leg for leg in d.legs if leg.robot_id == "a"] and not any("wait cycle" in n for n in d.notes)
