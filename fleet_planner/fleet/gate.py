@@ -313,8 +313,8 @@ class GateBook:
                 done = travelled(o.status) if on_it else None
                 done = 0.0 if done is None else min(done, p.length)
                 # it stands at the end of its latest path, which it reports: it cannot move before its next
-                # leg, which is ranked against this one when it comes (see :data:`STILL_MPS`)
-                parked = (on_it and pid == latest and done >= p.length - 1e-6
+                # leg, which is ranked against this one when it comes (see :data:`STILL_MPS`; not driven by hand)
+                parked = (on_it and pid == latest and done >= p.length - 1e-6 and not o.manual
                           and math.hypot(o.status.vx, o.status.vy) <= STILL_MPS)
                 # where it may be when a new link reaches it: never ahead of its plan, nor farther
                 # than its top speed takes it from its last report
