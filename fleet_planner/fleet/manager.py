@@ -776,10 +776,11 @@ class FleetManager:
             held.sort(key=lambda rid: (not waited[rid], rid))
             for rid in held:
                 r = self.robots[rid]
-                legs_before = len(d.legs)
-                self._hold(r, now, d)
-                if len(d.legs) == legs_before:
+                marked = self._hold(r, now, d)
+                if marked is None:
                     continue   # refused (it would start in a region another robot may be in): the next one
+                for o in marked:   # their links keep them off it: an optimisation, not a hold (as _find_rejected)
+                    o.conflict = False
                 r.broken_at = now
                 r.replan = r.target is not None
                 r.leg_retry_at = max(r.leg_retry_at, now + GATE_RETRY_S)
@@ -793,18 +794,18 @@ class FleetManager:
                                f"{', so that ' + ', '.join(waiting) + ' can be planned around it' if waiting else ''}")
                 break
 
-    def _hold(self, r: FleetRobot, now: float, d: Decisions) -> None:
+    def _hold(self, r: FleetRobot, now: float, d: Decisions) -> list[FleetRobot] | None:
         """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
-        that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
-        more must stop at once, not drive on for another ``lead_s``."""
+        that pass there re-plan too (returned; None: the gate refused the hold). No lead time: a robot
+        driving a leg nobody keeps clear of any more must stop at once, not drive on for another ``lead_s``."""
         path_id = max(round(now * 1e9), r.last_path_id + 1)
         x, y = self.strategy.start_of(r, path_id / 1e9, self._gate_limit(r))
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
         if not self._give(r, leg, d, now):
-            return  # gated: it keeps its leg, whose links still hold
+            return None  # gated: it keeps its leg, whose links still hold
         r.conflict = False
         d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
-        self._replan_around(r, (x, y), now)
+        return self._replan_around(r, (x, y), now)
 
     def _evade(self, r: FleetRobot, oid: str, now: float, d: Decisions) -> bool:
         """``r`` stands where the moving obstacle ``oid`` is about to walk: it gets a leg to the nearest
