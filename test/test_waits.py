@@ -6,6 +6,7 @@ import math
 
 from fleet_planner.checker import min_separation
 from fleet_planner.fleet.legs import Decisions
+from fleet_planner.fleet.manager import CYCLE_LASTS_S
 from fleet_planner.fleet.waits import cycles
 
 
@@ -91,17 +92,21 @@ def _cycle(break_waits):
     assert fm._give(a, Leg("a", way, 2, "park", "x"), Decisions(), 1.0)
     entry = gate_limit(fm.gates.records["a"], 2, {o.id: o.status for o in fm.robots.values()})
     assert 3.0 < entry < 5.0   # a waits for b short of it
-    fm.on_status(status("a", "cargo", entry - 0.05, 5.0, path_id=2, progress=0.4, travelled_m=entry - 0.05,
-                        mode="waiting", stamp=9.0), 9.0)
-    fm.on_status(status("b", "cargo", 5.0, 5.5, path_id=1, progress=1.0, travelled_m=0.0, stamp=9.0), 9.0)
     a.target = Target("park", "x", (10.0, 5.0))
-    b.waits_on, b.waits_since = ("a",), 9.0
-    assert wait_for_graph(fm.gates, fm.robots.values(), 9.0) == {"a": {"b": "gate"}, "b": {"a": "leg"}}
-    return fm, fm.step(9.5)
+    for now in (9.0, 9.0 + CYCLE_LASTS_S):   # the cycle is seen, and is still there when it has lasted
+        fm.on_status(status("a", "cargo", entry - 0.05, 5.0, path_id=2, progress=0.4, travelled_m=entry - 0.05,
+                            mode="waiting", stamp=now), now)
+        fm.on_status(status("b", "cargo", 5.0, 5.5, path_id=1, progress=1.0, travelled_m=0.0, stamp=now), now)
+        b.waits_on, b.waits_since = ("a",), now
+        assert wait_for_graph(fm.gates, fm.robots.values(), now) == {"a": {"b": "gate"}, "b": {"a": "leg"}}
+        d = fm.step(now + 0.5)
+        if now == 9.0:
+            assert not any("wait cycle" in n for n in d.notes)   # (not at once: most resolve themselves)
+    return fm, d
 
 
 def test_a_robot_its_gate_holds_in_a_wait_cycle_holds_where_it_stands_and_the_other_is_planned_next():
-    """The breaker of wait cycles gives the robot its gate holds a hold leg where it stands (a new record
+    """The breaker of a wait cycle that lasted gives the robot its gate holds a hold leg where it stands (a new record
     for a new path: the old one's links are not changed), so that the robot whose leg it blocked is planned
     around it standing, next. Control: without the breaker, nothing changes."""
     fm, d = _cycle(True)
@@ -111,6 +116,6 @@ def test_a_robot_its_gate_holds_in_a_wait_cycle_holds_where_it_stands_and_the_ot
     hold = next(leg for leg in d.legs if leg.robot_id == "a").path.waypoints
     assert len(hold) == 1 and math.dist(hold[0, :2], a.pos) < 1e-6   # where it stands, not a step further
     assert fm.gates.records["a"].path_id == a.leg.path_id > 2 and a.leg.purpose == "hold"
-    assert a.replan and a.leg_retry_at > 9.5 and a.target is not None   # it goes on later, from there
+    assert a.replan and a.leg_retry_at > 9.5 + CYCLE_LASTS_S and a.target is not None   # it goes on later, from there
     fm, d = _cycle(False)
     assert not [leg for leg in d.legs if leg.robot_id == "a"] and not any("wait cycle" in n for n in d.notes)

@@ -77,6 +77,9 @@ LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
 GATE_RETRY_S = 2.0
 #: (ours) wait cycles (.waits) are looked for this often (s of the clock) ...
 WAITS_EVERY_S = 1.0
+#: ... broken once they have lasted this long (s; one seen at every look: 22 robots with messages 6 s late had
+#: cycles of "leg" edges that resolved themselves, and breaking them at once did 33 jobs by 700 s, not 53) ...
+CYCLE_LASTS_S = 20.0
 #: ... and a robot the breaker held is not held again by it for this long (s)
 BREAK_AGAIN_S = 10.0
 #: a robot stepping aside from a moving obstacle tries this many refuges, nearest first; when none
@@ -191,6 +194,7 @@ class FleetManager:
         self.gates = GateBook() if gated and self.strategy.sends_gates else None
         #: break wait cycles of gated execution (:meth:`_break_waits`); when it next looks for them
         self.break_waits, self._waits_at = True, -math.inf
+        self._cycles_since: dict[tuple[str, ...], float] = {}   # the cycles seen last time, since when
         # indexes valid for one step (docs/ARCHITECTURE.md: every step proportional to what changed)
         self._occ: Occupancy | None = None
         self._free_spots: dict[tuple[int, float], list[tuple[str, Point]]] = {}
@@ -756,7 +760,8 @@ class FleetManager:
                 # it no longer keeps (gated and only late: it keeps its leg, the gates keep the others clear)
 
     def _break_waits(self, now: float, d: Decisions) -> None:
-        """Break a wait cycle (:mod:`.waits`; ours), looked for every :data:`WAITS_EVERY_S`: of its robots, one
+        """Break a wait cycle (:mod:`.waits`; ours) that lasted :data:`CYCLE_LASTS_S`, looked for every
+        :data:`WAITS_EVERY_S`: of its robots, one
         its gate holds for another of them, preferably one whose leg waits for it, gets a hold leg where its
         gate lets it stand (the gate's own rules apply to it: refused if it would start in a region another may
         be in), and the robots waiting for it are planned next, around it standing. It keeps its target and
@@ -765,8 +770,13 @@ class FleetManager:
             return
         self._waits_at = now + WAITS_EVERY_S
         graph = wait_for_graph(self.gates, self.robots.values(), now)
-        for piece in cycles(graph):
+        pieces = cycles(graph)
+        # (a cycle is broken only once it has lasted CYCLE_LASTS_S: most resolve themselves, late messages above all)
+        self._cycles_since = {key: self._cycles_since.get(key, now) for key in map(tuple, pieces)}
+        for piece in pieces:
             members = set(piece)
+            if now - self._cycles_since[tuple(piece)] < CYCLE_LASTS_S:
+                continue
             if any(now - self.robots[rid].broken_at < BREAK_AGAIN_S for rid in piece):
                 continue
             # (its robots whose legs wait for it)
