@@ -169,7 +169,7 @@ def run(n: int, policy: DispatchPolicy, jobs_n: int | None, interval: float | No
         latest.clear()
         if progress and k % round(100.0 / dt) == 0:
             print(f"  t = {t:.0f} s: {sum(e == 'done' for e in last_event.values())} done, {submitted} submitted, "
-                  f"CPU {time.process_time() - cpu0:.0f} s", file=sys.stderr, flush=True)
+                  f"CPU {time.process_time() - cpu0:.0f} s, closest {gap:+.3f} m", file=sys.stderr, flush=True)
             if notes is not None:   # who waits for whom (the gate), where (to find a jam)
                 for rid, a in sim.agents.items():
                     seen, fr = sim.last.get(rid), fm.robots.get(rid)

@@ -366,3 +366,24 @@ def test_a_record_too_big_for_the_wire_has_its_links_merged_so_that_the_robot_wa
     # merged, not dropped: with "a" 100 m along, the robot still waits behind it
     heard = {"a": said("a", pa, 100.0), "b": said("b", pb, 4.0)}
     assert 100.0 < gate_limit(sent, 10, heard) <= gate_limit(whole, 10, heard) < 102.1
+
+
+def test_a_standing_robot_the_gate_refused_retries_after_the_gate_retry_not_the_shorter_back_off():
+    """The gate's refusal of a standing robot's leg sets its retry ``GATE_RETRY_S`` later (the robots in
+    the region re-plan around it meanwhile); the back-off of a refused leg that follows keeps the later
+    retry (it overwrote it with 0.5 s: two merges crossed in ``_give`` / ``_plan_leg``)."""
+    from test_dispatch import manager
+
+    from fleet_planner.fleet.legs import Decisions, Leg
+    from fleet_planner.fleet.manager import GATE_RETRY_S, LEG_RETRY_S
+    fm = manager()
+    fm.on_status(status("a", "cargo", 0.0, 5.0), 0.0)
+    fm.on_status(status("b", "cargo", 5.0, 5.5), 0.0)
+    a, b = fm.robots["a"], fm.robots["b"]
+    assert fm._give(a, Leg("a", straight("a", (0.0, 5.0), (10.0, 5.0), 0.0), 1, "park", "x"), Decisions(), 0.0)
+    a.target = Target("park", "x", (10.0, 5.0))
+    a.status = RobotStatus.from_dict({**said("a", 1, 4.0).to_dict(), "x": 4.0, "y": 5.0, "stamp": 5.0})
+    fm._leg_path = lambda r, start, target, t0, now: straight("b", (5.0, 5.5), (5.0, 10.0), t0)
+    assert fm._plan_leg(b, Target("park", "y", (5.0, 10.0)), 5.0, Decisions()) is None
+    assert b.leg is None and b.leg_failures == 1
+    assert b.leg_retry_at >= 5.0 + GATE_RETRY_S > 5.0 + LEG_RETRY_S

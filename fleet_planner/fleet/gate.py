@@ -13,7 +13,8 @@ robot may follow another down an aisle (the exit grows along the entry, a stairc
 passes first comes from the plan's times (the curve of the two travelled lengths in time passes
 on one side of the region), except where reality decides: a robot that may already be in the
 region (its due position, which it is never ahead of, reaches it soon) passes first, and a robot
-whose new path starts inside a region passes it first (unless the other may be in it already).
+whose new path starts inside a region passes it first (unless the other may be in it already and
+does not stand for good at the end of its latest path: ours, :data:`STILL_MPS`).
 
 The robot's end is pure and small: :func:`gate_limit` says how far the robot may drive along its
 path now, given its :class:`~msg_schemas.records.GateRecord` and the other robots' last statuses
@@ -56,6 +57,9 @@ PIECE_TOL_M = 0.05
 #: a new link reaches a driving robot within this long (s); it is ranked first wherever its due
 #: position gets within a region before then
 REACH_S = 1.0
+#: (ours) a robot at the end of its latest path, which it reports, slower than this (m/s) stands for good: a new
+#: leg starting in a region with it passes first rather than being refused (:meth:`GateBook.on_leg`)
+STILL_MPS = 0.05
 #: spacing (m) of the fine samples that tell whether a robot may already be in a region: its disc
 #: comes within the pad of the other path there (less twice this, the fine samples' own error)
 FINE_M = 0.01
@@ -318,8 +322,13 @@ class GateBook:
 
         A leg that starts inside a region another robot may already be in (both in it at once:
         whoever passes first drives by the other standing in its way) is a conflict; its robots are
-        in :attr:`conflicts` afterwards. With ``refuse_conflicts`` such a leg is not taken (None,
-        nothing changes): the robot keeps the leg it has, whose links still hold."""
+        in :attr:`conflicts` afterwards. Not so beside a robot that stands for good at the end of its
+        latest path, which it reports (ours): it cannot move before its next leg, so the new leg passes
+        first (planned around it standing, it never comes nearer to it than it starts). Refused, two
+        robots stopped within the pad of each other never got a leg again (100 robots on large: a knot
+        of 8 robots round r85, held at (138.25, 6.49) with r97 0.755 m away, for 1300 s).
+        With ``refuse_conflicts`` such a leg is not taken (None, nothing changes): the robot keeps the
+        leg it has, whose links still hold."""
         fleet = list(fleet)
         heard = {o.id: o.status for o in fleet}
         mine = sample(path, step=self.sample_m)
@@ -346,6 +355,10 @@ class GateBook:
                 on_it = o.status.path_id == pid
                 done = travelled(o.status) if on_it else None
                 done = 0.0 if done is None else min(done, p.length)
+                # it stands at the end of its latest path, which it reports: it cannot move before its next
+                # leg, which is ranked against this one when it comes (see :data:`STILL_MPS`; not driven by hand)
+                parked = (on_it and pid == latest and done >= p.length - 1e-6 and not o.manual
+                          and math.hypot(o.status.vx, o.status.vy) <= STILL_MPS)
                 # where it may be when a new link reaches it: never ahead of its plan, nor farther
                 # than its top speed takes it from its last report
                 since = max(0.0, now - o.status.stamp) + self.reach_s
@@ -364,7 +377,10 @@ class GateBook:
                     enters = float(theirs.s[i_theirs].min()) - theirs.h / 2  # (grown: a first, coarse cut)
                     o_in = reach >= enters and self._may_be_in(p, done, reach, path, mine, i_mine, clear)
                     if o_in and i_mine.min() == 0:
-                        self.conflicts.append(o.id)
+                        if parked:   # (ours) beside a robot that stands: the new leg passes first
+                            o_in = False
+                        else:
+                            self.conflicts.append(o.id)
                     o_first = (pid != latest or not recorded or o_in
                                or (i_mine.min() > 0 and not first_by_plan(mine, path, theirs, i_mine, i_theirs)))
                     if o_first:

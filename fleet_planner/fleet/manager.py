@@ -66,6 +66,7 @@ from .lease import STRETCH_STEP_M, heard_record, reachable, stopped_by
 from .legs import ACTING, AT_STATION_M, EVADE, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import OBSTACLE_LOOKAHEAD, ObstacleMap, ObstacleParams
 from .state import FleetRobot, Job, Occupancy, Target, can_do
+from .waits import cycles, wait_for_graph
 
 #: a free robot that could not get a leg to a charger or parking spot tries again this much (s) later
 SPOT_RETRY_S = 2.0
@@ -76,6 +77,13 @@ LEG_RETRY_S, LEG_RETRY_MAX_S = 0.5, 4.0
 #: a standing robot whose new leg the gate refused (it would start in a region another robot may be in)
 #: tries again this much (s) later, once the robots in that region re-planned around it
 GATE_RETRY_S = 2.0
+#: (ours) wait cycles (.waits) are looked for this often (s of the clock) ...
+WAITS_EVERY_S = 1.0
+#: ... broken once they have lasted this long (s; one seen at every look: 22 robots with messages 6 s late had
+#: cycles of "leg" edges that resolved themselves, and breaking them at once did 33 jobs by 700 s, not 53) ...
+CYCLE_LASTS_S = 20.0
+#: ... and a robot the breaker held is not held again by it for this long (s)
+BREAK_AGAIN_S = 10.0
 #: a robot stepping aside from a moving obstacle tries this many refuges, nearest first; when none
 #: can be reached it holds and tries again this much later (s)
 EVADE_TRIES, EVADE_RETRY_S = 8, 0.5
@@ -187,6 +195,9 @@ class FleetManager:
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
         #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
         self.gates = GateBook() if gated and self.strategy.sends_gates else None
+        #: break wait cycles of gated execution (:meth:`_break_waits`); when it next looks for them
+        self.break_waits, self._waits_at = True, -math.inf
+        self._cycles_since: dict[tuple[str, ...], float] = {}   # the cycles seen last time, since when
         # indexes valid for one step (docs/ARCHITECTURE.md: every step proportional to what changed)
         self._occ: Occupancy | None = None
         self._free_spots: dict[tuple[int, float], list[tuple[str, Point]]] = {}
@@ -589,6 +600,7 @@ class FleetManager:
         self._arrivals(now, d)
         if not self.halted:
             self._find_late(d)
+            self._break_waits(now, d)
             self._replan(now, d)
             self._allocate(now, d)
             self._housekeeping(now, d)
@@ -779,18 +791,63 @@ class FleetManager:
                     self._hold(r, now, d)  # stand still, so the others plan around where it is, not around a leg
                 # it no longer keeps (gated and only late: it keeps its leg, the gates keep the others clear)
 
-    def _hold(self, r: FleetRobot, now: float, d: Decisions) -> None:
+    def _break_waits(self, now: float, d: Decisions) -> None:
+        """Break a wait cycle (:mod:`.waits`; ours) that lasted :data:`CYCLE_LASTS_S`, looked for every
+        :data:`WAITS_EVERY_S`: of its robots, one
+        its gate holds for another of them, preferably one whose leg waits for it, gets a hold leg where its
+        gate lets it stand (the gate's own rules apply to it: refused if it would start in a region another may
+        be in), and the robots waiting for it are planned next, around it standing. It keeps its target and
+        re-plans after :data:`GATE_RETRY_S`. A robot held so is not held again for :data:`BREAK_AGAIN_S`."""
+        if self.gates is None or not self.break_waits or now < self._waits_at:
+            return
+        self._waits_at = now + WAITS_EVERY_S
+        graph = wait_for_graph(self.gates, self.robots.values(), now)
+        pieces = cycles(graph)
+        # (a cycle is broken only once it has lasted CYCLE_LASTS_S: most resolve themselves, late messages above all)
+        self._cycles_since = {key: self._cycles_since.get(key, now) for key in map(tuple, pieces)}
+        for piece in pieces:
+            members = set(piece)
+            if now - self._cycles_since[tuple(piece)] < CYCLE_LASTS_S:
+                continue
+            if any(now - self.robots[rid].broken_at < BREAK_AGAIN_S for rid in piece):
+                continue
+            # (its robots whose legs wait for it)
+            waited = {rid: sorted(oid for oid in members if graph.get(oid, {}).get(rid) == "leg") for rid in piece}
+            held = [rid for rid in piece if self.robots[rid].on_leg
+                    and any(why == "gate" and oid in members for oid, why in graph.get(rid, {}).items())]
+            held.sort(key=lambda rid: (not waited[rid], rid))
+            for rid in held:
+                r = self.robots[rid]
+                marked = self._hold(r, now, d)
+                if marked is None:
+                    continue   # refused (it would start in a region another robot may be in): the next one
+                for o in marked:   # their links keep them off it: an optimisation, not a hold (as _find_rejected)
+                    o.conflict = False
+                r.broken_at = now
+                r.replan = r.target is not None
+                r.leg_retry_at = max(r.leg_retry_at, now + GATE_RETRY_S)
+                waiting = waited[rid]
+                for oid in waiting:   # planned next, around it standing
+                    o = self.robots[oid]
+                    o.leg_retry_at, o.retry_at, o.waits_on = min(o.leg_retry_at, now), min(o.retry_at, now), ()
+                    if o.target is not None:
+                        o.replan = True
+                d.notes.append(f"wait cycle {' -> '.join(piece)}: robot {rid} holds where its gate lets it stand"
+                               f"{', so that ' + ', '.join(waiting) + ' can be planned around it' if waiting else ''}")
+                break
+
+    def _hold(self, r: FleetRobot, now: float, d: Decisions) -> list[FleetRobot] | None:
         """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
-        that pass there re-plan too. No lead time: a robot driving a leg nobody keeps clear of any
-        more must stop at once, not drive on for another ``lead_s``."""
+        that pass there re-plan too (returned; None: the gate refused the hold). No lead time: a robot
+        driving a leg nobody keeps clear of any more must stop at once, not drive on for another ``lead_s``."""
         path_id = max(round(now * 1e9), r.last_path_id + 1)
         x, y = self.strategy.start_of(r, path_id / 1e9, self._gate_limit(r))
         leg = Leg(r.id, TimedPath(r.id, r.radius, np.array([[x, y, path_id / 1e9]])), path_id, "hold", "")
         if not self._give(r, leg, d, now):
-            return  # gated: it keeps its leg, whose links still hold
+            return None  # gated: it keeps its leg, whose links still hold
         r.conflict = False
         d.notes.append(f"robot {r.id} holds at ({x:.2f}, {y:.2f})")
-        self._replan_around(r, (x, y), now)
+        return self._replan_around(r, (x, y), now)
 
     def _evade(self, r: FleetRobot, oid: str, now: float, d: Decisions) -> bool:
         """``r`` stands where the moving obstacle ``oid`` is about to walk: it gets a leg to the nearest
@@ -1120,6 +1177,8 @@ class FleetManager:
             try:
                 path = self._leg_path(r, start, target, t0, now)
             except LegNotPlanned as exc:
+                if exc.blocker is not None:
+                    r.waits_on, r.waits_since = (exc.blocker,), now
                 if exc.why != r.trouble:
                     d.notes.append(f"robot {r.id}: {exc.why}")
                 r.trouble = exc.why
@@ -1132,7 +1191,7 @@ class FleetManager:
         if not self._give(r, leg, d, now):
             self._back_off(r, now)   # (a gate refused it: tried again later, as a leg not planned)
             return None  # (why is noted)
-        r.target, r.trouble = target, ""
+        r.target, r.trouble, r.waits_on = target, "", ()
         r.leg_retry_at, r.leg_failures = -math.inf, 0
         if self._reserved_at is not None:
             self._reserved_at.append(target.pose)
@@ -1140,9 +1199,10 @@ class FleetManager:
 
     @staticmethod
     def _back_off(r: FleetRobot, now: float) -> None:
-        """``r`` was refused a leg: it is tried again after a wait that doubles with each refusal in a row."""
+        """``r`` was refused a leg: it is tried again after a wait that doubles with each refusal in a row,
+        or later if a retry was already set later (a standing robot the gate refused waits ``GATE_RETRY_S``)."""
         # (the exponent capped: 2 ** 1024 failures overflowed a float: every step of the planner then failed)
-        r.leg_retry_at = now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16))
+        r.leg_retry_at = max(r.leg_retry_at, now + min(LEG_RETRY_MAX_S, LEG_RETRY_S * 2 ** min(r.leg_failures, 16)))
         r.leg_failures += 1
 
     def _leg_path(self, r: FleetRobot, start: Point, target: Target, t0: float, now: float) -> TimedPath:
@@ -1192,6 +1252,7 @@ class FleetManager:
                 if why != r.trouble:
                     d.notes.append(f"robot {r.id}: {why}: it {'keeps its leg' if r.on_leg else 'stands'}")
                 r.trouble = why
+                r.waits_on, r.waits_since = tuple(others), now
                 if not r.on_leg:
                     r.leg_retry_at = max(r.leg_retry_at, now + GATE_RETRY_S)
                     for oid in others:

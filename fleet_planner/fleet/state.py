@@ -80,6 +80,9 @@ class FleetRobot:
     unheard: tuple[float, str] | None = None
     #: immobile after it was unheard: every point it may stand at (n x 2; None: its status's position)
     reach: np.ndarray | None = None
+    waits_on: tuple[str, ...] = ()    # the robots its last failed or refused leg named (.waits) ...
+    waits_since: float = -math.inf    # ... and when
+    broken_at: float = -math.inf      # when the wait-cycle breaker last held it (.waits)
 
     @property
     def id(self) -> str:
