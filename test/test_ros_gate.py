@@ -32,13 +32,8 @@ class Outcome:
     replans: int        # "late: re-planning" notes of the planner
 
 
-def slowed_run(ros_context, gated: bool, lateness_s: float, rate: float = RATE, wait: float = WAIT) -> Outcome:
-    """The scenario: six jobs; once two robots drive, one at 30 % for 20 s, the other halted 10 s."""
-    fleet = bring_up(ros_context, WH, KINDS, MEMBERS, rate,
-                     planner_params=[Parameter("parking", value=PARKING), Parameter("offline_timeout_s", value=5.0),
-                                     Parameter("lateness_tolerance_s", value=float(lateness_s)),
-                                     Parameter("gated", value=gated)],
-                     agent_overrides=[Parameter("gated", value=gated)])
+def planner_notes(fleet) -> list[str]:
+    """The planner's notes of every step from now on (its step wrapped), as they are made."""
     notes: list[str] = []
     step = fleet.planner.fleet.step
 
@@ -47,6 +42,16 @@ def slowed_run(ros_context, gated: bool, lateness_s: float, rate: float = RATE, 
         notes.extend(d.notes)
         return d
     fleet.planner.fleet.step = counted
+    return notes
+
+def slowed_run(ros_context, gated: bool, lateness_s: float, rate: float = RATE, wait: float = WAIT) -> Outcome:
+    """The scenario: six jobs; once two robots drive, one at 30 % for 20 s, the other halted 10 s."""
+    fleet = bring_up(ros_context, WH, KINDS, MEMBERS, rate,
+                     planner_params=[Parameter("parking", value=PARKING), Parameter("offline_timeout_s", value=5.0),
+                                     Parameter("lateness_tolerance_s", value=float(lateness_s)),
+                                     Parameter("gated", value=gated)],
+                     agent_overrides=[Parameter("gated", value=gated)])
+    notes = planner_notes(fleet)
     try:
         mon = fleet.monitor
         ids = {m.id for m in MEMBERS}
@@ -75,6 +80,7 @@ def slowed_run(ros_context, gated: bool, lateness_s: float, rate: float = RATE, 
         return Outcome(done, end - start, gap, (a, b), slowed, halted, sum("late: re-planning" in n for n in notes))
     finally:
         fleet.destroy()
+
 
 
 def test_a_slowed_and_a_halted_robot_never_touch_the_others_without_re_planning_and_every_job_is_done(ros_context):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 from rclpy.parameter import Parameter
+from test_ros_gate import planner_notes
 from test_ros_system import KINDS, MEMBERS, PARKING, WAIT, WH
 
 from fleet_planner.fleet.lease import LEASE_SLACK_S, braking_s
@@ -37,14 +38,7 @@ def test_a_robot_whose_statuses_are_cut_off_stops_within_its_lease_and_the_other
     fleet = bring_up(ros_context, WH, KINDS, MEMBERS, RATE,
                      planner_params=[Parameter("parking", value=PARKING),
                                      Parameter("offline_timeout_s", value=TIMEOUT_S)])
-    notes: list[str] = []
-    step = fleet.planner.fleet.step
-
-    def counted(now):
-        d = step(now)
-        notes.extend(d.notes)
-        return d
-    fleet.planner.fleet.step = counted
+    notes = planner_notes(fleet)
     try:
         mon = fleet.monitor
         ids = {m.id for m in MEMBERS}
