@@ -152,3 +152,24 @@ def test_a_step_plans_legs_only_within_its_budget():
     fleet.step_budget_s = 10.0
     fleet.step(1.0)
     assert planner.calls > 1
+
+
+def test_a_fleet_files_robots_park_where_they_start_besides_the_params_files_spots():
+    """fleet-demo --fleet F: robots that start off the params file's parking spots get their start spots
+    as parking too (with only the nine's spots, 22 robots idled in the aisles and blocked the jobs); the
+    default fleet starts on them already, so nothing changes for it (the control)."""
+    from dataclasses import replace
+
+    from fleet_planner.fleet import load_fleet
+    from fleet_planner.ros.demo.bringup import parking_of
+    from fleet_planner.ros.demo.cli import DEMO_PARAMS, fleet_parking
+    from fleet_planner.warehouse import config_path
+
+    wh, params = load_warehouse(None), config_path(DEMO_PARAMS)
+    nine = load_fleet(None, load_kinds(), wh)
+    assert fleet_parking(params, wh, nine) == []
+    moved = replace(nine[0], x=nine[0].x + 7.0)
+    spots = fleet_parking(params, wh, [*nine, moved])
+    pairs = list(zip(spots[0::2], spots[1::2]))
+    assert pairs[:len(parking_of(params))] == parking_of(params)
+    assert pairs[len(parking_of(params)):] == [(moved.x, moved.y)]
