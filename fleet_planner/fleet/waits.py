@@ -15,7 +15,7 @@ A **wait-for graph** (:func:`wait_for_graph`) has an edge ``r -> o`` where
 * ``leg``: ``r``'s last leg search failed naming ``o`` as the blocker (LegNotPlanned.blocker), or the
   gate refused ``r``'s last new leg for ``o`` (a region ``o`` may be in), within :data:`FRESH_S`.
 
-:func:`cycles` gives its strongly connected pieces of two robots or more (Tarjan's algorithm). The
+:func:`cycles` gives its strongly connected pieces of two robots or more. The
 manager breaks one (:meth:`~.manager.FleetManager._break_waits`): a robot its gate holds for a robot
 whose leg waits for it gets a hold leg where its gate lets it stand, so the other is planned around
 it standing (the gate's own rules keep every link of the hold leg, a new record, higher ``seq``).
@@ -24,6 +24,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from msg_schemas.records import RobotStatus
 
@@ -72,45 +76,17 @@ def wait_for_graph(book: GateBook, robots: Iterable[FleetRobot], now: float) -> 
 
 
 def cycles(graph: Mapping[str, Mapping[str, str]]) -> list[list[str]]:
-    """The strongly connected pieces of ``graph`` with two robots or more, each sorted (Tarjan, iterative)."""
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on: set[str] = set()
-    out: list[list[str]] = []
-    counter = 0
-    for root in sorted(graph):
-        if root in index:
-            continue
-        work = [(root, iter(sorted(graph.get(root, {}))))]
-        index[root] = low[root] = counter
-        counter += 1
-        stack.append(root)
-        on.add(root)
-        while work:
-            v, it = work[-1]
-            w = next(it, None)
-            if w is not None:
-                if w not in index:
-                    index[w] = low[w] = counter
-                    counter += 1
-                    stack.append(w)
-                    on.add(w)
-                    work.append((w, iter(sorted(graph.get(w, {})))))
-                elif w in on:
-                    low[v] = min(low[v], index[w])
-                continue
-            work.pop()
-            if work:
-                low[work[-1][0]] = min(low[work[-1][0]], low[v])
-            if low[v] == index[v]:
-                piece = []
-                while True:
-                    w = stack.pop()
-                    on.discard(w)
-                    piece.append(w)
-                    if w == v:
-                        break
-                if len(piece) > 1:
-                    out.append(sorted(piece))
-    return out
+    """The strongly connected pieces of ``graph`` with two robots or more, each sorted (SciPy's
+    ``connected_components``, strong connection)."""
+    ids = sorted(set(graph) | {o for edges in graph.values() for o in edges})
+    if not ids:
+        return []
+    at = {rid: k for k, rid in enumerate(ids)}
+    rows = [at[r] for r, edges in graph.items() for _ in edges]
+    cols = [at[o] for edges in graph.values() for o in edges]
+    adj = csr_matrix((np.ones(len(rows), dtype=np.int8), (rows, cols)), shape=(len(ids), len(ids)))
+    _, labels = connected_components(adj, directed=True, connection="strong")
+    pieces: dict[int, list[str]] = {}
+    for rid, lab in zip(ids, labels.tolist()):
+        pieces.setdefault(lab, []).append(rid)
+    return [piece for piece in pieces.values() if len(piece) > 1]
