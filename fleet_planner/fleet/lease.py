@@ -33,6 +33,7 @@ from msg_schemas.records import Heard
 
 from ..model import TimedPath
 from ..robots import RobotKind
+from .gate import arc_at, sample
 from .legs import MAX_CLOCK_SKEW_S
 from .state import FleetRobot
 
@@ -149,20 +150,6 @@ def stopped_by(r: FleetRobot, now: float, silence_s: float, slack_s: float = LEA
     return shown + silence_s + braking_s(r.kind) + slack_s
 
 
-def _arc(path: TimedPath) -> np.ndarray:
-    wp = path.waypoints
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
-
-
-def stretch(path: TimedPath, lo: float, hi: float, step: float = STRETCH_STEP_M) -> np.ndarray:
-    """Points of ``path`` from ``lo`` to ``hi`` m along it, at most ``step`` apart, ends included."""
-    arc = _arc(path)
-    lo, hi = max(0.0, min(lo, float(arc[-1]))), max(0.0, min(hi, float(arc[-1])))
-    s = np.linspace(lo, hi, max(2, math.ceil((hi - lo) / step) + 1)) if hi > lo else np.array([lo])
-    wp = path.waypoints
-    return np.column_stack([np.interp(s, arc, wp[:, 0]), np.interp(s, arc, wp[:, 1])])
-
-
 def reachable(r: FleetRobot, paths: dict[int, TimedPath], until: float) -> np.ndarray:
     """Where unheard robot ``r`` may stand at ``until`` (n x 2 points): its last heard position, and on
     each of its live ``paths`` (path id -> timed path, absolute times) the stretch it could have driven
@@ -172,16 +159,15 @@ def reachable(r: FleetRobot, paths: dict[int, TimedPath], until: float) -> np.nd
     st = r.status
     out = [np.array([[st.x, st.y]])]
     for pid, path in paths.items():
-        wp = path.waypoints
-        due = float(np.interp(until, wp[:, 2], _arc(path)))
+        due = arc_at(path, until)
         if pid == st.path_id:
-            done = st.travelled_m if st.travelled_m is not None else st.progress * float(_arc(path)[-1])
+            done = st.travelled_m if st.travelled_m is not None else st.progress * path.length
             hi = min(due, done + r.kind.max_speed * max(0.0, until - st.stamp))
-            out.append(stretch(path, done, hi))
+            out.append(sample(path, done, hi, STRETCH_STEP_M).xy)
         elif st.path_id is None or pid > st.path_id:   # sent, not yet taken: it may take it from its start
-            out.append(stretch(path, 0.0, due))
+            out.append(sample(path, 0.0, due, STRETCH_STEP_M).xy)
     return np.vstack(out)
 
 
 __all__ = ["HEARD_DECIMALS", "LEASE_SLACK_S", "STRETCH_STEP_M", "Lease", "braking_s", "heard_record", "reachable",
-           "stopped_by", "stretch"]
+           "stopped_by"]
