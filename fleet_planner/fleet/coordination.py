@@ -389,17 +389,18 @@ class CentralDriver(Driver):
         if self.awaiting is not None and record.path_id > self.awaiting:
             self.awaiting = None
 
+    def _holds(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> bool:
+        """Whether the robot stands this step: the safety net, a refused leg, a leg awaiting its record, the gate."""
+        return (self.must_wait(t, dt, heard) or self.stopped or self.awaiting is not None
+                or self.gate_holds(dt, heard))
+
     def drive(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
-        hold = self.must_wait(t, dt, heard)
-        if not hold and (self.stopped or self.awaiting is not None or self.gate_holds(dt, heard)):
-            hold = True
-        self.model.step(t, dt, hold=hold)
+        self.model.step(t, dt, hold=self._holds(t, dt, heard))
 
     def brake(self, t: float, dt: float, heard: Mapping[str, RobotStatus]) -> None:
         """Slow down to a stop along the path, but hold at once where driving would (the safety net, the
         gate, a refused leg, a leg awaiting its record): braking never takes it where driving may not."""
-        hold = (self.must_wait(t, dt, heard) or self.stopped or self.awaiting is not None
-                or self.gate_holds(dt, heard))
+        hold = self._holds(t, dt, heard)
         self.model.step(t, dt, hold=hold, brake=not hold)
 
     def gate_holds(self, dt: float, heard: Mapping[str, RobotStatus]) -> bool:
