@@ -225,36 +225,35 @@ class AgentNode(Node):
         except (RecordError, ValueError) as exc:
             self.get_logger().error(printable(f"timed path ignored: {exc}", 300), throttle_duration_sec=1.0)
 
+    def _not_planners(self, record: Any, topic: str, origin: OriginCheck, field: str) -> str | None:
+        """Why ``record`` on ``topic`` is not the planner's word (None: it is). With keys, its signature
+        is checked (fresh, not replayed); without, the topic must have the planner node alone as publisher."""
+        if self.keys.checks:
+            problem = self.keys.problem(record, topic)
+            return f"{field}.auth: {problem} ({self.keys.refused} refused so far)" if problem else None
+        problem = origin.problem()
+        return f"not from the planner: {problem}" if problem else None
+
     def _on_gate(self, msg: String) -> None:
-        # a gate record releases the robot into a region: like task events, with keys only when
-        # signed by the planner (fresh, not replayed), without keys only while the planner node
-        # alone publishes the topic
+        # a gate record releases the robot into a region: like task events, only the planner's word counts
         try:
             record = string_to_record(msg, GateRecord)
-            if self.keys.checks:
-                problem = self.keys.problem(record, self._gates_topic)
-                if problem:
-                    raise RecordError(f"gate {record.path_id}/{record.seq}: gate.auth: {problem} "
-                                      f"({self.keys.refused} refused so far)")
-            elif problem := self._gate_origin.problem():
-                if self._gate_origin.unnamed_only:  # likely the planner, just discovered: asked again (origin.py)
+            if problem := self._not_planners(record, self._gates_topic, self._gate_origin, "gate"):
+                if not self.keys.checks and self._gate_origin.unnamed_only:
+                    # likely the planner, just discovered: asked again (origin.py)
                     self._gate_pending = (record, time.monotonic() + GATE_SETTLE_S)
-                raise RecordError(f"gate {record.path_id}/{record.seq}: not from the planner: {problem}")
+                raise RecordError(f"gate {record.path_id}/{record.seq}: {problem}")
             self._gate_pending = None
             self.agent.on_gate(record)
         except RecordError as exc:
             self.get_logger().error(printable(f"gate record ignored: {exc}", 300), throttle_duration_sec=1.0)
 
     def _on_heard(self, msg: String) -> None:
-        # whom the planner hears renews the robot's lease: only the planner's word counts (with keys, signed)
+        # whom the planner hears renews the robot's lease: only the planner's word counts
         try:
             record = string_to_record(msg, Heard)
-            if self.keys.checks:
-                problem = self.keys.problem(record, self._heard_topic)
-                if problem:
-                    raise RecordError(f"heard.auth: {problem} ({self.keys.refused} refused so far)")
-            elif problem := self._heard_origin.problem():
-                raise RecordError(f"heard: not from the planner: {problem}")
+            if problem := self._not_planners(record, self._heard_topic, self._heard_origin, "heard"):
+                raise RecordError(problem)
             self.agent.on_heard(record, self._now())
         except (RecordError, ValueError) as exc:
             self.get_logger().warning(printable(f"heard record ignored: {exc}", 300), throttle_duration_sec=5.0)
@@ -277,13 +276,8 @@ class AgentNode(Node):
     def _on_event(self, msg: String) -> None:
         try:
             event = string_to_record(msg, TaskEvent)
-            if self.keys.checks:
-                problem = self.keys.problem(event, self._events_topic)
-                if problem:
-                    raise RecordError(f"task event {event.task_id} {event.event}: task_event.auth: {problem} "
-                                      f"({self.keys.refused} refused so far)")
-            elif problem := self._event_origin.problem():
-                raise RecordError(f"task event {event.task_id} {event.event}: not from the planner: {problem}")
+            if problem := self._not_planners(event, self._events_topic, self._event_origin, "task_event"):
+                raise RecordError(f"task event {event.task_id} {event.event}: {problem}")
             self.agent.on_event(event, sender=self.planner)
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}", throttle_duration_sec=5.0)
