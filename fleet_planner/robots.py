@@ -330,21 +330,18 @@ class RobotModel:
             if len(ahead):
                 gap = max(0.0, float(ahead[:, 0].min()) - s)
                 v = min(v, math.sqrt(2 * a * gap), gap / dt)
-        s_new = min(s + v * dt, s_due, float(self._S[-1]))
-        if s_new <= s:
-            return 0.0
-        x, y = self._point_at(s_new)
-        self.vx, self.vy = (x - self.x) / dt, (y - self.y) / dt
-        self.x, self.y, self._s = x, y, s_new
-        return s_new - s
+        return self._advance(min(s + v * dt, s_due, float(self._S[-1])), dt)
 
     def _brake(self, end: float, dt: float) -> float:
         """Slow down along the path at ``max_accel`` (at once without a limit); the distance driven."""
         self._pre = None
         a = self.kind.max_accel
         v = max(0.0, self.speed - a * dt) if math.isfinite(a) else 0.0
+        return self._advance(min(self._s + v * dt, float(np.interp(end, self._T, self._S)), float(self._S[-1])), dt)
+
+    def _advance(self, s_new: float, dt: float) -> float:
+        """Move forward along the path to arc length ``s_new`` over ``dt`` (never back); the distance driven."""
         s = self._s
-        s_new = min(s + v * dt, float(np.interp(end, self._T, self._S)), float(self._S[-1]))
         if s_new <= s:
             return 0.0
         x, y = self._point_at(s_new)
