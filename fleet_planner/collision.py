@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _md_kernels as K
+from .geometry import arc_lengths
 from .model import EPS
 
 
@@ -114,7 +115,7 @@ class CollisionModel:
         self.radii = np.asarray(radii, dtype=float)
         self.margin = float(margin)
         self.paths = [np.asarray(p, dtype=float).reshape(-1, 2) for p in paths]
-        self.cumlen = [_cumlen(p) for p in self.paths]   # travelled length at each vertex
+        self.cumlen = [arc_lengths(p) for p in self.paths]   # travelled length at each vertex
         if times is None:
             v = np.ones(len(self.paths)) if speeds is None else np.asarray(speeds, dtype=float)
             times = [c / v[x] for x, c in enumerate(self.cumlen)]
@@ -186,7 +187,7 @@ class CollisionModel:
         for x, (path, times) in changed.items():
             self.paths[x] = np.asarray(path, dtype=float).reshape(-1, 2)
             self.times[x] = np.asarray(times, dtype=float)
-            self.cumlen[x] = _cumlen(self.paths[x])
+            self.cumlen[x] = arc_lengths(self.paths[x])
             self.lengths[x] = self.cumlen[x][-1]
             self.travel[x] = float(self.times[x][-1])
             self._segs[x] = _robot_segments(x, self.paths[x], self.times[x])
@@ -419,5 +420,3 @@ def _merge_boxes_batch(chunks: Sequence[np.ndarray]) -> list[list[tuple[float, f
     return [[(r[0], r[1], r[2], r[3]) for r in rows[lo:hi]] for lo, hi in zip(bounds[:-1], bounds[1:])]
 
 
-def _cumlen(path: np.ndarray) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))]) if len(path) > 1 else np.zeros(1)

@@ -8,7 +8,7 @@ Every part of the planner that asks "how close does this path come to that point
 * :func:`polyline_point_distances` - each of many points to one polyline;
 * :func:`polyline_passes_near` - does a polyline come closer than ``dist`` to a point;
 * :func:`polyline_keeps_off` - does a polyline stay farther than each disc's radius from its centre;
-* :func:`polyline_length`, :func:`point_at_arc` - lengths and points along a polyline.
+* :func:`polyline_length`, :func:`arc_lengths`, :func:`point_at_arc` - lengths and points along a polyline.
 
 A polyline is an array of shape (n, 2); a single point counts as a polyline of one (degenerate)
 segment. The swept disc of a robot driving a segment is a *capsule*: the points within its radius
@@ -77,6 +77,14 @@ def polyline_length(points: Sequence[Point] | np.ndarray) -> float:
     """Length of a polyline (0 for fewer than two points)."""
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     return float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) if len(pts) > 1 else 0.0
+
+
+def arc_lengths(points: np.ndarray) -> np.ndarray:
+    """The arc length at each point of a polyline (its first two columns: x, y), from 0 at the first."""
+    pts = np.asarray(points, dtype=float)
+    if len(pts) < 2:
+        return np.zeros(len(pts))
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts[:, :2], axis=0).T))])
 
 
 def point_at_arc(pts: np.ndarray, arc: np.ndarray, s: float) -> Point:

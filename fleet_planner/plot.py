@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .geometry import polyline_point_distances
+from .geometry import arc_lengths, polyline_point_distances
 from .grid import GridMap
 from .model import Network, Plan, RobotSpec, TimedPath
 
@@ -68,7 +68,7 @@ def points_along(path: TimedPath, lengths: np.ndarray) -> np.ndarray:
     """The points of the path's polyline at the given travelled lengths (clamped to its ends),
     shape (len(lengths), 2)."""
     wp = path.waypoints
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+    cum = arc_lengths(wp)
     s = np.asarray(lengths, dtype=float)
     return np.column_stack([np.interp(s, cum, wp[:, 0]), np.interp(s, cum, wp[:, 1])])
 
@@ -76,7 +76,7 @@ def points_along(path: TimedPath, lengths: np.ndarray) -> np.ndarray:
 def travelled_length(path: TimedPath) -> tuple[np.ndarray, np.ndarray]:
     """(times, travelled length) at the waypoints, starting at t = 0 with length 0."""
     wp = path.waypoints
-    length = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+    length = arc_lengths(wp)
     times = wp[:, 2]
     if times[0] > 0:
         times, length = np.concatenate([[0.0], times]), np.concatenate([[0.0], length])

@@ -40,7 +40,7 @@ import numpy as np
 from msg_schemas.records import GateRecord, RobotStatus, WaitMessageRecord
 
 from ..behavior import BehaviorController, BehaviorParams, RobotView, WaitMessage, safety_stop
-from ..geometry import point_at_arc, polyline_passes_near, segment_point_distance
+from ..geometry import arc_lengths, point_at_arc, polyline_passes_near, segment_point_distance
 from ..grid import GridMap
 from ..model import PlanningError, Point, RobotSpec, TimedPath, timed_path_from_polyline
 from ..paths import PathFinder
@@ -193,7 +193,7 @@ class CentralCoordination(Coordination):
             ahead = max(0.0, t0 - st.stamp) if st.mode == "driving" else 0.0
             return st.x + st.vx * ahead, st.y + st.vy * ahead
         wp = robot.leg.path.waypoints
-        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+        arc = arc_lengths(wp)
         due = float(np.interp(t0, wp[:, 2], arc))
         done = st.travelled_m if st.travelled_m is not None else st.progress * arc[-1]
         s = min(done + math.hypot(st.vx, st.vy) * max(0.0, t0 - st.stamp), due, arc[-1])
@@ -276,10 +276,6 @@ JOIN_TOL_M = 0.2
 JOIN_WITHIN_M = 10.0
 
 
-def _arc_of(wp: np.ndarray) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
-
-
 def join_at(path: TimedPath, t0: float, pos: Point, now: float, limit: float | None = None) -> float:
     """Where (m along ``path``, whose times count from ``t0``) a robot at ``pos`` at ``now`` joins
     it: the first point of its first :data:`JOIN_WITHIN_M` within :data:`JOIN_TOL_M` of ``pos``,
@@ -290,7 +286,7 @@ def join_at(path: TimedPath, t0: float, pos: Point, now: float, limit: float | N
     wp = path.waypoints
     if len(wp) < 2:
         return 0.0
-    arc = _arc_of(wp)
+    arc = arc_lengths(wp)
     a, b = wp[:-1, :2], wp[1:, :2]
     p = np.asarray(pos, dtype=float)
     ab = b - a
@@ -345,7 +341,7 @@ class CentralDriver(Driver):
             at = join_at(path, t0, (m.x, m.y), now, limit)
         if heard:
             start = path.waypoints[0, :2] if at == 0.0 else np.array(point_at_arc(
-                path.waypoints[:, :2], _arc_of(path.waypoints), at))
+                path.waypoints[:, :2], arc_lengths(path.waypoints), at))
             if math.hypot(start[0] - m.x, start[1] - m.y) > JUMP_TOL_M:
                 way = np.array([[m.x, m.y], start], dtype=float)
                 sweep = {st.id: (0.0, 0.0) for st in heard.values()}
@@ -477,7 +473,7 @@ class CentralDriver(Driver):
         cached = self._arc
         if cached is None or cached[0] is not m.path:
             wp = m.path.waypoints[:, :2]
-            cached = self._arc = (m.path, wp, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp, axis=0).T))]))
+            cached = self._arc = (m.path, wp, arc_lengths(wp))
         _, wp, arc = cached
         s0 = m.travelled
         s1 = min(s0 + step, float(arc[-1]))

@@ -41,7 +41,7 @@ from scipy.spatial.distance import cdist
 
 from msg_schemas.records import MAX_RECORD_BYTES, GateRecord, RobotStatus
 
-from ..geometry import polyline_passes_near
+from ..geometry import arc_lengths, polyline_passes_near
 from ..model import TimedPath
 from .state import FleetRobot
 
@@ -210,13 +210,9 @@ class _Samples:
     parks: bool       # the last sample is where the path ends (the robot stays there for ever)
 
 
-def _arc(path: TimedPath) -> np.ndarray:
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path.waypoints[:, :2], axis=0).T))])
-
-
 def sample(path: TimedPath, lo: float = 0.0, hi: float = math.inf, step: float = SAMPLE_M) -> _Samples:
     """Samples of ``path`` from ``lo`` to ``hi`` m along it, at most ``step`` apart."""
-    wp, arc = path.waypoints, _arc(path)
+    wp, arc = path.waypoints, arc_lengths(path.waypoints)
     total = float(arc[-1])
     lo, hi = min(max(lo, 0.0), total), min(hi, total)
     hi = max(hi, lo)
@@ -236,7 +232,7 @@ def sample(path: TimedPath, lo: float = 0.0, hi: float = math.inf, step: float =
 def arc_at(path: TimedPath, t: float) -> float:
     """How far along ``path`` its plan is at time ``t``."""
     wp = path.waypoints
-    return float(np.interp(t, wp[:, 2], _arc(path)))
+    return float(np.interp(t, wp[:, 2], arc_lengths(path.waypoints)))
 
 
 def regions(a: _Samples, b: _Samples, reach: float) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -286,7 +282,7 @@ def first_by_plan(new: _Samples, new_path: TimedPath, other: _Samples, i_new: np
     """Whether the new path's robot passes the region first by the plan's times: when the other
     robot first reaches its part of a pair, the new robot is already beyond its part (majority)."""
     when = other.t[i_other]
-    at = np.interp(when, new_path.waypoints[:, 2], _arc(new_path))
+    at = np.interp(when, new_path.waypoints[:, 2], arc_lengths(new_path.waypoints))
     return bool(np.count_nonzero(at > new.s[i_new]) * 2 > len(i_new))
 
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from msg_schemas.records import INT_MAX, INT_MIN, Command, TaskEvent
 
-from ..geometry import point_at_arc
+from ..geometry import arc_lengths, point_at_arc
 from ..model import Point, TimedPath
 from .legs import Decisions, Leg
 from .manager import FleetManager
@@ -163,7 +163,7 @@ class Operator:
         wp = leg.path.waypoints
         path_id = max(round(now * 1e9), r.last_path_id + 1)
         t_new = path_id / 1e9
-        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp[:, :2], axis=0).T))])
+        arc = arc_lengths(wp)
         s_now = float(np.interp(t_new, wp[:, 2], arc))
         due = point_at_arc(wp[:, :2], arc, s_now)
         if math.dist(due, fm.strategy.start_of(r, t_new)) > ON_LEG_M:
