@@ -429,6 +429,9 @@ def _lanes(free: np.ndarray, runs: Sequence[Sequence[int]], tails: np.ndarray, h
     on, 0.5 m apart), so an aisle is a lane of its own, not one with the cross aisle beyond it; and
     the parallel pieces side by side in a narrow corridor are one lane (one direction for all of
     them, else opposing robots would meet head-on in it anyway). Lanes numbered from 0."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
     h, w = free.shape
     across = np.ones((2, h * w), dtype=np.int64)       # [0]: free extent along the column, [1]: along the row
     for cells in runs:
@@ -442,22 +445,19 @@ def _lanes(free: np.ndarray, runs: Sequence[Sequence[int]], tails: np.ndarray, h
     new = np.ones(len(tails), dtype=bool)
     new[1:] = (run_of[1:] != run_of[:-1]) | (is_narrow[1:] != is_narrow[:-1])
     piece = np.cumsum(new) - 1
-    parent = np.arange(int(piece[-1]) + 1 if len(piece) else 0)
-
-    def find(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = int(parent[a])
-        return a
-
-    edge = {(int(t), int(hd)): k for k, (t, hd) in enumerate(zip(tails, heads))}
-    for k in np.nonzero(is_narrow)[0]:
-        side = w if horizontal[k] else 1                 # the parallel edge below / to the right
-        other = edge.get((int(tails[k]) + side, int(heads[k]) + side))
-        if other is not None and is_narrow[other]:
-            parent[find(int(piece[k]))] = find(int(piece[other]))
-    roots = np.array([find(p) for p in range(len(parent))], dtype=np.int64)
-    _, label = np.unique(roots, return_inverse=True)
+    n_pieces = int(piece[-1]) + 1 if len(piece) else 0
+    # each narrow edge joins its piece to that of the parallel narrow edge below / to the right of it
+    orient = horizontal.astype(np.int64)
+    edge_at = np.full((2, h * w), -1, dtype=np.int64)  # [orientation (1: horizontal), tail cell] -> edge
+    edge_at[orient, tails] = np.arange(len(tails))
+    k = np.nonzero(is_narrow)[0]
+    beside = tails[k] + np.where(horizontal[k], w, 1)
+    k, beside = k[beside < h * w], beside[beside < h * w]
+    other = edge_at[orient[k], beside]
+    k, other = k[other >= 0], other[other >= 0]
+    k, other = k[is_narrow[other]], other[is_narrow[other]]
+    g = csr_matrix((np.ones(len(k)), (piece[k], piece[other])), shape=(n_pieces, n_pieces))
+    _, label = connected_components(g, directed=False)
     return label[piece]
 
 
