@@ -55,6 +55,7 @@ class Planner(ABC):
         """Load (or compile) the compiled code this planner runs, once per process, so that no
         planning budget is spent on it: the fleet manager calls it when it is set up, and planners
         whose kernels are compiled call it before their budgets start. Nothing to do by default."""
+        return None
 
 
 def incremental_problem(robots: Sequence[RobotSpec], fixed: Sequence[TimedPath], t0: float) -> list[RobotSpec]:
