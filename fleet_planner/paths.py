@@ -321,6 +321,31 @@ class PathFinder:
         return {}
 
 
+_WARM = False
+
+
+def warm_up() -> None:
+    """Load (or compile: numba's on-disk cache) every kernel of path finding with the argument types
+    of real searches, once per process, so that no planning budget is spent on it (a cold cache
+    compiles for seconds): a search round a wall with a keep-out disc, one with an extra wall cell,
+    a straight sight line, the graph's components and a distance field, the aisle count of
+    :mod:`fleet_planner.planners.md_crowd`."""
+    global _WARM
+    if _WARM:
+        return
+    blocked = np.zeros((5, 7), dtype=bool)
+    blocked[:4, 3] = True   # a wall with a gap at the top row
+    finder = PathFinder(GridMap(blocked, 1.0, "warm-up"), 0.3)
+    finder.find((0.5, 0.5), (6.5, 0.5), avoid=[((1.5, 4.5), 0.4)])
+    finder.find((0.5, 0.5), (6.5, 0.5), blocked_cells=[(0, 4)])
+    finder.find((0.5, 4.5), (6.5, 4.5))
+    graph = finder._move_graph()
+    graph.labels()
+    K.distances(graph.heads, graph.weights, 0)
+    K.count_components4(np.ascontiguousarray(blocked))
+    _WARM = True
+
+
 def _corners(path: np.ndarray) -> np.ndarray:
     """The cells of a grid path (flat indices) where its direction changes (plus both ends)."""
     if len(path) <= 2:

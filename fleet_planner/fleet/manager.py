@@ -176,6 +176,9 @@ class FleetManager:
             + self.params.safety_margin
         # the live fleet paces its legs in wall-clock seconds (paced_budgets, MIN_LEG_LIMIT_S)
         self.planner = planner if planner is not None else get_planner("md", margin=self.margin, leg_clock="wall")
+        warm_up = getattr(self.planner, "warm_up", None)   # (a planner is anything with plan_incremental)
+        if warm_up is not None:
+            warm_up()   # its compiled kernels, loaded now: not inside the first steps' budgets
         self.robots: dict[str, FleetRobot] = {}
         self.jobs: dict[str, Job] = {}
         #: finished jobs still in ``jobs``, oldest first, with why they ended (at most MAX_CLOSED_JOBS)

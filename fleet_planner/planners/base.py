@@ -51,6 +51,13 @@ class Planner(ABC):
         problem this planner takes (e.g. a robot both fixed and to be planned)."""
 
 
+    def warm_up(self) -> None:
+        """Load (or compile) the compiled code this planner runs, once per process, so that no
+        planning budget is spent on it: the fleet manager calls it when it is set up, and planners
+        whose kernels are compiled call it before their budgets start. Nothing to do by default."""
+        return None
+
+
 def incremental_problem(robots: Sequence[RobotSpec], fixed: Sequence[TimedPath], t0: float) -> list[RobotSpec]:
     """``robots`` as a list, once the arguments of :meth:`Planner.plan_incremental` are a problem
     it takes: ``t0`` finite and no robot both fixed and to be planned (else ``ValueError`` naming

@@ -142,10 +142,13 @@ class CrowdPlanner(Planner):
             raise ValueError(f"margin: must be a finite number >= 0 (got {margin!r})")
         self.margin = float(margin)
 
-    def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
+    def warm_up(self) -> None:
         kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
         crowd_st.warm_up()
         crowd_sipp.warm_up()
+
+    def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
+        self.warm_up()
         t_start, c_start = time.perf_counter(), time.process_time()
         deadline = t_start + self.time_limit_s
         robots = list(robots)

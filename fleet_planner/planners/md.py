@@ -90,6 +90,10 @@ COMPARE_REFINE_S = 0.2
 HOLD_CELLS = 4
 
 
+#: the dense solver's kernels are loaded in this process (:meth:`MDPlanner.warm_up`)
+_DENSE_WARM = False
+
+
 class _SearchFailed(Exception):
     """md found no plan within its budget: the last refusal and how many attempts were made."""
 
@@ -254,7 +258,30 @@ class MDPlanner(Planner):
         self._finders = _FinderCache()
 
     # ------------------------------------------------------------------------------------------
+    def warm_up(self) -> None:
+        """Load (or compile) the compiled kernels of md's legs - path finding, the collision pieces
+        and the hold search - once per process, before any budget starts (ours: with numba's cache
+        cold, the first leg of the delivery benchmark spent 11.4 s CPU compiling, inside its 0.5 s
+        budget, later legs up to 0.6 s; with the cache on disk, the first leg 0.06 s loading it; the
+        first kernel a process loads also starts numba: 0.35 s). :meth:`plan` also warms the dense
+        solver's kernels (legs never hand over to it; cold, they compile for about 40 s)."""
+        self._warm_up(dense=False)
+
+    def _warm_up(self, dense: bool) -> None:
+        """:meth:`warm_up`; the dense solver's kernels too with ``dense`` (one-shot plans)."""
+        global _DENSE_WARM
+        from .. import _md_kernels, paths
+
+        paths.warm_up()
+        _md_kernels.warm_up()
+        if dense and self.fallback is not None and self.holds == "anywhere" and not _DENSE_WARM:
+            from . import get_planner
+
+            get_planner(self._dense_name()).warm_up()
+            _DENSE_WARM = True
+
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
+        self._warm_up(dense=True)
         t_start = time.perf_counter()
         deadline = Budget(self.time_limit)
         robots = list(robots)
@@ -413,6 +440,7 @@ class MDPlanner(Planner):
         six ``leg_time_limit`` plus two scheduling passes. Measured in the delivery benchmark:
         without it md's legs waited 4-5x longer than PRIOR's on the same situations (they stay on
         the shortest path and queue behind the traffic in it)."""
+        self._warm_up(dense=False)
         robots = list(robots)
         deadline = self._leg_budget()
         failure: PlanningError | None = None
