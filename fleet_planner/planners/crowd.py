@@ -172,6 +172,10 @@ class CrowdPlanner(Planner):
         radii = [r.radius for r in robots]
         accels = [r.max_accel for r in robots]
         at_top_speed = all(a is None for a in accels)
+        # diagonal steps in the timed searches (crowd_sipp): at top speed, radii <= half the cell step
+        diagonals = crowd_sipp.diagonal_table(graph.index, graph.rows, graph.cols) \
+            if self.diagonal and DIAGONAL_SEARCH and len(robots) <= DIAGONAL_MAX and at_top_speed \
+            and max(radii) <= res / 2 + 1e-12 else None
         hopeless = False
         if self.first == "auto" and at_top_speed:
             # speed-aware from the start: each robot planned at its own speed (no fast robot queued behind a
@@ -183,7 +187,7 @@ class CrowdPlanner(Planner):
                 starts, search.goals, durations, search.fields, search.grow, graph.nb, graph.deg, graph.n,
                 self.seed, release=crowd_sipp.RELEASE, cpu_s=0.5 + len(robots) / 1000,
                 repair=crowd_sipp.REPAIR,
-                wrong=wrong, lane=crowd_sipp.LANE)
+                wrong=wrong, lane=crowd_sipp.LANE, diagonals=diagonals)
             if timed_first is None:
                 # (the discrete pipeline's budget below as without the attempt: at 1000 robots on
                 # warehouse-10-20-10-2-1 the attempt fails after ~0.9 s, and LaCAM's plan needs its LNS time)
@@ -198,7 +202,7 @@ class CrowdPlanner(Planner):
                 timing, stats = _timed_rounds(timed_first, deadline, budget, starts, search, graph, durations,
                                               centres, radii, res, accels, self.margin, self.seed)
                 timed_info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
-                              "search_s": round(t_first, 3), **stats}
+                              "search_s": round(t_first, 3), "diagonal_search": diagonals is not None, **stats}
                 return self._finish(timing, centres, starts, robots, res, t_start, timed_info, progress, graph,
                                     durations)
         configs = None
@@ -240,7 +244,7 @@ class CrowdPlanner(Planner):
         if timed_s > 0 and len(robots) > 1 and at_top_speed:
             # speed-aware: each robot re-planned at its own speed against the others' timed cells
             timed = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
-                                 graph.deg, graph.n, self.seed, release=crowd_sipp.RELEASE)
+                                 graph.deg, graph.n, self.seed, release=crowd_sipp.RELEASE, diagonals=diagonals)
             timing, stats = _timed_rounds(timed, deadline, timed_s, starts, search, graph, durations, centres,
                                           radii, res, accels, self.margin, self.seed, timing)
             info.update(stats)
@@ -252,7 +256,7 @@ class CrowdPlanner(Planner):
         (:mod:`.crowd_smooth`; only without acceleration limits and for radii <= half the cell step)."""
         radii = [r.radius for r in robots]
         if self.diagonal and len(robots) <= DIAGONAL_MAX and all(r.max_accel is None for r in robots) \
-                and max(radii) <= res / 2 + 1e-12:
+                and max(radii) <= res / 2 + 1e-12 and not info.get("diagonal_search"):
             c0 = time.process_time()
             before = _arrival_sum(timing)
             timing = crowd_smooth.smooth(timing, starts, graph, durations, centres, radii, res, self.margin,
@@ -326,6 +330,8 @@ DIAGONAL_MAX = 500
 #: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
 #: re-planned ones move up, which gives the next round room)
 TIMED_ROUNDS = 3
+#: diagonal steps in the timed searches themselves (crowd_sipp), up to DIAGONAL_MAX robots
+DIAGONAL_SEARCH = True
 
 
 def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, search, graph, durations, centres,
@@ -338,7 +344,9 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
 
     def retimed(r: TimedRefiner):
         robot, key, src, dst = r.moves()
-        return time_move_list(starts, robot, key, src, dst, durations, centres, radii, res, accels, margin)
+        sides = r.sides(src, dst)
+        return time_move_list(starts, robot, key, src, dst, durations, centres, radii, res, accels, margin,
+                              sides=sides if np.any(sides != NIL) else None)
 
     def total(t) -> float:
         arrival = np.zeros(len(starts))
@@ -353,7 +361,7 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
         if k > 0:
             refiner = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
                                    graph.deg, graph.n, seed + k, release=crowd_sipp.RELEASE, wrong=refiner.wrong,
-                                   lane=refiner.lane_lns)
+                                   lane=refiner.lane_lns, diagonals=(refiner.dnb, refiner.dside, refiner.ddeg))
         refiner.run(deadline, cpu_s=cpu_s / TIMED_ROUNDS)
         iterations, accepted = iterations + refiner.iterations, accepted + refiner.accepted
         if not refiner.accepted:
