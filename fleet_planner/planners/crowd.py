@@ -105,7 +105,10 @@ class CrowdPlanner(Planner):
     sum to at least it, the solver gives up at once with PlanningError (md's comparison: its plan
     cannot lose, up to what diagonal steps in open floor would have saved).
     ``diagonal``: shorten the timed plan by diagonal steps where they fit (:mod:`.crowd_smooth`; up to
-    :data:`DIAGONAL_MAX` robots).
+    :data:`DIAGONAL_MAX` robots; with :data:`DIAGONAL_SEARCH` the timed searches take diagonal steps
+    themselves and the post-pass is skipped after them).
+    ``cpu_start``: the ``time.process_time()`` at which the caller's planning began (md: its crowding
+    check and the compiled kernels' loading then count towards the CPU budgets of the timed plan).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
@@ -116,7 +119,7 @@ class CrowdPlanner(Planner):
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
                  network: bool = True, time_limit_s: float | None = None, margin: float = 0.02,
                  timed_refine_s: float | None = None, first: str = "auto", cutoff: float | None = None,
-                 diagonal: bool = True):
+                 diagonal: bool = True, cpu_start: float | None = None):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
@@ -131,6 +134,7 @@ class CrowdPlanner(Planner):
             raise ValueError(f"first: 'auto', 'discrete' or 'lacam' (got {first!r})")
         self.first = first
         self.diagonal = bool(diagonal)
+        self.cpu_start = None if cpu_start is None else float(cpu_start)
         if cutoff is not None and not (isinstance(cutoff, (int, float)) and math.isfinite(cutoff)):
             raise ValueError(f"cutoff: must be a finite number or None (got {cutoff!r})")
         self.cutoff = None if cutoff is None else float(cutoff)
@@ -143,10 +147,12 @@ class CrowdPlanner(Planner):
         self.margin = float(margin)
 
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
-        kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget
+        kern.warm_up()   # compiled kernels (numba's cache): not part of any planning budget ...
         crowd_st.warm_up()
         crowd_sipp.warm_up()
         t_start, c_start = time.perf_counter(), time.process_time()
+        if self.cpu_start is not None:   # ... unless the caller counts them (md)
+            c_start = min(c_start, self.cpu_start)
         deadline = t_start + self.time_limit_s
         robots = list(robots)
         if not robots:
@@ -197,8 +203,9 @@ class CrowdPlanner(Planner):
                 if progress:
                     progress(1, 3, "refinement (timed LNS)")
                 timed_first.lane_lns = crowd_sipp.LANE_LNS
+                whole = TIMED_BUDGET_DIAG_S if diagonals is not None else TIMED_BUDGET_S
                 budget = self.timed_refine_s if self.timed_refine_s is not None else \
-                    max(0.2, TIMED_BUDGET_S * min(1.0, 0.25 + len(robots) / 500) - (time.process_time() - c_start))
+                    max(0.2, whole * min(1.0, 0.25 + len(robots) / 500) - (time.process_time() - c_start))
                 timing, stats = _timed_rounds(timed_first, deadline, budget, starts, search, graph, durations,
                                               centres, radii, res, accels, self.margin, self.seed)
                 timed_info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
@@ -319,6 +326,8 @@ class CrowdPlanner(Planner):
 #: 1.5 -> 1.2 with the diagonal steps (crowd_smooth, ~0.25 s CPU at 400 robots for SoC/free -0.02; the last
 #: 0.3 s of LNS bought ~0.003)
 TIMED_BUDGET_S = 1.2
+#: the same with diagonal steps in the timed searches (DIAGONAL_SEARCH): the post-pass's ~0.3 s go to the LNS
+TIMED_BUDGET_DIAG_S = 1.5
 #: CPU seconds of the diagonal steps' search for rewrites (crowd_smooth; the re-timing of what it found comes
 #: on top): at 400 robots it needs ~0.3 s
 DIAGONAL_S = 0.4

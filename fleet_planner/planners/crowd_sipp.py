@@ -54,7 +54,16 @@ REPAIR = 4
 LANE = 0.5
 LANE_LNS = 0.0
 TRAPPED = True
+#: the heuristic's weight with diagonal steps (the hop distance is no lower bound then): in the timed LNS
+#: plain 1 (0.9 measured no better, 400 robots on warehouse-10-20-10-2-1, 5 seeds), in the first plan 0.85
+#: (less greedy, more expansions: 5 seeds SoC/free 1.150/1.141/1.152/1.152/1.144 at 1 -> 1.141/1.144/1.152/1.138/
+#: 1.145 at 0.85 with the 1.5 s budget; 0.8 failed the first plan on one seed: 1.231 by the discrete pipeline)
 DIAG_WEIGHT = 1.0
+FIRST_WEIGHT = 0.85
+#: timed LNS iterations per compiled call between budget checks (16: ~0.15-0.3 s per call with diagonal steps
+#: at 400 robots, which overshot the budget by that much)
+BATCH = 16
+DIAG_BATCH = 4
 
 
 @_jit
@@ -626,7 +635,8 @@ class TimedRefiner(LNSStats):
             self.gen, nf = prioritized(order, hold, self.p_cell, self.p_dep, self.p_len, self.arrival, self.dur,
                                        self.rel, self.goals, fields, grow, nb, deg, self.h_who, self.h_lo, self.h_hi,
                                        self.h_n, self.si_lo, self.si_hi, self.si_n, self.si_gen, self.gen,
-                                       self.node_gen, self.node_t, self.node_par, self.node_closed, self.weight,
+                                       self.node_gen, self.node_t, self.node_par, self.node_closed,
+                                       FIRST_WEIGHT if self.ddeg.any() else 1.0,
                                        4 * ncell, failed, max_failed, self.stats, self.node_p, repair, self.wrong,
                                        self.lane_first, self.dnb, self.dside, self.ddeg)
             if nf < 0:              # a cell's holding table overflowed: twice the room, same order
@@ -647,11 +657,12 @@ class TimedRefiner(LNSStats):
     def total(self) -> float:
         return float(self.arrival.sum())
 
-    def run(self, deadline: float, cpu_s: float, batch: int = 16, patience: int = 0) -> None:
+    def run(self, deadline: float, cpu_s: float, batch: int | None = None, patience: int = 0) -> None:
         """Improve the plan until ``deadline`` (perf_counter), ``cpu_s`` seconds of this process's CPU
         time, until no robot is delayed, or until ``patience`` iterations in a row did not lower the
         sum of arrivals (default: 50 + the number of robots, as the discrete LNS)."""
         cpu_end = time.process_time() + cpu_s
+        batch = batch or (DIAG_BATCH if self.ddeg.any() else BATCH)
         patience = patience or 50 + self.n
         best, best_at = self.total(), self.iterations
         while time.perf_counter() < deadline and time.process_time() < cpu_end:
