@@ -248,3 +248,24 @@ def test_the_dense_benchmark_passes_the_timed_lns_budget_to_the_solver(capsys):
     assert stop.value.code == 2
     assert "--timed-refine: must be >= 0" in capsys.readouterr().err
     assert CrowdPlanner(**given_budget).timed_refine_s == 2.5
+
+
+def test_a_robot_trapped_on_its_start_names_the_first_robots_through_it():
+    """The first plan's second repair (ours): a robot not sealed off from its goal that finds no path
+    is trapped on its start by robots that drive through it before it can leave; the repair re-plans
+    the first planned ones through it (by time, at most as many as it has room for), never itself
+    nor robots not planned yet. (On warehouse-10-20-10-2-1, 400 robots, seeds 0 and 2 the first pass
+    then succeeds: without it one robot failed and a second whole pass ran.)"""
+    from fleet_planner.planners import crowd_sipp
+
+    h_who = np.full((2, 8), -1, dtype=np.int32)
+    h_lo, h_hi, h_n = np.zeros((2, 8)), np.zeros((2, 8)), np.zeros(2, dtype=np.int32)
+    # cell 0: robot 0 (the trapped one) from 0, then 3 (not planned), 1, 2, 1 again, 4, 5 - sorted by start
+    for who, lo in ((0, 0.0), (3, 1.0), (1, 2.0), (2, 3.0), (1, 4.0), (4, 5.0), (5, 6.0)):
+        crowd_sipp._put(0, who, lo, lo + 0.5, h_who, h_lo, h_hi, h_n)
+    planned = np.array([True, True, True, False, True, True])
+    out = np.full(3, -1, dtype=np.int32)
+    assert crowd_sipp._through_start(0, 0, planned, h_who, h_n, out) == 3 and out.tolist() == [1, 2, 4]
+    out = np.full(8, -1, dtype=np.int32)
+    assert crowd_sipp._through_start(0, 0, planned, h_who, h_n, out) == 4 and out[:4].tolist() == [1, 2, 4, 5]
+    assert crowd_sipp._through_start(0, 1, planned, h_who, h_n, out) == 0          # nobody through cell 1

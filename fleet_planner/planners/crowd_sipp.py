@@ -884,7 +884,8 @@ def prioritized(order, hold, p_cell, p_dep, p_len, arrival, dur, rel, goals, fie
                     return gen, -1
             gen, ok = _plan_one(a, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who,
                                 h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par,
-                                node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane, dnb, dside, ddeg)
+                                node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane, dnb, dside,
+                                ddeg)
             if ok < 0:
                 return gen, -1
             for m in range(k):
@@ -892,7 +893,8 @@ def prioritized(order, hold, p_cell, p_dep, p_len, arrival, dur, rel, goals, fie
                 _remove(b, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
                 gen, okb = _plan_one(b, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who,
                                      h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par,
-                                     node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane, dnb, dside, ddeg)
+                                     node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane, dnb,
+                                     dside, ddeg)
                 if okb < 0:
                     return gen, -1
                 if okb == 0:
