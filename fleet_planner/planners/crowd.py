@@ -38,7 +38,13 @@ safe for discs in continuous time:
    robot following another into a cell starts as soon as their gap provably stays >= r_i + r_j
    (closed forms for the same direction and for the corner case); collinear moves at one speed
    without a stop are merged.
-4. **Diagonal steps** (ours, :mod:`.crowd_smooth`): where the grid has room (free 2x2 blocks), windows
+4. **Diagonal steps** (ours). Up to :data:`DIAGONAL_MAX` robots at top speed with radii <= half a cell, the
+   timed searches of steps 0 and 2b take diagonal steps themselves (:func:`.crowd_sipp.sipp`: a step
+   between the corners of a free 2x2 block holds its source to its end and its two side cells while it
+   drives, the rule below, re-timed exactly by step 3's pass); measured on bench_dense, 400 robots on
+   warehouse-10-20-10-2-1, seeds 0-4 at load 6: SoC/free 1.158/1.147/1.172/1.149/1.159 (post-pass) ->
+   1.141/1.140/1.155/1.138/1.140 at 1.65-1.81 s CPU. Otherwise a post-pass (:mod:`.crowd_smooth`): where the
+   grid has room (free 2x2 blocks), windows
    of each robot's timed path are replaced by shorter octile paths whose diagonal steps hold the two
    side cells they sweep, when that fits the others' holdings; re-timed by step 3's pass with the
    sweeps as visits, which can only make robots earlier (measured on bench_dense, 400 robots on
