@@ -380,7 +380,7 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
         refiner.run(deadline, cpu_s=cpu_s / TIMED_ROUNDS)
         iterations, accepted = iterations + refiner.iterations, accepted + refiner.accepted
         if not refiner.accepted:
-            break
+            continue   # (the next round from the same timing, another seed: the round's budget is not lost)
         timing = retimed(refiner)
         now = total(timing)
         if now < best_sum - 1e-9:
