@@ -380,6 +380,8 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
         refiner.run(deadline, cpu_s=cpu_s / TIMED_ROUNDS)
         iterations, accepted = iterations + refiner.iterations, accepted + refiner.accepted
         if not refiner.accepted:
+            if len(starts) > DIAGONAL_MAX:
+                break      # (2000 robots on warehouse-20-40-10-2-2: one batch of a round overshoots its share, +1.5 s)
             continue   # (the next round from the same timing, another seed: the round's budget is not lost)
         timing = retimed(refiner)
         now = total(timing)
