@@ -124,13 +124,9 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, options: 
     t0, c0 = time.perf_counter(), time.process_time()
     try:
         planner = get_planner(name, **options)
-        if name in ("dense", "crowd"):
-            from fleet_planner.planners import crowd_kernels, crowd_sipp, crowd_st
-
-            crowd_kernels.warm_up()   # numba's cache, loaded once per process: not planning
-            crowd_st.warm_up()
-            crowd_sipp.warm_up()
-            t0, c0 = time.perf_counter(), time.process_time()
+        for p in (planner, get_planner("dense")):   # (md may hand over to the dense solver)
+            p.warm_up()   # compiled kernels, numba's cache loaded once per process: not planning
+        t0, c0 = time.perf_counter(), time.process_time()
         plan = planner.plan(grid, robots)
         timing = (time.perf_counter() - t0, time.process_time() - c0)
         plan.network = None   # large and not needed here

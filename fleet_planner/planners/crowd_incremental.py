@@ -125,18 +125,19 @@ def _sequential(graph, order, starts, goals, dur, fields, grow, holdings, L, K):
     node_closed = np.zeros(ncell * ks, dtype=np.int64)
     node_p = np.zeros(ncell * ks)
     no_lanes = np.zeros(graph.nb.shape, dtype=np.uint8)
+    straight = sipp_k.no_diagonals(ncell)      # (legs keep to the cell graph's edges)
     out_cell = np.empty(L, dtype=np.int32)
     out_dep = np.empty(L)
     stats = np.zeros(5, dtype=np.int64)
     failed = []
     gen = 0
     for i in order:
-        sipp_k._remove(i, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+        sipp_k._remove(i, p_cell, p_len, h_who, h_lo, h_hi, h_n, *straight)
         gen += 1
         ln = sipp_k.sipp(i, int(starts[i]), int(goals[i]), float(dur[i]), fields[grow[i]], h_lo, h_hi, h_n, graph.nb,
                          graph.deg, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf,
                          1.0, 50 * ncell, out_cell, out_dep, stats, float(dur[i]), node_p,
-                         no_lanes, 0.0)
+                         no_lanes, 0.0, *straight)
         if ln < 0:
             failed.append(i)
             sipp_k._put(int(starts[i]), i, 0.0, np.inf, h_who, h_lo, h_hi, h_n)   # it stays where it is
@@ -144,7 +145,7 @@ def _sequential(graph, order, starts, goals, dur, fields, grow, holdings, L, K):
         p_cell[i, :ln] = out_cell[:ln]
         p_dep[i, :ln] = out_dep[:ln]
         p_len[i] = ln
-        if not sipp_k._insert(i, p_cell, p_dep, p_len, dur, h_who, h_lo, h_hi, h_n):
+        if not sipp_k._insert(i, p_cell, p_dep, p_len, dur, h_who, h_lo, h_hi, h_n, dur, *straight):
             failed.append(i)
     if failed:
         return None, failed

@@ -34,6 +34,7 @@ from .crowd_lns import LNSStats
 from .crowd_st import add_member, delayed_at_random, downhill, group_cost, pick_kind, settle, shuffle_group, start_group
 
 INF = np.inf
+SQRT2 = np.sqrt(2.0)
 #: how long after the start of its move out of a cell a robot lets it go, in its time per cell, where
 #: the precedence pass re-times the result (measured on bench_dense's 400 robots on
 #: warehouse-10-20-10-2-1, 3 seeds, discrete pipeline with 0.8 s of discrete and 0.5 s of timed LNS:
@@ -52,30 +53,65 @@ REPAIR = 4
 #: cell: in the first plan and in the timed LNS
 LANE = 0.5
 LANE_LNS = 0.0
+TRAPPED = True
+#: the heuristic's weight with diagonal steps (the hop distance is no lower bound then): in the timed LNS
+#: plain 1 (0.9 measured no better, 400 robots on warehouse-10-20-10-2-1, 5 seeds), in the first plan 0.85
+#: (less greedy, more expansions: 5 seeds SoC/free 1.150/1.141/1.152/1.152/1.144 at 1 -> 1.141/1.144/1.152/1.138/
+#: 1.145 at 0.85 with the 1.5 s budget; 0.8 failed the first plan on one seed: 1.231 by the discrete pipeline)
+DIAG_WEIGHT = 1.0
+FIRST_WEIGHT = 0.85
+#: timed LNS iterations per compiled call between budget checks (16: ~0.15-0.3 s per call with diagonal steps
+#: at 400 robots, which overshot the budget by that much)
+BATCH = 16
+DIAG_BATCH = 4
 
 
 @_jit
-def _hold(p_dep, i, k, length, rel):
+def _diag(v, w, dnb, ddeg):
+    """Which of cell v's diagonal neighbours w is (its slot in ``dnb``), or -1: a straight move."""
+    for e in range(ddeg[v]):
+        if dnb[v, e] == w:
+            return e
+    return -1
+
+
+@_jit
+def _hold(p_cell, p_dep, i, k, length, rel, d, dnb, ddeg):
     """Robot i's holding interval of its k-th cell (``rel``: how long after the start of its move out
-    it lets the cell go)."""
+    it lets the cell go; out of a diagonal step, at its end: the timing gives a diagonal step no
+    follower slack)."""
     lo = 0.0 if k == 0 else p_dep[i, k - 1]
-    hi = np.inf if k == length - 1 else p_dep[i, k] + rel
-    return lo, hi
+    if k == length - 1:
+        return lo, np.inf
+    if _diag(p_cell[i, k], p_cell[i, k + 1], dnb, ddeg) >= 0:
+        return lo, p_dep[i, k] + SQRT2 * d
+    return lo, p_dep[i, k] + rel
 
 
 @_jit
-def _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n):
-    """Take robot a's holdings out of the tables (each cell's list stays sorted by start)."""
+def _remove_at(a, c, h_who, h_lo, h_hi, h_n):
+    w = 0
+    for m in range(h_n[c]):
+        if h_who[c, m] != a:
+            h_who[c, w] = h_who[c, m]
+            h_lo[c, w] = h_lo[c, m]
+            h_hi[c, w] = h_hi[c, m]
+            w += 1
+    h_n[c] = w
+
+
+@_jit
+def _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg):
+    """Take robot a's holdings out of the tables (each cell's list stays sorted by start), the side
+    cells its diagonal steps sweep too."""
     for k in range(p_len[a]):
         c = p_cell[a, k]
-        w = 0
-        for m in range(h_n[c]):
-            if h_who[c, m] != a:
-                h_who[c, w] = h_who[c, m]
-                h_lo[c, w] = h_lo[c, m]
-                h_hi[c, w] = h_hi[c, m]
-                w += 1
-        h_n[c] = w
+        _remove_at(a, c, h_who, h_lo, h_hi, h_n)
+        if k + 1 < p_len[a]:
+            e = _diag(c, p_cell[a, k + 1], dnb, ddeg)
+            if e >= 0:
+                _remove_at(a, dside[c, e, 0], h_who, h_lo, h_hi, h_n)
+                _remove_at(a, dside[c, e, 1], h_who, h_lo, h_hi, h_n)
 
 
 @_jit
@@ -98,13 +134,21 @@ def _put(c, who, lo, hi, h_who, h_lo, h_hi, h_n):
 
 
 @_jit
-def _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n):
-    """Write robot a's holdings (``rel[a]``: see :func:`_hold`); False (nothing left written) when a
-    cell's table is full."""
+def _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n, dur, dnb, dside, ddeg):
+    """Write robot a's holdings (``rel[a]``: see :func:`_hold`; a diagonal step holds its two side
+    cells from its start to its end); False (nothing left written) when a cell's table is full."""
     for k in range(p_len[a]):
-        lo, hi = _hold(p_dep, a, k, p_len[a], rel[a])
-        if not _put(p_cell[a, k], a, lo, hi, h_who, h_lo, h_hi, h_n):
-            _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+        lo, hi = _hold(p_cell, p_dep, a, k, p_len[a], rel[a], dur[a], dnb, ddeg)
+        ok = _put(p_cell[a, k], a, lo, hi, h_who, h_lo, h_hi, h_n)
+        if ok and k + 1 < p_len[a]:
+            c = p_cell[a, k]
+            e = _diag(c, p_cell[a, k + 1], dnb, ddeg)
+            if e >= 0:
+                t0 = p_dep[a, k]
+                ok = _put(dside[c, e, 0], a, t0, t0 + SQRT2 * dur[a], h_who, h_lo, h_hi, h_n) and \
+                    _put(dside[c, e, 1], a, t0, t0 + SQRT2 * dur[a], h_who, h_lo, h_hi, h_n)
+        if not ok:
+            _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
             return False
     return True
 
@@ -132,8 +176,55 @@ def _intervals(c, h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen):
 
 
 @_jit
+def _side_free(s1, s2, tau, dd, si_lo, si_hi, si_n):
+    """The earliest time from ``tau`` on at which both side cells s1, s2 stay free for ``dd`` (their
+    safe intervals cached), or inf."""
+    for _ in range(64):
+        moved = False
+        for c in (s1, s2):
+            m = 0
+            while m < si_n[c] and si_hi[c, m] < tau + dd:
+                m += 1
+            if m == si_n[c]:
+                return np.inf
+            if si_lo[c, m] > tau:
+                tau = si_lo[c, m]
+                moved = True
+        if not moved:
+            return tau
+    return np.inf
+
+
+@_jit
+def _push(hf, hn, size, key, node):
+    """Push ``node`` with ``key`` on the binary heap (hf, hn) of ``size`` entries; returns the heap
+    (grown when full) and its new size."""
+    cap = hf.shape[0]
+    if size >= cap:
+        gf = np.empty(2 * cap, dtype=np.float64)
+        gn = np.empty(2 * cap, dtype=np.int64)
+        gf[:cap] = hf
+        gn[:cap] = hn
+        hf, hn = gf, gn
+    p = size
+    size += 1
+    while p > 0:
+        q = (p - 1) // 2
+        if hf[q] > key:
+            hf[p] = hf[q]
+            hn[p] = hn[q]
+            p = q
+        else:
+            break
+    hf[p] = key
+    hn[p] = node
+    return hf, hn, size
+
+
+@_jit
 def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t,
-         node_par, node_closed, bound, weight, limit, out_cell, out_dep, stats, rel, node_p, wrong, lane):
+         node_par, node_closed, bound, weight, limit, out_cell, out_dep, stats, rel, node_p, wrong, lane,
+         dnb, dside, ddeg):
     """Earliest arrival of robot a (``d`` seconds per cell, ``hd`` hop distances to its goal) from
     ``start`` at time 0 at ``goal`` to stay there for ever, against the holdings in the tables (its
     own removed). Weighted A* (``weight`` on the heuristic) over (cell, safe interval) with the
@@ -147,7 +238,13 @@ def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si
     ``wrong`` (shaped as ``nb``) and ``lane`` (ours): a move from cell v to its e-th neighbour with
     ``wrong[v, e]`` costs ``lane`` x ``d`` on top of its time in the search's order (a soft one-way
     rule, :func:`one_way`; ``node_p``: the extra cost paid so far per node); with ``lane`` 0 the
-    search is plain SIPP."""
+    search is plain SIPP.
+
+    ``dnb`` / ``dside`` / ``ddeg`` (ours): per cell its diagonal neighbours, the two side cells each
+    diagonal step sweeps and how many (all 0: 4-connected). A diagonal step takes sqrt 2 x ``d``, holds
+    its source to its end and its two side cells from its start to its end (:mod:`.crowd_smooth`'s
+    rule, which the precedence pass times exactly). The heuristic stays the 4-connected hop distance:
+    no longer a lower bound, it makes the search greedy towards diagonal steps where they fit."""
     ks = si_lo.shape[1]
     _intervals(start, h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen)
     if si_n[start] == 0 or si_lo[start, 0] > 0.0:
@@ -163,9 +260,8 @@ def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si
     node_t[s0] = 0.0
     node_p[s0] = 0.0
     node_par[s0] = -1
-    cap = 1 << 14
-    hf = np.empty(cap, dtype=np.float64)
-    hn = np.empty(cap, dtype=np.int64)
+    hf = np.empty(1 << 14, dtype=np.float64)
+    hn = np.empty(1 << 14, dtype=np.int64)
     hf[0] = weight * max(hd[start] * d, busy)
     hn[0] = s0
     size = 1
@@ -211,7 +307,8 @@ def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si
             for q in range(length - 1, -1, -1):
                 out_cell[q] = x // ks
                 if q < length - 1:
-                    out_dep[q] = node_t[prev] - d
+                    diag = _diag(x // ks, prev // ks, dnb, ddeg) >= 0
+                    out_dep[q] = node_t[prev] - (SQRT2 * d if diag else d)
                 prev = x
                 x = node_par[x]
             out_dep[length - 1] = np.inf
@@ -246,31 +343,50 @@ def sipp(a, start, goal, d, hd, h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n, si
                 node_p[s2] = p2
                 node_par[s2] = s
                 key = arr + p2 + weight * max(hd[w] * d, busy - arr)
-                if size >= cap:
-                    gf = np.empty(2 * cap, dtype=np.float64)
-                    gn = np.empty(2 * cap, dtype=np.int64)
-                    gf[:cap] = hf
-                    gn[:cap] = hn
-                    hf, hn = gf, gn
-                    cap *= 2
-                p = size
-                size += 1
-                while p > 0:
-                    q = (p - 1) // 2
-                    if hf[q] > key:
-                        hf[p] = hf[q]
-                        hn[p] = hn[q]
-                        p = q
-                    else:
-                        break
-                hf[p] = key
-                hn[p] = s2
+                hf, hn, size = _push(hf, hn, size, key, s2)
+        dd = SQRT2 * d
+        for e in range(ddeg[v]):
+            w = dnb[v, e]
+            c1 = dside[v, e, 0]
+            c2 = dside[v, e, 1]
+            _intervals(w, h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen)
+            _intervals(c1, h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen)
+            _intervals(c2, h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen)
+            for j in range(si_n[w]):
+                lo_w = si_lo[w, j]
+                hi_w = si_hi[w, j]
+                if lo_w + dd > hi_v:
+                    break                 # the source is held to the step's end
+                if hi_w < t + dd + rel:
+                    continue
+                tau = _side_free(c1, c2, t if t > lo_w else lo_w, dd, si_lo, si_hi, si_n)
+                if tau == np.inf or tau + dd > hi_v:
+                    break                 # (a later interval of w only starts later)
+                arr = tau + dd
+                if arr + rel > hi_w and hi_w < np.inf:
+                    continue
+                if arr + hd[w] * d > bound:
+                    continue
+                s2 = w * ks + j
+                p2 = node_p[s]
+                if node_gen[s2] == gen and node_t[s2] + node_p[s2] <= arr + p2:
+                    continue
+                node_gen[s2] = gen
+                node_t[s2] = arr
+                node_p[s2] = p2
+                node_par[s2] = s
+                key = arr + p2 + weight * max(hd[w] * d, busy - arr)
+                hf, hn, size = _push(hf, hn, size, key, s2)
     return -1
 
 
 @_jit
-def _arrival(p_dep, p_len, i, d):
-    return 0.0 if p_len[i] <= 1 else p_dep[i, p_len[i] - 2] + d
+def _arrival(p_cell, p_dep, p_len, i, d, dnb, ddeg):
+    n = p_len[i]
+    if n <= 1:
+        return 0.0
+    diag = _diag(p_cell[i, n - 2], p_cell[i, n - 1], dnb, ddeg) >= 0
+    return p_dep[i, n - 2] + (SQRT2 * d if diag else d)
 
 
 @_jit
@@ -286,7 +402,7 @@ def _holder(c, t0, t1, h_who, h_lo, h_hi, h_n, mark):
 @_jit
 def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo, h_hi, h_n,
         si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, size, weight, limit,
-        strategy, stats, node_p, wrong, lane):
+        strategy, stats, node_p, wrong, lane, dnb, dside, ddeg):
     """``iters`` iterations of the timed large neighbourhood search (module docstring); updates the
     tables and ``arrival`` in place, ``strategy`` (the neighbourhoods' weights) and ``stats``
     ([iterations, accepted]); returns the last search stamp."""
@@ -339,7 +455,7 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, rel, goals, fields, grow,
             old_arr[k] = arrival[a]
             old_cell[k, :ln] = p_cell[a, :ln]
             old_dep[k, :ln] = p_dep[a, :ln]
-            _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+            _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
         for k in range(g):       # who is not re-planned yet still stands on its start at time 0
             a = group[k]
             _put(p_cell[a, 0], a, 0.0, dur[a], h_who, h_lo, h_hi, h_n)
@@ -348,12 +464,12 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, rel, goals, fields, grow,
         done = 0
         for k in range(g):
             a = group[k]
-            _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+            _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
             gen += 1
             ln = sipp(a, p_cell[a, 0], goals[a], dur[a], fields[grow[a]], h_lo, h_hi, h_n, nb, deg, si_lo, si_hi,
                       si_n, si_gen, gen, node_gen, node_t, node_par, node_closed,
                       lb[a] + room + 1e-9, weight, limit, out_cell, out_dep, stats, rel[a], node_p,
-                      wrong, lane)
+                      wrong, lane, dnb, dside, ddeg)
             if ln < 0:
                 stats[4] += 1
                 ok = False
@@ -361,15 +477,15 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, rel, goals, fields, grow,
             p_cell[a, :ln] = out_cell[:ln]
             p_dep[a, :ln] = out_dep[:ln]
             p_len[a] = ln
-            if not _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n):
+            if not _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n, dur, dnb, dside, ddeg):
                 ok = False
                 break
-            arrival[a] = _arrival(p_dep, p_len, a, dur[a])
+            arrival[a] = _arrival(p_cell, p_dep, p_len, a, dur[a], dnb, ddeg)
             room -= arrival[a] - lb[a]
             done += 1
         if not settle(kind, ok, before, group_cost(group, g, ones, arrival), strategy, stats):
             for k in range(g):
-                _remove(group[k], p_cell, p_len, h_who, h_lo, h_hi, h_n)
+                _remove(group[k], p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
             for k in range(g):
                 a = group[k]
                 ln = old_len[k]
@@ -377,7 +493,7 @@ def lns(iters, p_cell, p_dep, p_len, arrival, lb, dur, rel, goals, fields, grow,
                 p_cell[a, :ln] = old_cell[k, :ln]
                 p_dep[a, :ln] = old_dep[k, :ln]
                 arrival[a] = old_arr[k]
-                _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n)
+                _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n, dur, dnb, dside, ddeg)
         for k in range(g):
             mark[group[k]] = False
     return gen
@@ -394,9 +510,10 @@ class TimedRefiner(LNSStats):
     the first timed plan itself (prioritized)."""
 
     def __init__(self, timing, starts, goals, durations, fields, grow, nb, deg, ncell: int, seed: int = 0,
-                 size: int = 4, release: float = 1.0, wrong: np.ndarray | None = None, lane: float = 0.0):
+                 size: int = 4, release: float = 1.0, wrong: np.ndarray | None = None, lane: float = 0.0,
+                 diagonals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
         n = len(starts)
-        self._setup(starts, goals, durations, fields, grow, nb, deg, seed, size, release)
+        self._setup(starts, goals, durations, fields, grow, nb, deg, seed, size, release, diagonals)
         if wrong is not None:
             self.wrong, self.lane_lns = wrong, float(lane)
         first = timing.first
@@ -418,14 +535,26 @@ class TimedRefiner(LNSStats):
         self.arrival = np.where(counts > 1, end_of[np.arange(n), np.maximum(counts - 2, 0)], 0.0)
         if release < 1.0:
             end_of = self.p_dep + self.rel[:, None]
+        sides = timing.sides if timing.sides is not None else np.full((len(rob), 2), NIL, dtype=np.int64)
+        diag = sides[:, 0] != NIL
+        end_of[rob[diag], pos[diag]] = np.maximum(end_of[rob[diag], pos[diag]],
+                                                  timing.start[diag] + SQRT2 * self.dur[rob[diag]])
         # holdings exactly as the first timing has them
         cells_n = np.zeros(ncell, dtype=np.int64)
         np.add.at(cells_n, self.p_cell[np.arange(self.L)[None, :] < counts[:, None]], 1)
         self._tables(ncell, int(max(16, 2 * cells_n.max(initial=1) + 8)))
         _fill(self.p_cell, self.p_dep, self.p_len, end_of, self.h_who, self.h_lo, self.h_hi, self.h_n)
+        for c, who, lo, hi in zip(sides[diag].reshape(-1).tolist(), np.repeat(rob[diag], 2).tolist(),
+                                  np.repeat(timing.start[diag], 2).tolist(),
+                                  np.repeat(np.maximum(timing.end[diag], timing.start[diag] + SQRT2 *
+                                                       self.dur[rob[diag]]), 2).tolist()):
+            _put(c, who, lo, hi, self.h_who, self.h_lo, self.h_hi, self.h_n)
 
-    def _setup(self, starts, goals, durations, fields, grow, nb, deg, seed, size, release) -> None:
+    def _setup(self, starts, goals, durations, fields, grow, nb, deg, seed, size, release, diagonals=None) -> None:
         n = len(starts)
+        if diagonals is None:
+            diagonals = no_diagonals(len(nb))
+        self.dnb, self.dside, self.ddeg = diagonals
         self.n = n
         self.dur = np.asarray(durations, dtype=np.float64)
         if not 0.0 < release <= 1.0:
@@ -439,6 +568,8 @@ class TimedRefiner(LNSStats):
         self.wrong = np.zeros(np.shape(nb), dtype=np.uint8)
         self.lane_first = self.lane_lns = 0.0
         self.weight = 1.0     # (plain A*: measured 3 seeds at 400 robots, ~0.004 lower SoC/free than 1.2)
+        if self.ddeg.any():
+            self.weight = DIAG_WEIGHT
         self.limit = 20 * len(nb)
         self.strategy = np.ones(2)
         self.stats = np.zeros(5, dtype=np.int64)   # iterations, accepted, expansions, over limit, failed
@@ -468,7 +599,8 @@ class TimedRefiner(LNSStats):
                      size: int = 4, release: float = 1.0, tries: int = 3, hold: float = 3.0,
                      cpu_s: float = float("inf"), give_up: int = 20,
                      repair: int = REPAIR, wrong: np.ndarray | None = None,
-                     lane: float = 0.0) -> tuple[TimedRefiner | None, bool]:
+                     lane: float = 0.0, diagonals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                     ) -> tuple[TimedRefiner | None, bool]:
         """The first timed plan by prioritized safe-interval planning (:func:`prioritized`): robots
         with the shortest time alone first, each at its own speed against the ones before it and the
         start cells of the ones after it (held ``hold`` x its time per cell). As in the discrete
@@ -477,7 +609,7 @@ class TimedRefiner(LNSStats):
         None when no pass succeeded within ``cpu_s`` CPU seconds, and whether a pass stopped because
         more than one robot in ``give_up`` failed: prioritized planning of the crowd is hopeless)."""
         self = cls.__new__(cls)
-        self._setup(starts, goals, durations, fields, grow, nb, deg, seed, size, release)
+        self._setup(starts, goals, durations, fields, grow, nb, deg, seed, size, release, diagonals)
         if wrong is not None:
             self.wrong, self.lane_first = wrong, float(lane)
         n = self.n
@@ -503,9 +635,10 @@ class TimedRefiner(LNSStats):
             self.gen, nf = prioritized(order, hold, self.p_cell, self.p_dep, self.p_len, self.arrival, self.dur,
                                        self.rel, self.goals, fields, grow, nb, deg, self.h_who, self.h_lo, self.h_hi,
                                        self.h_n, self.si_lo, self.si_hi, self.si_n, self.si_gen, self.gen,
-                                       self.node_gen, self.node_t, self.node_par, self.node_closed, 1.0,
+                                       self.node_gen, self.node_t, self.node_par, self.node_closed,
+                                       FIRST_WEIGHT if self.ddeg.any() else 1.0,
                                        4 * ncell, failed, max_failed, self.stats, self.node_p, repair, self.wrong,
-                                       self.lane_first)
+                                       self.lane_first, self.dnb, self.dside, self.ddeg)
             if nf < 0:              # a cell's holding table overflowed: twice the room, same order
                 K *= 2
                 self._tables(ncell, K)
@@ -524,11 +657,12 @@ class TimedRefiner(LNSStats):
     def total(self) -> float:
         return float(self.arrival.sum())
 
-    def run(self, deadline: float, cpu_s: float, batch: int = 16, patience: int = 0) -> None:
+    def run(self, deadline: float, cpu_s: float, batch: int | None = None, patience: int = 0) -> None:
         """Improve the plan until ``deadline`` (perf_counter), ``cpu_s`` seconds of this process's CPU
         time, until no robot is delayed, or until ``patience`` iterations in a row did not lower the
         sum of arrivals (default: 50 + the number of robots, as the discrete LNS)."""
         cpu_end = time.process_time() + cpu_s
+        batch = batch or (DIAG_BATCH if self.ddeg.any() else BATCH)
         patience = patience or 50 + self.n
         best, best_at = self.total(), self.iterations
         while time.perf_counter() < deadline and time.process_time() < cpu_end:
@@ -543,7 +677,7 @@ class TimedRefiner(LNSStats):
                                self.h_hi, self.h_n, self.si_lo, self.si_hi, self.si_n, self.si_gen, self.gen,
                                self.node_gen, self.node_t, self.node_par, self.node_closed, self.size,
                                self.weight, self.limit, self.strategy, self.stats, self.node_p,
-                               self.wrong, self.lane_lns))
+                               self.wrong, self.lane_lns, self.dnb, self.dside, self.ddeg))
             if self.iterations == before:
                 return
 
@@ -556,6 +690,47 @@ class TimedRefiner(LNSStats):
         robot = np.nonzero(has)[0]
         pos = np.nonzero(has)[1]
         return robot, self.p_dep[robot, pos], self.p_cell[robot, pos], self.p_cell[robot, pos + 1]
+
+    def sides(self, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+        """(moves, 2): the side cells each move from ``src`` to ``dst`` sweeps (NIL, NIL for straight
+        moves), as :func:`.crowd_timing.time_move_list` takes them."""
+        out = np.full((len(src), 2), NIL, dtype=np.int64)
+        for e in range(self.dnb.shape[1]):
+            hit = (self.dnb[src, e] == dst) & (e < self.ddeg[src])
+            out[hit] = self.dside[src[hit], e]
+        return out
+
+
+def no_diagonals(ncell: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The diagonal tables of a 4-connected search (no diagonal steps)."""
+    return np.full((ncell, 4), NIL, dtype=np.int32), np.full((ncell, 4, 2), NIL, dtype=np.int32), \
+        np.zeros(ncell, dtype=np.int32)
+
+
+def diagonal_table(index: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Diagonal steps between cells (ours): per cell its diagonal neighbours whose 2x2 block is four
+    cells (``index``: (rows, cols) cell index, NIL where there is none), the two side cells of each,
+    and how many. A disc of radius <= half the cell step on the centre line of such a step keeps
+    clear of every obstacle (obstacles are whole cells); the caller checks the radii."""
+    h, w = index.shape
+    n = len(rows)
+    dnb, dside, ddeg = no_diagonals(n)
+
+    def at(r, c):
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        out = np.full(r.shape, NIL, dtype=np.int64)
+        out[ok] = index[r[ok], c[ok]]
+        return out
+
+    for dr, dc in ((-1, -1), (-1, 1), (1, -1), (1, 1)):
+        z, s1, s2 = at(rows + dr, cols + dc), at(rows, cols + dc), at(rows + dr, cols)
+        ok = np.nonzero((z != NIL) & (s1 != NIL) & (s2 != NIL))[0]
+        slot = ddeg[ok]
+        dnb[ok, slot] = z[ok]
+        dside[ok, slot, 0] = s1[ok]
+        dside[ok, slot, 1] = s2[ok]
+        ddeg[ok] += 1
+    return dnb, dside, ddeg
 
 
 @_jit
@@ -604,30 +779,53 @@ def _sealed_by(a, start, goal, goal_of, planned, nb, deg, seen, queue, out):
 
 
 @_jit
+def _through_start(a, start, planned, h_who, h_n, out):
+    """The first planned robots that drive through robot a's start cell (ours: a robot not sealed off
+    from its goal that still finds no path is trapped on its start: they come before it can get out),
+    at most ``len(out)``, listed in ``out`` (each cell's holdings are sorted by start); how many."""
+    k = 0
+    for m in range(h_n[start]):
+        b = h_who[start, m]
+        if b == a or not planned[b]:
+            continue
+        dup = False
+        for q in range(k):
+            if out[q] == b:
+                dup = True
+        if dup:
+            continue
+        out[k] = b
+        k += 1
+        if k == len(out):
+            break
+    return k
+
+
+@_jit
 def _plan_one(a, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo, h_hi, h_n,
               si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, weight, limit, stats, node_p,
-              out_cell, out_dep, wrong, lane):
+              out_cell, out_dep, wrong, lane, dnb, dside, ddeg):
     """Robot a (its holdings already out of the tables) by :func:`sipp`, written to the tables; returns
     (the search stamp, 1 planned, 0 no path, -1 a cell's holding table is full)."""
     gen += 1
     ln = sipp(a, p_cell[a, 0], goals[a], dur[a], fields[grow[a]], h_lo, h_hi, h_n, nb, deg, si_lo, si_hi, si_n,
               si_gen, gen, node_gen, node_t, node_par, node_closed, np.inf, weight, limit, out_cell, out_dep,
-              stats, rel[a], node_p, wrong, lane)
+              stats, rel[a], node_p, wrong, lane, dnb, dside, ddeg)
     if ln < 0:
         return gen, 0
     p_cell[a, :ln] = out_cell[:ln]
     p_dep[a, :ln] = out_dep[:ln]
     p_len[a] = ln
-    if not _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n):
+    if not _insert(a, p_cell, p_dep, p_len, rel, h_who, h_lo, h_hi, h_n, dur, dnb, dside, ddeg):
         return gen, -1
-    arrival[a] = _arrival(p_dep, p_len, a, dur[a])
+    arrival[a] = _arrival(p_cell, p_dep, p_len, a, dur[a], dnb, ddeg)
     return gen, 1
 
 
 @_jit
 def prioritized(order, hold, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo,
                 h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed, weight, limit,
-                failed, max_failed, stats, node_p, repair, wrong, lane):
+                failed, max_failed, stats, node_p, repair, wrong, lane, dnb, dside, ddeg):
     """Prioritized safe-interval planning on empty tables: the robots of ``order`` one after the
     other by :func:`sipp` at their own speeds against the ones before it and the start cells of the
     ones after it (each held ``hold`` x its time per cell). ``p_cell[:, 0]`` holds the starts,
@@ -660,10 +858,10 @@ def prioritized(order, hold, p_cell, p_dep, p_len, arrival, dur, rel, goals, fie
     fixes = 0
     for q in range(n):
         a = order[q]
-        _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+        _remove(a, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
         gen, ok = _plan_one(a, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who, h_lo,
                             h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par, node_closed,
-                            weight, limit, stats, node_p, out_cell, out_dep, wrong, lane)
+                            weight, limit, stats, node_p, out_cell, out_dep, wrong, lane, dnb, dside, ddeg)
         if ok < 0:
             return gen, -1
         k = 0
@@ -671,28 +869,32 @@ def prioritized(order, hold, p_cell, p_dep, p_len, arrival, dur, rel, goals, fie
             k = _sealed_by(a, p_cell[a, 0], goals[a], goal_of, planned, nb, deg, seen, queue, blockers)
             if k > repair:
                 k = 0
+            if k == 0 and TRAPPED:
+                k = _through_start(a, p_cell[a, 0], planned, h_who, h_n, blockers)
         if k > 0:
             fixes += 1
             if nf + fixes > max_failed:      # (hopeless as when they fail: at 1000 robots on warehouse-10-20-10-2-1
                 return gen, max_failed + 1    # the repairs overflowed the holding tables after 1 s)
             for m in range(k):
                 b = blockers[m]
-                _remove(b, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+                _remove(b, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
                 p_len[b] = 1
                 planned[b] = False
                 if not _put(p_cell[b, 0], b, 0.0, hold * dur[b], h_who, h_lo, h_hi, h_n):
                     return gen, -1
             gen, ok = _plan_one(a, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who,
                                 h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par,
-                                node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane)
+                                node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane, dnb, dside,
+                                ddeg)
             if ok < 0:
                 return gen, -1
             for m in range(k):
                 b = blockers[m]
-                _remove(b, p_cell, p_len, h_who, h_lo, h_hi, h_n)
+                _remove(b, p_cell, p_len, h_who, h_lo, h_hi, h_n, dnb, dside, ddeg)
                 gen, okb = _plan_one(b, p_cell, p_dep, p_len, arrival, dur, rel, goals, fields, grow, nb, deg, h_who,
                                      h_lo, h_hi, h_n, si_lo, si_hi, si_n, si_gen, gen, node_gen, node_t, node_par,
-                                     node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane)
+                                     node_closed, weight, limit, stats, node_p, out_cell, out_dep, wrong, lane, dnb,
+                                     dside, ddeg)
                 if okb < 0:
                     return gen, -1
                 if okb == 0:
@@ -768,8 +970,10 @@ def warm_up() -> None:
         refiner.goals, fields, grow, nb, deg, refiner.h_who, refiner.h_lo, refiner.h_hi, refiner.h_n, refiner.si_lo,
         refiner.si_hi, refiner.si_n, refiner.si_gen, 0, refiner.node_gen, refiner.node_t, refiner.node_par,
         refiner.node_closed, 2, 1.2, 1000, refiner.strategy, refiner.stats, refiner.node_p,
-        refiner.wrong, 0.0)
+        refiner.wrong, 0.0, *no_diagonals(6))
     robot, key, src, dst = refiner.moves()
     time_move_list(plan[0], robot, key, src, dst, dur)
     TimedRefiner.from_scratch(plan[0], goals, dur, fields, grow, nb, deg, 6, 0, size=2, release=RELEASE)
+    # a diagonal move's side cells are held from Python (TimedRefiner.__init__): the same call here
+    _put(0, 0, 0.0, 1.0, refiner.h_who, refiner.h_lo, refiner.h_hi, refiner.h_n)
     _WARM = True
