@@ -556,7 +556,11 @@ class BehaviorController:
     # to the goal again. One escape per ``escape_after`` at most.
 
     def _escape(self, sensed: Sequence[RobotView]) -> bool:
-        """Start an escape into a less crowded place; True when one was found."""
+        """Start an escape into a less crowded place; True when one was found. Not for a robot
+        holding its station: docking, it would leave the station the queue waits for; leaving, it
+        re-plans round the robots that do not give way (:meth:`_select_holding`). Measured (issue
+        13, ARMO on `large`, 100 robots, t = 600-2000 s): 38 escapes refused so, all one robot
+        leaving chute_5, blocked 38 s at most; none of the 43 robots left at session 23's stall held one."""
         if self.goal is None or self.holds is not None:
             return False
         self.escape_ready = self.time + self.params.escape_after
