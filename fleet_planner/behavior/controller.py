@@ -663,7 +663,8 @@ class BehaviorController:
     # above it, from t = 660 s, r14 376 failed re-plans, the cycle found 20,440 times, 41 robots
     # queued behind them; r62 and r83 the same 5 m further south; with a wall-following back-out of
     # the lane robot, r71 and r90 at a junction of a cross aisle, where a crowd left no room behind).
-    # So a robot whose escape found no place re-plans from a neighbouring cell instead: one move
+    # So a robot whose escape found no place, in a wait cycle with its partner (each the other's
+    # partner: the cycles measured), re-plans from a neighbouring cell instead: one move
     # that the lanes may forbid (the disc fits, it touches no robot), then a path along the lanes
     # to its goal that keeps out of its partner and of the robots standing in range. The shortest
     # such way wins; the paper's re-plan is kept for every other case.
@@ -674,7 +675,7 @@ class BehaviorController:
         if lanes is None or not lanes.restricts or self.partner is None or self.goal is None or self.holds:
             return False
         partner = next((o for o in sensed if o.id == self.partner), None)
-        if partner is None:
+        if partner is None or partner.partner != self.id:   # only a wait cycle of the two of us
             return False
         touch = [(o.position, self.radius + o.radius + self.params.safety_margin) for o in sensed]
         keep = [(o.position, self.radius + o.radius + self.params.critical_margin) for o in sensed
