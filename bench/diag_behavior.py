@@ -333,6 +333,9 @@ def main() -> None:
           f"t={res.ctime:.0f} coll={res.collisions} dead={res.deadlocks}")
     print(f"  {steps} steps in {cpu:.1f} s CPU ({steps / max(cpu, 1e-9):.1f} steps/s), {wall:.1f} s wall")
     print("  counters:", {k: v for k, v in res.extra.items() if k not in ("mean_phase_s", "stalled")})
+    ctl = [run.fleet.controller(i) for i in run.fleet.ids]
+    print(f"  escapes {sum(c.escapes for c in ctl)}, yields {sum(c.yields for c in ctl)}, "
+          f"steps against the lanes {sum(c.steps_out for c in ctl)}")
     if budget is not None:
         budget.print()
     kinds = report(run, a.near)

@@ -315,3 +315,66 @@ def test_a_robot_leaving_its_station_replans_round_a_driving_robot_pinned_in_its
     _until_d_arrives(control, 200.0)
     d = control.controller("d")
     assert not control.arrived("d") and d.holds is not None and d.replan_failures >= 10
+
+
+def _shut_in_a_junction_pocket() -> BehaviorFleet:
+    """The east end of `large`'s rack aisles (x 66-74 m, y 0-9.5 m of the map, shifted to the
+    origin) on one-way lanes as ARMO laid them: the side aisle x = 6.75 southbound (one robot
+    wide), the rack aisle y = 5.75 westbound out of it, y = 8.25 eastbound into it, a way back
+    north at x = 0.75. p stands in the corner cell (6.25, 5.25) of the junction of y = 5.75 with
+    the side aisle, whose only way out the lanes allow runs north past q; q, in the side aisle
+    above it, is bound south past p; b queues behind q."""
+    from fleet_planner.roadmap import _BIT, RoadMap, with_lanes
+
+    rows = ["@" * 16,                               # y = 0 (row 0) first
+            "." * 7 + "@@@" + "." * 5 + "@",
+            "." * 7 + "@@@" + "." * 5 + "@",
+            "." * 15 + "@",
+            *(["." * 15 + "@"] * 4),
+            *(["..." + "@" * 9 + "...@"] * 2),
+            *(["." * 15 + "@"] * 3),
+            *(["..." + "@" * 9 + "...@"] * 2),
+            *(["." * 15 + "@"] * 3),
+            "@" * 12 + "...@"]
+    grid = GridMap.from_rows(rows, resolution=0.5)
+    n, s, e, w = (np.uint8(_BIT[d]) for d in ((0, 1), (0, -1), (1, 0), (-1, 0)))
+    allowed = RoadMap.open(grid).allowed.copy()
+    allowed[:, 13] &= ~n                     # the side aisle x = 6.75: southbound
+    allowed[:, 1] &= ~s                      # x = 0.75: northbound
+    allowed[11, :13] &= ~e                   # y = 5.75: westbound
+    allowed[16, :13] &= ~w                   # y = 8.25: eastbound
+    allowed[10, 12] &= ~e                    # the pocket: out north only
+    grid = with_lanes(grid, RoadMap(allowed, 0.5))
+    radius = 0.5 ** 1.5                      # the robots of `large`
+    robots = [RobotSpec("p", radius, 0.8, (6.25, 5.25), (1.25, 5.75)),
+              RobotSpec("q", radius, 0.8, (6.75, 6.25), (6.75, 2.25)),
+              RobotSpec("b", radius, 0.8, (6.75, 8.25), (3.25, 2.25))]
+    fleet = BehaviorFleet(grid, robots, BehaviorParams())
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    return fleet
+
+
+def _until_all_arrive(fleet: BehaviorFleet, limit_s: float) -> None:
+    while fleet.time < limit_s and not all(fleet.arrived(i) for i in fleet.ids):
+        fleet.step(0.1)
+
+
+def test_a_robot_shut_in_a_junction_pocket_by_one_way_lanes_steps_out_against_them(monkeypatch):
+    """p and q wait for each other; the wait cycle is found (IV.C) but every re-plan and escape
+    of either keeps to the lanes, which leave p one way out, past q (control: stuck 300 s, over
+    40 failed re-plans, the cycle found 200 times and more; the measured lock on `large`, ARMO,
+    100 robots, lasted 2900 s). Ours (``BehaviorController._step_out``): p re-plans from a
+    neighbouring cell, its first move against the lanes, and all three arrive."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _shut_in_a_junction_pocket()
+    gap = _drive(fleet, limit_s=120.0)   # checks the walls at every step
+    assert all(fleet.arrived(i) for i in fleet.ids) and gap > 0
+    assert fleet.controller("p").steps_out >= 1
+    monkeypatch.setattr(BehaviorController, "_step_out", lambda self, sensed: False)
+    control = _shut_in_a_junction_pocket()
+    _until_all_arrive(control, 300.0)
+    p, q = control.controller("p"), control.controller("q")
+    assert not control.arrived("p") and not control.arrived("q")
+    assert p.replan_failures + q.replan_failures >= 40 and p.deadlocks + q.deadlocks >= 200
