@@ -315,3 +315,56 @@ def test_a_robot_leaving_its_station_replans_round_a_driving_robot_pinned_in_its
     _until_d_arrives(control, 200.0)
     d = control.controller("d")
     assert not control.arrived("d") and d.holds is not None and d.replan_failures >= 10
+
+
+def _escaped_in_the_way() -> BehaviorFleet:
+    """A one-cell corridor with a niche above it (x = 4.5): e escaped (ours, after IV.B.8) and stands
+    where its escape took it, at x = 8.5 in the corridor, still bound for the corridor's east end;
+    b drives east along the corridor 2 m behind it, e in its way."""
+    grid = GridMap.from_rows(["@@@@.@@@@@@@@@@@",
+                              "................",
+                              "@@@@@@@@@@@@@@@@"])
+    robots = [RobotSpec("e", 0.35, 0.8, (8.5, 1.5), (15.5, 1.5)), RobotSpec("b", 0.35, 0.8, (6.5, 1.5), (13.5, 1.5))]
+    fleet = BehaviorFleet(grid, robots, BehaviorParams(escape_after=0.0))   # b does not escape itself
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    e = fleet.controller("e")   # standing in the place it escaped to, as _advance leaves it
+    e.path = e.tail = e.run = None
+    e.escape_to = e.pos.copy()
+    e.escape_hold, e.escape_end = 3.0, 15.0
+    return fleet
+
+
+def _until_b_arrives(fleet: BehaviorFleet, limit_s: float) -> None:
+    while fleet.time < limit_s and not fleet.arrived("b"):
+        fleet.step(0.1)
+
+
+def test_an_escaped_robot_standing_in_a_drivers_way_moves_on(monkeypatch):
+    """An escaped robot standing in the way of a driving robot leaves its place at once (ours,
+    ``BehaviorController._end_escape``): into another less crowded place off the way or on to its
+    goal, so b passes. Control (the old condition: in someone's way it stood until its escape
+    ended, 15 s; in nobody's way it left after 3 s): b stands behind e until then."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _escaped_in_the_way()
+    _until_b_arrives(fleet, 60.0)
+    assert fleet.arrived("b")
+    fixed_s = fleet.time
+
+    def old(self, sensed):
+        if self.time >= self.escape_end or (
+                self.path is None and self.time >= self.escape_hold and not self._in_the_way(sensed)):
+            self._resume(sensed)
+
+    monkeypatch.setattr(BehaviorController, "_end_escape", old)
+    control = _escaped_in_the_way()
+    stood = 0.0
+    while control.time < 60.0 and not control.arrived("b"):
+        control.step(0.1)
+        e = control.controller("e")
+        if e.escape_to is not None and e.path is None:
+            stood = control.time
+    assert control.arrived("b")
+    assert stood >= 14.0                 # e stood in b's way until its escape ended
+    assert fixed_s < control.time - 5.0, (fixed_s, control.time)
