@@ -368,3 +368,45 @@ def test_an_escaped_robot_standing_in_a_drivers_way_moves_on(monkeypatch):
     assert control.arrived("b")
     assert stood >= 14.0                 # e stood in b's way until its escape ended
     assert fixed_s < control.time - 5.0, (fixed_s, control.time)
+
+
+def _going_through_a_waiting_robot() -> BehaviorFleet:
+    """A one-cell corridor with a niche above it (x = 5.5): g goes through (GoThrough) eastwards
+    while its partner w, bound westwards, waits for it (WaitForGoThrough) standing right in g's
+    channel with no room to leave it sideways (the pair that held 39 of 62 stuck robots on
+    ``large`` at 200 robots, t = 500 s)."""
+    grid = GridMap.from_rows(["@@@@@.@@@@@@@@@@", "." * 16, "@" * 16])
+    robots = [RobotSpec("g", 0.35, 0.8, (2.5, 1.5), (14.5, 1.5)), RobotSpec("w", 0.35, 0.8, (3.4, 1.5), (0.5, 1.5))]
+    fleet = BehaviorFleet(grid, robots)
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    g, w = fleet.controller("g"), fleet.controller("w")
+    g._set(Behavior.GO_THROUGH, "w")
+    w._set(Behavior.WAIT_FOR_GO_THROUGH, "g")
+    return fleet
+
+
+def test_a_going_through_robot_blocked_by_its_waiting_partner_fails(monkeypatch):
+    """GoThrough fails (IV.C.4) once the safety layer refused its motion for ``blocked_timeout``, as
+    Avoid and Exchange do (ours): g re-plans, and the pair gets past each other by the niche.
+    Control (IV.C.4's timeout only): they stand until the GoThrough has lasted
+    ``go_through_timeout`` (30 s)."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    def until_g_arrives(fleet: BehaviorFleet) -> float:
+        while fleet.time < 120.0 and not (fleet.arrived("g") and fleet.arrived("w")):
+            fleet.step(0.1)
+        assert fleet.arrived("g") and fleet.arrived("w")
+        return fleet.time
+
+    fixed_s = until_g_arrives(_going_through_a_waiting_robot())
+    failed = BehaviorController._failed
+
+    def timeout_only(self, me, sensed, in_front):
+        if self.behavior is Behavior.GO_THROUGH:
+            return self.time - self.since > self.params.go_through_timeout
+        return failed(self, me, sensed, in_front)
+
+    monkeypatch.setattr(BehaviorController, "_failed", timeout_only)
+    control_s = until_g_arrives(_going_through_a_waiting_robot())
+    assert fixed_s < control_s - 15.0, (fixed_s, control_s)
