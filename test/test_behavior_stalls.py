@@ -378,3 +378,98 @@ def test_a_robot_shut_in_a_junction_pocket_by_one_way_lanes_steps_out_against_th
     p, q = control.controller("p"), control.controller("q")
     assert not control.arrived("p") and not control.arrived("q")
     assert p.replan_failures + q.replan_failures >= 40 and p.deadlocks + q.deadlocks >= 200
+
+
+def _escaped_in_the_way() -> BehaviorFleet:
+    """A one-cell corridor with a niche above it (x = 4.5): e escaped (ours, after IV.B.8) and stands
+    where its escape took it, at x = 8.5 in the corridor, still bound for the corridor's east end;
+    b drives east along the corridor 2 m behind it, e in its way."""
+    grid = GridMap.from_rows(["@@@@.@@@@@@@@@@@",
+                              "................",
+                              "@@@@@@@@@@@@@@@@"])
+    robots = [RobotSpec("e", 0.35, 0.8, (8.5, 1.5), (15.5, 1.5)), RobotSpec("b", 0.35, 0.8, (6.5, 1.5), (13.5, 1.5))]
+    fleet = BehaviorFleet(grid, robots, BehaviorParams(escape_after=0.0))   # b does not escape itself
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    e = fleet.controller("e")   # standing in the place it escaped to, as _advance leaves it
+    e.path = e.tail = e.run = None
+    e.escape_to = e.pos.copy()
+    e.escape_hold, e.escape_end = 3.0, 15.0
+    return fleet
+
+
+def _until_b_arrives(fleet: BehaviorFleet, limit_s: float) -> None:
+    while fleet.time < limit_s and not fleet.arrived("b"):
+        fleet.step(0.1)
+
+
+def test_an_escaped_robot_standing_in_a_drivers_way_moves_on(monkeypatch):
+    """An escaped robot standing in the way of a driving robot leaves its place at once (ours,
+    ``BehaviorController._end_escape``): into another less crowded place off the way or on to its
+    goal, so b passes. Control (the old condition: in someone's way it stood until its escape
+    ended, 15 s; in nobody's way it left after 3 s): b stands behind e until then."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _escaped_in_the_way()
+    _until_b_arrives(fleet, 60.0)
+    assert fleet.arrived("b")
+    fixed_s = fleet.time
+
+    def old(self, sensed):
+        if self.time >= self.escape_end or (
+                self.path is None and self.time >= self.escape_hold and not self._in_the_way(sensed)):
+            self._resume(sensed)
+
+    monkeypatch.setattr(BehaviorController, "_end_escape", old)
+    control = _escaped_in_the_way()
+    stood = 0.0
+    while control.time < 60.0 and not control.arrived("b"):
+        control.step(0.1)
+        e = control.controller("e")
+        if e.escape_to is not None and e.path is None:
+            stood = control.time
+    assert control.arrived("b")
+    assert stood >= 14.0                 # e stood in b's way until its escape ended
+    assert fixed_s < control.time - 5.0, (fixed_s, control.time)
+
+
+def _going_through_a_waiting_robot() -> BehaviorFleet:
+    """A one-cell corridor with a niche above it (x = 5.5): g goes through (GoThrough) eastwards
+    while its partner w, bound westwards, waits for it (WaitForGoThrough) standing right in g's
+    channel with no room to leave it sideways (the pair that held 39 of 62 stuck robots on
+    ``large`` at 200 robots, t = 500 s)."""
+    grid = GridMap.from_rows(["@@@@@.@@@@@@@@@@", "." * 16, "@" * 16])
+    robots = [RobotSpec("g", 0.35, 0.8, (2.5, 1.5), (14.5, 1.5)), RobotSpec("w", 0.35, 0.8, (3.4, 1.5), (0.5, 1.5))]
+    fleet = BehaviorFleet(grid, robots)
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    g, w = fleet.controller("g"), fleet.controller("w")
+    g._set(Behavior.GO_THROUGH, "w")
+    w._set(Behavior.WAIT_FOR_GO_THROUGH, "g")
+    return fleet
+
+
+def test_a_going_through_robot_blocked_by_its_waiting_partner_fails(monkeypatch):
+    """GoThrough fails (IV.C.4) once the safety layer refused its motion for ``blocked_timeout``, as
+    Avoid and Exchange do (ours): g re-plans, and the pair gets past each other by the niche.
+    Control (IV.C.4's timeout only): they stand until the GoThrough has lasted
+    ``go_through_timeout`` (30 s)."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    def until_g_arrives(fleet: BehaviorFleet) -> float:
+        while fleet.time < 120.0 and not (fleet.arrived("g") and fleet.arrived("w")):
+            fleet.step(0.1)
+        assert fleet.arrived("g") and fleet.arrived("w")
+        return fleet.time
+
+    fixed_s = until_g_arrives(_going_through_a_waiting_robot())
+    failed = BehaviorController._failed
+
+    def timeout_only(self, me, sensed, in_front):
+        if self.behavior is Behavior.GO_THROUGH:
+            return self.time - self.since > self.params.go_through_timeout
+        return failed(self, me, sensed, in_front)
+
+    monkeypatch.setattr(BehaviorController, "_failed", timeout_only)
+    control_s = until_g_arrives(_going_through_a_waiting_robot())
+    assert fixed_s < control_s - 15.0, (fixed_s, control_s)

@@ -99,3 +99,29 @@ def test_spots_never_cut_a_corridor():
         assert not (9 <= col <= 20), f"spot ({x}, {y}) is in the corridor"
     with pytest.raises(ValueError, match="parking spots"):
         choose_spots(grid, 200, seed=0, radius=0.354)
+
+
+def test_a_crowd_the_spread_homes_cannot_hold_gets_packed_homes():
+    """200 robots on `large` (issue 13's stress run): the spread homes hold only 148 of them, 59
+    besides the queue spots (the control raises), the packed ones (ours) hold all 200, each a disc
+    apart, clear of the stations by the docking region, none in a one-robot rack aisle; a size that
+    fits gets the spread homes as before."""
+    from fleet_planner.delivery.layout import PACKED_STATION_CLEARANCE, ROBOT_RADIUS, SPOT_MARGIN
+
+    large = generate_warehouse(5, 10, 24, 2, 3, 0.5, "large")
+    problem = warehouse_problem(large, n_robots=200, n_deliveries=600, seed=0)
+    homes = np.asarray(problem.homes)
+    stations = list(problem.stations.values())
+    with pytest.raises(ValueError, match="parking spots that cut no passage"):   # control: spread homes
+        choose_spots(large.grid, 200, 0, stations)
+    assert len(homes) == 200
+    gaps = np.hypot(*(homes[:, None] - homes[None]).transpose(2, 0, 1)) + np.eye(200) * 99
+    assert gaps.min() >= 2 * ROBOT_RADIUS + SPOT_MARGIN
+    to_station = np.hypot(*(homes[:, None] - np.asarray(stations)[None]).transpose(2, 0, 1))
+    assert to_station.min() >= PACKED_STATION_CLEARANCE - 1e-9
+    # storage stations stand in the rack aisles (the top one opens into the wide top band)
+    rack_aisle_ys = sorted({s[1] for s in stations if s[1] > 5.0})[:-1]
+    assert not any(abs(y - ya) < 0.3 for _, y in homes for ya in rack_aisle_ys)
+
+    small = warehouse_problem(large, n_robots=20, n_deliveries=60, seed=0)
+    assert len(small.spots) > 20 + 10   # spread: homes, queue spots (packed: none), spares (N/2)

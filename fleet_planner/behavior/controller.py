@@ -112,6 +112,7 @@ class BehaviorController:
         self.escape_end = -math.inf           # the escape ends then at the latest
         self.escape_hold = -math.inf          # standing in the less crowded place at least until then
         self.escape_ready = -math.inf         # no new escape before this time
+        self.escape_again = False             # the escape moved on from a place in someone's way (ours)
         self.seen_standing: dict[str, tuple[Point, float]] = {}  # robots seen standing in its way (see _remember)
         self.deadlocks = self.replans = self.replan_failures = self.yields = self.escapes = self.steps_out = 0
 
@@ -349,9 +350,8 @@ class BehaviorController:
         behaviour, the traffic rules, and a re-plan when the behaviour failed."""
         if self.holds is not None and not self.docking.keeps(self.holds[0], self.id):
             self.holds = None                   # another robot asked to dock earlier: queue again
-        if self.escape_to is not None and (self.time >= self.escape_end or (
-                self.path is None and self.time >= self.escape_hold and not self._in_the_way(sensed))):
-            self._resume(sensed)                # made room (or took too long): back to the goal
+        if self.escape_to is not None:
+            self._end_escape(sensed)
         if self.path is None:                   # idle, or parked on its goal (docked if it holds)
             self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
             return
@@ -555,15 +555,18 @@ class BehaviorController:
     # ``escape_reach`` that it can reach without touching a robot it senses, then plans its path
     # to the goal again. One escape per ``escape_after`` at most.
 
-    def _escape(self, sensed: Sequence[RobotView]) -> bool:
-        """Start an escape into a less crowded place; True when one was found. Not for a robot
-        holding its station: docking, it would leave the station the queue waits for; leaving, it
-        re-plans round the robots that do not give way (:meth:`_select_holding`). Measured (issue
-        13, ARMO on `large`, 100 robots, t = 600-2000 s): 38 escapes refused so, all one robot
-        leaving chute_5, blocked 38 s at most; none of the 43 robots left at session 23's stall held one."""
+    def _escape(self, sensed: Sequence[RobotView], again: bool = False) -> bool:
+        """Start an escape into a less crowded place; True when one was found. ``again``: a robot
+        standing in its less crowded place moves on to another (:meth:`_end_escape`); the escape
+        keeps its end (ours). Not for a robot holding its station: docking, it would leave the
+        station the queue waits for; leaving, it re-plans round the robots that do not give way
+        (:meth:`_select_holding`). Measured (issue 13, ARMO on `large`, 100 robots, t = 600-2000 s):
+        38 escapes refused so, all one robot leaving chute_5, blocked 38 s at most; none of the 43
+        robots left at session 23's stall held one."""
         if self.goal is None or self.holds is not None:
             return False
-        self.escape_ready = self.time + self.params.escape_after
+        if not again:
+            self.escape_ready = self.time + self.params.escape_after
         free = self.finder.free
         res = self.grid.resolution
         reach = self.params.escape_reach
@@ -609,12 +612,34 @@ class BehaviorController:
             if path is not None and len(path) >= 2:
                 self.escapes += 1
                 self.escape_to = np.array(target)
-                self.escape_end = self.time + self.params.escape_after / 2
+                if not again:
+                    self.escape_end = self.time + self.params.escape_after / 2
+                self.escape_again = again
                 self.retreat = None
                 self._set_path(path)
                 self._set(B.FOLLOW_WAYPOINT, None)
                 return True
         return False
+
+    def _end_escape(self, sensed: Sequence[RobotView]) -> None:
+        """An escaping robot: back to its goal when the escape took too long, or once it stood
+        ``_ESCAPE_HOLD_S`` in its less crowded place; but at once when it stands in the way of a
+        robot driving nearby, into another less crowded place off the ways (:meth:`_escape`), else
+        back to its goal.
+
+        Interpretation (ours, issue 13): it used to stand on while in someone's way (until the
+        escape ended, ``escape_after`` / 2) and leave early only when in nobody's way - the wrong
+        way round: the place it escaped to was meant to leave room, and a robot standing in
+        another's channel is an obstacle the other can only Avoid (or fail at, in a one-robot
+        aisle). Measured on ``large2x`` at 200 robots, t = 500 s: 15 of 32 wait chains ended at
+        such a robot (up to 7 robots behind one)."""
+        if self.time >= self.escape_end:
+            self._resume(sensed)                # took too long: back to the goal
+        elif self.path is None and self._in_the_way(sensed):
+            if not self._escape(sensed, again=True):
+                self._resume(sensed)
+        elif self.path is None and self.time >= self.escape_hold:
+            self._resume(sensed)                # made room: back to the goal
 
     def _in_the_way(self, sensed: Sequence[RobotView]) -> bool:
         """A robot driving nearby has me in its way (my disc near its channel to its next waypoint)."""
@@ -754,7 +779,11 @@ class BehaviorController:
             if self._pass_or_fail(me, sensed, in_front, stalled):
                 return True
         elif self.behavior is B.GO_THROUGH:                                  # IV.C.4
-            return self.time - self.since > p.go_through_timeout
+            # Interpretation (ours, issue 13): also when the safety layer refused its motion for
+            # blocked_timeout, as Avoid and Exchange fail (IV.C.2-3): its partner waits in its channel
+            # with no room to leave it sideways (measured: large, 200 robots, t = 500 s: 39 of 62
+            # stuck robots in chains ending at one such pair, blocked 15 s of the 30 s timeout)
+            return self.time - self.since > p.go_through_timeout or stalled
         elif self.behavior is B.FOLLOW_WAYPOINT:                             # IV.C.1
             return stalled and not in_front
         # Interpretation: waiting for a standing robot in my channel that I could not drive round
@@ -1033,7 +1062,8 @@ class BehaviorController:
         if wp >= len(self.path) and self.escape_to is not None:   # reached the less crowded place: stand there
             self.path = self.tail = self.run = None
             self.escape_hold = self.time + _ESCAPE_HOLD_S
-            self.escape_end = self.time + self.params.escape_after / 2
+            if not self.escape_again:   # a second place (in someone's way at the first) keeps the end
+                self.escape_end = self.time + self.params.escape_after / 2
             return
         if wp >= len(self.path):
             self.path = self.tail = self.run = None

@@ -29,6 +29,12 @@ SPOT_MARGIN = 0.05
 STATION_CLEARANCE = 2.0
 #: attempts at a set of spots every robot can leave (spots that shut a robot in are replaced)
 _SPOT_ROUNDS = 8
+#: packed spots (:func:`choose_spots` ``packed``, ours, for crowds the spread homes cannot hold): this far
+#: from every station, the behaviour layer's docking region (``BehaviorParams.dock_region``)
+PACKED_STATION_CLEARANCE = 1.5
+#: packed spots: only in passages whose free space for a robot's centre is at least this wide (m): a
+#: parked robot against one side leaves a way for another past it
+PACKED_MIN_PASSAGE = 2.0
 
 
 class _StandingPlaces:
@@ -124,7 +130,8 @@ def _stamp(mask: np.ndarray, col: int, row: int, footprint: np.ndarray) -> None:
 
 
 def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point] = (),
-                 radius: float = ROBOT_RADIUS, queue: Sequence[int] = (), spare: int = 0) -> list[Point]:
+                 radius: float = ROBOT_RADIUS, queue: Sequence[int] = (), spare: int = 0,
+                 packed: bool = False) -> list[Point]:
     """Parking spots where a parked robot cuts no passage, at least :data:`STATION_CLEARANCE`
     from every station and a disc apart from each other: ``count`` at seeded random places (the
     robots' homes), then ``queue[k]`` as close to ``stations[k]`` by driving distance as the map
@@ -134,14 +141,20 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
     The local rules of :meth:`_StandingPlaces.usable` are checked globally with the path finder:
     with a robot on every spot and every station, each of them must still be able to drive to the
     most open place of the map; spots that cannot (or that shut in a station) are dropped and others
-    picked instead. Raises ValueError when the map has fewer than ``count`` places for the homes."""
+    picked instead. Raises ValueError when the map has fewer than ``count`` places for the homes.
+
+    ``packed`` (ours: a crowd the spread homes cannot hold, e.g. 200 robots on ``large``): the same
+    rules, but the homes are lined up along the walls first, the widest passages first (parking rows,
+    the seeded order only breaks ties), only :data:`PACKED_STATION_CLEARANCE` from the stations, and no
+    queue spots (``queue`` is ignored); spare spots follow in the same order."""
     places = _StandingPlaces(grid, radius)
     for p in stations:
         places.take(*places.cell(p))
     rows, cols = np.nonzero(places.free & ~places.taken)
     centres = np.column_stack([(cols + 0.5) * grid.resolution, (rows + 0.5) * grid.resolution])
     if len(stations):
-        far = cKDTree(np.asarray(stations, dtype=float)).query(centres)[0] >= STATION_CLEARANCE
+        clearance = PACKED_STATION_CLEARANCE if packed else STATION_CLEARANCE
+        far = cKDTree(np.asarray(stations, dtype=float)).query(centres)[0] >= clearance
         rows, cols = rows[far], cols[far]
 
     def take(i: int) -> Point | None:
@@ -151,7 +164,7 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
         return None
 
     queued: list[Point] = []
-    if any(q > 0 for q in queue):
+    if not packed and any(q > 0 for q in queue):
         dist = driving_distances(grid, places.free, stations)[:, rows * grid.width + cols]
         ranked = [iter(np.argsort(d, kind="stable")) for d in dist]
         left = list(queue)
@@ -163,7 +176,8 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
                 left[k] = 0 if spot is None else left[k] - 1
                 if spot is not None:
                     queued.append(spot)
-    order = iter(np.random.default_rng(seed).permutation(len(rows)).tolist())
+    order = iter((_wall_first(places, rows, cols, seed) if packed else
+                  np.random.default_rng(seed).permutation(len(rows))).tolist())
     homes: list[Point] = []
     hub: Point | None = None
     for _ in range(_SPOT_ROUNDS):
@@ -185,6 +199,18 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
         raise ValueError(f"{grid.name}: only {len(homes)} parking spots that cut no passage, {count} needed "
                          f"(fewer robots or a larger map)")
     return homes[:count] + queued + homes[count:]
+
+
+def _wall_first(places: _StandingPlaces, rows: np.ndarray, cols: np.ndarray, seed: int) -> np.ndarray:
+    """Ours (packed spots): the candidate cells closest to a wall first (rows of robots along it), among
+    those the ones in the widest passages, ties in seeded random order; none in a passage narrower than
+    :data:`PACKED_MIN_PASSAGE` (a robot parked there would leave no room for one to pass)."""
+    edt = ndimage.distance_transform_edt(places.free)
+    reach = int(round(PACKED_MIN_PASSAGE / places.grid.resolution))
+    width = ndimage.maximum_filter(edt, size=reach + 1)[rows, cols] * places.grid.resolution
+    tie = np.random.default_rng(seed).random(len(rows))
+    order = np.lexsort((tie, -width, edt[rows, cols]))
+    return order[width[order] >= PACKED_MIN_PASSAGE / 2]
 
 
 def _shut_in(grid: GridMap, radius: float, stations: list[Point], spots: list[Point], hub: Point) -> list[Point]:

@@ -79,7 +79,9 @@ def delivery_problem(grid: GridMap, stations: dict[str, Point], n_robots: int, n
     different one of ``drop`` (both default to all stations). Parking spots: one home per robot,
     plus ``queue_spots`` (default N/2 + 8) close to the stations, shared out by how often the
     deliveries visit each station (at most 4 per station), plus up to N/2 spare ones where the map
-    has room (a robot on its way to a spot holds two)."""
+    has room (a robot on its way to a spot holds two). When the map cannot hold that many homes
+    spread out, they are packed (``choose_spots(..., packed=True)``): the same problem as before for
+    every size that fits."""
     if n_deliveries < 1:
         raise ValueError(f"n_deliveries: must be >= 1 (got {n_deliveries})")
     pick = list(stations) if pick is None else list(pick)
@@ -103,8 +105,14 @@ def delivery_problem(grid: GridMap, stations: dict[str, Point], n_robots: int, n
             break
         best = max(open_, key=lambda s: visits[s] / (quota[s] + 1))   # D'Hondt: by demand
         quota[best] += 1
-    spots = choose_spots(grid, n_robots, seed, list(stations.values()), radius, list(quota.values()),
-                         spare=n_robots // 2)
+    try:
+        spots = choose_spots(grid, n_robots, seed, list(stations.values()), radius, list(quota.values()),
+                             spare=n_robots // 2)
+    except ValueError:
+        # ours: a crowd the spread homes cannot hold (200 robots on `large`): homes packed in rows along
+        # the walls, closer to the stations, no queue spots (the behaviour fleet needs none)
+        spots = choose_spots(grid, n_robots, seed, list(stations.values()), radius, spare=n_robots // 2,
+                             packed=True)
     return DeliveryProblem(name or grid.name, grid, dict(stations), deliveries, spots, n_robots, radius,
                            max_speed, dock_s)
 
