@@ -197,7 +197,7 @@ class FleetManager:
         self.gates = GateBook() if gated and self.strategy.sends_gates else None
         #: break wait cycles of gated execution (:meth:`_break_waits`); when it next looks for them
         self.break_waits, self._waits_at = True, -math.inf
-        self._cycling: dict[str, float] = {}   # the robots in a cycle at every look since when
+        self._cycles_since: dict[tuple[str, ...], float] = {}   # the cycles seen last time, since when
         # indexes valid for one step (docs/ARCHITECTURE.md: every step proportional to what changed)
         self._occ: Occupancy | None = None
         self._free_spots: dict[tuple[int, float], list[tuple[str, Point]]] = {}
@@ -805,14 +805,11 @@ class FleetManager:
         self._waits_at = now + WAITS_EVERY_S
         graph = wait_for_graph(self.gates, self.robots.values(), now)
         pieces = cycles(graph)
-        # (a cycle is broken only once it has lasted CYCLE_LASTS_S: most resolve themselves, late messages above all.
-        # Its age is that of its robots, two of which must have been in a cycle at every look for that long (ours): the
-        # piece as a whole (its exact set of robots) changed as leg edges came and went, and a knot of 20 robots in
-        # the central aisle (bench_dispatch --delay 6 --seed 2) was never broken)
-        self._cycling = {rid: self._cycling.get(rid, now) for piece in pieces for rid in piece}
+        # (a cycle is broken only once it has lasted CYCLE_LASTS_S: most resolve themselves, late messages above all)
+        self._cycles_since = {key: self._cycles_since.get(key, now) for key in map(tuple, pieces)}
         for piece in pieces:
             members = set(piece)
-            if sum(now - self._cycling[rid] >= CYCLE_LASTS_S for rid in piece) < 2:
+            if now - self._cycles_since[tuple(piece)] < CYCLE_LASTS_S:
                 continue
             if any(now - self.robots[rid].broken_at < BREAK_AGAIN_S for rid in piece):
                 continue
