@@ -91,3 +91,46 @@ def test_a_robot_whose_statuses_are_cut_off_stops_within_its_lease_and_the_other
         assert gap >= 0.0, f"{a} and {b} overlapped by {-gap:.3f} m"
     finally:
         fleet.destroy()
+
+
+def _heard_during_a_long_step(ros_context, monkeypatch, keeper):
+    """The planner node, its clock taken as 10x real time, steps once for twice its silence_s in wall seconds (a
+    stalled step); the wall times its heard records went out then. ``keeper`` False: the rule before (the heard
+    timer alone, which cannot fire during the step)."""
+    import time
+
+    from fleet_planner.fleet import Decisions
+    from fleet_planner.ros.planner_node import PlannerNode
+
+    planner = PlannerNode("keeper_planner", context=ros_context, warehouse=WH, kinds=KINDS,
+                          parameter_overrides=[Parameter("offline_timeout_s", value=TIMEOUT_S)])
+    try:
+        planner._rate = RATE   # (ROS s per wall s: the pace the node measured)
+        stall = 2.0 * planner.fleet.params.silence / RATE
+        monkeypatch.setattr(planner.operator, "step", lambda now: (time.sleep(stall), Decisions())[1])
+        if not keeper:
+            monkeypatch.setattr(planner._stepping, "set", lambda: None)
+        sent: list[float] = []
+        publish = planner._heard_pub.publish
+        monkeypatch.setattr(planner._heard_pub, "publish", lambda msg: (sent.append(time.monotonic()), publish(msg)))
+        start = time.monotonic()
+        planner._on_timer()
+        return [start, *sent, time.monotonic()], planner.fleet.params
+    finally:
+        planner.destroy_node()
+
+
+def test_heard_records_keep_going_out_while_a_step_outlasts_the_silence(ros_context, monkeypatch):
+    """A step of the planner longer than silence_s of the clock must not stop the fleet: heard records go out during
+    it as often as the timer sends them (lease / 3 of the clock), so no robot's lease runs out. Control: by the
+    timer alone none goes out during the step, a gap of twice silence_s: every robot would have braked and stood."""
+    from fleet_planner.ros.planner_node import HEARD_PER_LEASE
+
+    times, params = _heard_during_a_long_step(ros_context, monkeypatch, True)
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    every = params.lease / HEARD_PER_LEASE   # (s of the clock)
+    assert len(times) - 2 >= 0.5 * (times[-1] - times[0]) * RATE / every   # (a loaded machine wakes threads late)
+    assert max(gaps) * RATE < params.silence / 4 and min(gaps[1:-1]) * RATE >= 0.9 * every
+    monkeypatch.undo()
+    times, params = _heard_during_a_long_step(ros_context, monkeypatch, False)
+    assert len(times) == 2 and (times[1] - times[0]) * RATE > params.silence

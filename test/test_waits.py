@@ -119,3 +119,56 @@ def test_a_robot_its_gate_holds_in_a_wait_cycle_holds_where_it_stands_and_the_ot
     assert a.replan and a.leg_retry_at > 9.5 + CYCLE_LASTS_S and a.target is not None   # it goes on later, from there
     fm, d = _cycle(False)
     assert not [leg for leg in d.legs if leg.robot_id == "a"] and not any("wait cycle" in n for n in d.notes)
+
+
+def _net_cycle(monkeypatch, net_counts):
+    """b drives a leg east along the aisle at y = 6.5 planned through where a now stands for good (a refused its
+    leg there; no gate link orders them): b's safety net stops it 1.1 m short of a, nowhere near a gate limit. a's
+    new legs are refused (b may be in the region at a's start), b's re-plans are blocked by a standing in its way:
+    two leg edges, no robot its gate holds. Steps of the manager over CYCLE_LASTS_S; ``net_counts``: False is the
+    rule before (only a robot its gate holds could be held)."""
+    import numpy as np
+    from test_dispatch import manager, status
+
+    from fleet_planner.fleet.legs import Leg
+    from fleet_planner.fleet.manager import FleetManager
+    from fleet_planner.fleet.state import Target
+    from fleet_planner.fleet.waits import wait_for_graph
+    from fleet_planner.model import TimedPath
+
+    if not net_counts:
+        monkeypatch.setattr(FleetManager, "_stands", staticmethod(lambda r: False))
+    fm = manager()
+    fm.on_status(status("a", "cargo", 7.0, 6.5), 0.0)
+    fm.on_status(status("b", "cargo", 4.0, 6.5), 0.0)
+    a, b = fm.robots["a"], fm.robots["b"]
+    way = TimedPath("b", b.radius, np.array([[4.0, 6.5, 1.0], [11.0, 6.5, 8.0]]))
+    assert fm._give(b, Leg("b", way, 2, "park", "y"), Decisions(), 1.0)
+    b.target = Target("park", "y", (11.0, 6.5))
+    a.target, a.replan = Target("park", "x", (13.0, 6.5)), True
+    notes, legs = [], []
+    for now in (9.0, 9.0 + CYCLE_LASTS_S):
+        fm.on_status(status("a", "cargo", 7.0, 6.5, stamp=now, mode="waiting"), now)
+        fm.on_status(status("b", "cargo", 5.9, 6.5, path_id=2, progress=0.3, travelled_m=1.9, mode="waiting",
+                            stamp=now), now)
+        a.waits_on, a.waits_since, a.leg_retry_at = ("b",), now, now + 2.0   # (its leg refused: b may be in)
+        b.waits_on, b.waits_since, b.replan = ("a",), now, False              # (its re-plan blocked by a)
+        assert wait_for_graph(fm.gates, fm.robots.values(), now) == {"a": {"b": "leg"}, "b": {"a": "leg"}}
+        d = fm.step(now + 0.5)
+        notes += d.notes
+        legs += [(leg.robot_id, leg.purpose) for leg in d.legs]
+    return fm, notes, legs
+
+
+def test_a_robot_its_safety_net_stops_in_a_wait_cycle_holds_and_the_robot_it_blocked_is_planned(monkeypatch):
+    """A wait cycle with no robot its gate holds is broken too: the robot that drives a leg but stands (its net
+    stopped it short of the other) holds where it stands, and the robot whose legs it blocked gets a leg round it,
+    in the same step. Control: with only gate-held robots eligible (the rule before), the cycle stays for good
+    (bench_dispatch --robots 22 --delay 6: r11 <-> r12 from t = 761 s to the end, the breaker never acted)."""
+    fm, notes, legs = _net_cycle(monkeypatch, True)
+    assert ("b", "hold") in legs and ("a", "park") in legs, notes
+    assert any(n.startswith("wait cycle a -> b: robot b holds") for n in notes), notes
+    assert fm.robots["b"].leg.purpose == "hold" and fm.robots["b"].replan
+    monkeypatch.undo()
+    fm, notes, legs = _net_cycle(monkeypatch, False)
+    assert not legs and not any("wait cycle" in n for n in notes), notes
