@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -264,6 +265,9 @@ def main() -> None:
     if a.resume is not None:
         run = load(a.resume)
         problem = run.problem
+        # the wall-clock cap counts from the resume (the snapshot's clock started in another process)
+        run.limits = dataclasses.replace(run.limits, wall_cap_s=a.wall_cap)
+        run.tally.started = time.perf_counter()
     else:
         args = argparse.Namespace(per_robot=a.per_robot, dock=5.0, seed=0, stations=8, maps_dir=a.maps_dir)
         problem = make_problem(a.map, a.n, args)

@@ -473,3 +473,53 @@ def test_a_going_through_robot_blocked_by_its_waiting_partner_fails(monkeypatch)
     monkeypatch.setattr(BehaviorController, "_failed", timeout_only)
     control_s = until_g_arrives(_going_through_a_waiting_robot())
     assert fixed_s < control_s - 15.0, (fixed_s, control_s)
+
+
+
+def _short_of_diagonal_waypoints(params: BehaviorParams) -> BehaviorFleet:
+    """The scene of ARMO on `large`, 100 robots, at chute_3 (shifted): d leaves the station it still
+    holds (Dock), 2.7 cm short of its waypoint (3.25, 1.75), its path turning west there; f, 2.6
+    cm short of its waypoint (2.75, 2.25), the next diagonal cell on the road map, its path turning
+    east. The discs are 0.76 m apart and the waypoints 0.71 m (the sum of radii): each move is
+    refused by the other's disc plus the safety margin. Three robots parked round f stand for the
+    crowd that left its re-plans no other first move."""
+    from fleet_planner.roadmap import RoadMap, with_lanes
+
+    grid = GridMap.from_rows(["." * 16] * 8, resolution=0.5)
+    allowed = RoadMap.open(grid).allowed.copy()
+    allowed[0, 0] = 0                       # a road map: paths are not straightened
+    grid = with_lanes(grid, RoadMap(allowed, 0.5))
+    radius, station, crowd = 0.5 ** 1.5, (3.75, 1.25), [(2.75, 3.0), (2.0, 2.4), (3.5, 3.0)]
+    robots = [RobotSpec("d", radius, 0.8, (3.75, 1.5), station),
+              RobotSpec("f", radius, 0.8, (2.732, 2.268), (7.25, 2.25))]
+    robots += [RobotSpec(f"c{k}", radius, 0.8, p, p) for k, p in enumerate(crowd)]
+    fleet = BehaviorFleet(grid, robots, params)
+    for k, p in enumerate(crowd):
+        fleet.assign(f"c{k}", p)            # parked: arrived where they stand
+    fleet.assign("d", station, station="chute")
+    for _ in range(10):
+        fleet.step(0.1)
+    d, f = fleet.controller("d"), fleet.controller("f")
+    assert d.holds is not None
+    d.pos = np.array([3.269, 1.731])
+    fleet.assign("d", (0.75, 1.75))
+    d._set_path(np.array([[3.25, 1.75], [0.75, 1.75]]))
+    fleet.assign("f", (7.25, 2.25))
+    f._set_path(np.array([[2.75, 2.25], [3.75, 2.25], [7.25, 2.25]]))
+    return fleet
+
+
+def test_two_robots_refused_a_few_cm_short_of_diagonal_waypoints_head_on():
+    """Neither front area (a few cm long: the paths turn at the waypoints) holds the other, so no
+    rule applies and both stand, their moves refused (control: 120 s, not a cm moved; measured on
+    `large`: 1800 s, 65 robots queued behind). Ours (``BehaviorController._reached_nearly``): a
+    waypoint a refused move is this close to counts as reached; each heads for its next one, the
+    rules see the other ahead, and both arrive, their discs never closer than the sum of radii."""
+    fleet = _short_of_diagonal_waypoints(BehaviorParams())
+    assert _drive(fleet, limit_s=60.0) >= 0.0   # checks the walls at every step
+    assert fleet.arrived("d") and fleet.arrived("f"), fleet.behaviors()
+    assert fleet.controller("d").nearly_reached + fleet.controller("f").nearly_reached >= 1
+    control = _short_of_diagonal_waypoints(BehaviorParams(waypoint_reach=0.0))
+    _drive(control, limit_s=120.0)
+    assert not control.arrived("d") and not control.arrived("f")
+    assert np.allclose(control.positions()[:2], [(3.269, 1.731), (2.732, 2.268)])

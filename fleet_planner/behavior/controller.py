@@ -115,6 +115,7 @@ class BehaviorController:
         self.escape_again = False             # the escape moved on from a place in someone's way (ours)
         self.seen_standing: dict[str, tuple[Point, float]] = {}  # robots seen standing in its way (see _remember)
         self.deadlocks = self.replans = self.replan_failures = self.yields = self.escapes = self.steps_out = 0
+        self.nearly_reached = 0   # waypoints counted reached a few cm short (``_reached_nearly``)
 
     # -- public ---------------------------------------------------------------------------
     @property
@@ -281,9 +282,27 @@ class BehaviorController:
             return True
         if not candidates:
             return None
+        self._reached_nearly()
         if self.blocked_since is None:
             self.blocked_since = self.time
         return False
+
+    def _reached_nearly(self) -> None:
+        """Interpretation (ours, issue 13): a robot driving along its path whose move the safety
+        layer refused ``waypoint_reach`` or less short of a waypoint (not the goal) has reached it
+        and heads for the next one, if the straight way there is free of walls. Two robots a few cm
+        short of waypoints 0.71 m apart (diagonal cells of a road map), each refused by the
+        other's disc, else stand for good: the path turns there, so neither front area, a few cm
+        long, holds the other and no rule applies, and every re-plan starts with the same move
+        (measured: ARMO on `large`, 100 robots, r46 leaving chute_3 and r67, stuck from t = 187 s,
+        65 robots queued behind). Heading on, each sees the other ahead and the rules (IV.B) take
+        over. No disc moves here, so the safety layer is untouched."""
+        if self.path is None or self.behavior not in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK):
+            return
+        if (self.wp < len(self.path) - 1 and math.dist(self.pos, self.path[self.wp]) <= self.params.waypoint_reach
+                and self.finder.segment_free(self.position, tuple(self.path[self.wp + 1]))):
+            self.wp += 1
+            self.nearly_reached += 1
 
     def keeps_clear(self, sensed: Sequence[RobotView], reach: Mapping[str, float]) -> Callable[[np.ndarray], bool]:
         """The local safety layer of a robot on its own: may the disc move to ``q``?

@@ -27,6 +27,8 @@ class BehaviorParams:
     safety_margin: float = 0.02     # the hard safety layer keeps discs this far apart
     dock_region: float = 1.5        # a robot this close to its station asks to dock
     dock_give_up: float = 3.0       # WaitForDocking ends when pushed this far from the station
+    waypoint_reach: float = 0.05    # a robot refused its move this close to a waypoint (not the goal) has
+                                    # reached it (ours; 0: never)
     go_through_timeout: float = 30.0  # a GoThrough lasting longer fails (paper IV.C.4)
     avoid_timeout: float = 15.0     # Avoid / Exchange / waiting for an obstacle this long without progress fails
     blocked_timeout: float = 5.0    # FollowWayPoint unable to move this long fails; also the re-plan cooldown
@@ -43,7 +45,7 @@ class BehaviorParams:
             if not (isinstance(value, (int, float)) and math.isfinite(value)):
                 raise ValueError(f"BehaviorParams.{f.name}: must be a finite number, got {value!r}")
             may_be_zero = ("safety_margin", "avoid_margin", "critical_margin", "retreat_timeout", "escape_after",
-                           "give_way_reach")
+                           "give_way_reach", "waypoint_reach")
             if value < 0 or (value == 0 and f.name not in may_be_zero):
                 raise ValueError(f"BehaviorParams.{f.name}: must be > 0, got {value!r}")
         if self.dock_give_up < self.dock_region:
