@@ -59,7 +59,7 @@ from ..robots import RobotKind
 from ..warehouse import Station, Warehouse
 from .coordination import Coordination, LegNotPlanned, get_coordination, room_to_leave
 from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, queue_spots, staging_spots
-from .gate import STILL_MPS, GateBook
+from .gate import GateBook
 from .intake import Roster
 from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
 from .lease import STRETCH_STEP_M, heard_record, reachable, stopped_by
@@ -798,8 +798,8 @@ class FleetManager:
 
     def _break_waits(self, now: float, d: Decisions) -> None:
         """Break a wait cycle (:mod:`.waits`; ours) that lasted :data:`CYCLE_LASTS_S`, looked for every
-        :data:`WAITS_EVERY_S`: of its robots, one that drives a leg but stands (its gate holds it for another of
-        them, or its safety net stopped it), preferably one whose leg waits for it, gets a hold leg where its
+        :data:`WAITS_EVERY_S`: of its robots, one
+        its gate holds for another of them, preferably one whose leg waits for it, gets a hold leg where its
         gate lets it stand (the gate's own rules apply to it: refused if it would start in a region another may
         be in), and the robots waiting for it are planned next, around it standing. It keeps its target and
         re-plans after :data:`GATE_RETRY_S`. A robot held so is not held again for :data:`BREAK_AGAIN_S`."""
@@ -818,15 +818,9 @@ class FleetManager:
                 continue
             # (its robots whose legs wait for it)
             waited = {rid: sorted(oid for oid in members if graph.get(oid, {}).get(rid) == "leg") for rid in piece}
-            # of them, those that drive a leg but stand: held by their gates (gate edges), or by their safety nets
-            # short of a robot of the cycle that stands in their way (ours: the gate alone left the cycle r11 <-> r12
-            # of bench_dispatch --delay 6 unbroken for good: r12 stopped by its net short of r11, standing after
-            # it refused a leg; r11's legs refused, r12's re-plans blocked by r11: two leg edges, no gate-held robot)
-            gated = {rid for rid in piece
-                     if any(why == "gate" and oid in members for oid, why in graph.get(rid, {}).items())}
-            held = [rid for rid in piece
-                    if self.robots[rid].on_leg and (rid in gated or self._stands(self.robots[rid]))]
-            held.sort(key=lambda rid: (not waited[rid], rid not in gated, rid))
+            held = [rid for rid in piece if self.robots[rid].on_leg
+                    and any(why == "gate" and oid in members for oid, why in graph.get(rid, {}).items())]
+            held.sort(key=lambda rid: (not waited[rid], rid))
             for rid in held:
                 r = self.robots[rid]
                 marked = self._hold(r, now, d)
@@ -846,11 +840,6 @@ class FleetManager:
                 d.notes.append(f"wait cycle {' -> '.join(piece)}: robot {rid} holds where its gate lets it stand"
                                f"{', so that ' + ', '.join(waiting) + ' can be planned around it' if waiting else ''}")
                 break
-
-    @staticmethod
-    def _stands(r: FleetRobot) -> bool:
-        """``r``'s status shows it standing (slower than the gate's :data:`~.gate.STILL_MPS`)."""
-        return math.hypot(r.status.vx, r.status.vy) <= STILL_MPS
 
     def _hold(self, r: FleetRobot, now: float, d: Decisions) -> list[FleetRobot] | None:
         """Stop ``r`` where it is now (it keeps any target and re-plans from there); legs of others
