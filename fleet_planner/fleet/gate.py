@@ -14,8 +14,7 @@ passes first comes from the plan's times (the curve of the two travelled lengths
 on one side of the region), except where reality decides: a robot that may already be in the
 region (its due position, which it is never ahead of, reaches it soon) passes first, and a robot
 whose new path starts inside a region passes it first (unless the other may be in it already and
-does not stand for good at the end of its latest path, or after refusing its latest leg: ours, :data:`STILL_MPS`,
-:func:`stands_refused`).
+does not stand for good at the end of its latest path: ours, :data:`STILL_MPS`).
 
 The robot's end is pure and small: :func:`gate_limit` says how far the robot may drive along its
 path now, given its :class:`~msg_schemas.records.GateRecord` and the other robots' last statuses
@@ -92,11 +91,6 @@ class Link:
         """A link of a (validated) gate record."""
         ex = d["exit"]
         return cls(str(d["robot"]), int(d["path_id"]), None if ex is None else float(ex), float(d["entry"]))
-
-
-def _key(d: Mapping[str, Any]) -> tuple[Any, ...]:
-    """A link of a record as a hashable whole (robot, path, exit, entry)."""
-    return d["robot"], d["path_id"], d["exit"], d["entry"]
 
 
 def links_of(record: GateRecord) -> tuple[Link, ...]:
@@ -295,22 +289,6 @@ def first_by_plan(new: _Samples, new_path: TimedPath, other: _Samples, i_new: np
 # -------------------------------------------------------------------------------------------------
 # the planner's end
 # -------------------------------------------------------------------------------------------------
-def stands_refused(o: FleetRobot, latest: int) -> bool:
-    """Whether ``o`` stands for good because it refused ``latest``, the newest leg it was given (ours): its status
-    names that leg as rejected and shows it slower than :data:`STILL_MPS`, not driven by hand. It stops where it
-    is until its next leg (``CentralDriver.refused``) and never drives the refused one, so neither path of it
-    has a region with a new leg: the new leg is planned round it standing, and its next leg is ranked against
-    the new leg when it comes. Taken as one that may still drive on (its refused leg kept as its latest path),
-    it made every leg starting near it a conflict, the hold the breaker gave the robot it blocked too:
-    ``bench_dispatch --robots 22 --delay 6 --status-delay 1`` stalled at 78-80 of 100 jobs from t = 1100 s, r11
-    standing mid-aisle after refusing leg 754.5, r12 stopped by its net short of it, neither given a leg for
-    740 s. Only once the planner dropped the refused leg (``o.leg``; ``FleetManager._find_rejected``): until then
-    it plans others round that leg, not round the robot standing."""
-    st = o.status
-    return (st.rejected_path_id is not None and st.rejected_path_id >= latest and not o.manual
-            and (o.leg is None or o.leg.path_id != st.rejected_path_id) and math.hypot(st.vx, st.vy) <= STILL_MPS)
-
-
 class GateBook:
     """Every robot's gate record and live paths, on the planner's end (pure)."""
 
@@ -323,8 +301,6 @@ class GateBook:
         self._boxes: dict[int, tuple[TimedPath, tuple[float, float, float, float]]] = {}
         #: robot -> the robots whose records (may) have links naming it (a superset: checked on use)
         self._named_by: dict[str, set[str]] = {}
-        #: robot -> the path of its latest leg and the links its first record for it had (as sent: :meth:`reach_limits`)
-        self._first: dict[str, tuple[int, frozenset[tuple[Any, ...]]]] = {}
 
     def _live(self, o: FleetRobot) -> dict[int, TimedPath]:
         paths = self.paths.get(o.id, {})
@@ -365,16 +341,10 @@ class GateBook:
                 continue
             latest = max(paths)
             recorded = o.id in self.records and self.records[o.id].path_id == latest
-            # (ours) it refused the latest leg it was given (its status says so): it never drives that leg, and it
-            # stands where it is until its next one, which is ranked against this one when it comes (see
-            # :func:`stands_refused`)
-            refused = stands_refused(o, latest)
             # a path whose bounding box keeps farther than the regions' reach from the new leg's
             # has no region with it (its samples lie in that box): skipped, nothing else changes
             near = r.radius + o.radius + self.pad_m + self.sample_m + 1e-6
             for pid, p in paths.items():
-                if refused:
-                    continue
                 bx0, by0, bx1, by1 = self._box(p)
                 if bx0 > hx + near or by0 > hy + near or bx1 < lx - near or by1 < ly - near:
                     continue
@@ -422,7 +392,6 @@ class GateBook:
         self.paths[r.id][path_id] = path
         out = [self._set(GateRecord(robot_id=r.id, path_id=path_id, seq=0, stamp=float(now),
                                     links=tuple(lk.to_dict() for lk in links), watch=watch))]
-        self._first[r.id] = (path_id, frozenset(_key(d) for d in out[0].links))
         # the records of others that grow or name r (in the records' order), not every record
         named = self._named_by.setdefault(r.id, set())
         rank = {oid: k for k, oid in enumerate(self.records)}
@@ -503,40 +472,6 @@ class GateBook:
                                             links=tuple(d for d in rec.links if d["robot"] != r.id),
                                             watch={k: v for k, v in (rec.watch or {}).items() if k != r.id})))
         return out, stuck
-
-    def reach_limits(self, r: FleetRobot, fleet: Iterable[FleetRobot], until: float,
-                     skew: float = 0.0) -> dict[int, float]:
-        """How far along the path of its latest leg (path id -> m) robot ``r``, unheard, can have driven by ``until``
-        whatever record of that leg it holds and whatever statuses of others it heard (ours; fleet/lease.py caps
-        the stretch it reserves with it). Only links of the leg's first record count that every later record kept
-        (a later record may not have reached it; one it holds has every link of the first that the planner did
-        not drop), and of them only those whose robot cannot have left the region by ``until`` (+ ``skew``, the
-        clocks' difference): last heard on the link's path short of the exit, and its due position or its top
-        speed from there keeps it short of the exit by then (path ids and travelled lengths only grow: ``r``
-        cannot have seen it beyond the exit). Empty: no limit known."""
-        rec, first = self.records.get(r.id), self._first.get(r.id)
-        if rec is None or first is None or first[0] != rec.path_id:
-            return {}
-        by_id = {o.id: o for o in fleet}
-        limit = math.inf
-        for d in rec.links:
-            if _key(d) not in first[1]:
-                continue
-            lk = Link.from_dict(d)
-            o = by_id.get(lk.robot)
-            if o is None or o.status.path_id != lk.path_id:
-                continue
-            done = travelled(o.status)
-            if done is None:
-                continue
-            then = until + skew
-            bound = done + o.kind.max_speed * max(0.0, then - o.status.stamp)
-            path = self.paths.get(o.id, {}).get(lk.path_id)
-            if path is not None:   # (never ahead of its schedule)
-                bound = min(bound, max(done, arc_at(path, then)))
-            if lk.exit is None or bound <= lk.exit:
-                limit = min(limit, lk.entry)
-        return {rec.path_id: limit} if math.isfinite(limit) else {}
 
     def limit_of(self, r: FleetRobot, fleet: Iterable[FleetRobot]) -> float:
         """How far (m along the path its status names) ``r``'s gate lets it drive, by the statuses

@@ -12,7 +12,6 @@ logged warning.
 """
 from __future__ import annotations
 
-import threading
 import time
 import traceback
 from collections.abc import Mapping
@@ -80,9 +79,6 @@ EVENTS_SETTLE_MAX_S = 10.0
 _FIXED = ("speed_factor", "safety_margin")
 #: heard records (fleet/lease.py) per lease: a robot's lease is renewed this often while it is heard
 HEARD_PER_LEASE = 3.0
-#: (ours) while a step runs, its heard records go out from a thread at least this often (wall s), however fast the
-#: clock: the timer cannot fire during a step (see PlannerNode._keep_heard)
-HEARD_KEEP_MIN_S = 0.02
 
 _HELP = {
     "speed_factor": "legs are planned at this fraction of each robot's top speed",
@@ -208,10 +204,6 @@ class PlannerNode(Node):
         # parses the whole record, ~0.4 ms at 100 robots: fleet-wide that is the cost, not the planner's)
         self._heard_pub = self.create_publisher(String, topics.HEARD, topics.HEARD_QOS)
         self._heard_timer = self.create_timer(self.fleet.params.lease / HEARD_PER_LEASE, self._refresh)
-        # ... and while a step runs, from a thread (_keep_heard): one record at a time (the lock)
-        self._heard_lock = threading.Lock()
-        self._stepping, self._closing = threading.Event(), threading.Event()
-        self._keeper = threading.Thread(target=self._keep_heard, name="heard-keeper", daemon=True)
         self._paths: dict[str, tuple[Publisher, Publisher | None]] = {}
         self._gates: dict[str, Publisher] = {}
         self._inbox = StatusInbox()  # only the latest status of each robot is parsed (fleet/inbox.py)
@@ -226,7 +218,6 @@ class PlannerNode(Node):
         self._status_limit = drain_limit(topics.ROBOT_STATUS_QOS)
         self._paced: tuple[float, float] | None = None   # (ROS time, wall time) of the last step
         self._rate = 1.0   # ROS seconds per wall second, measured
-        self._keeper.start()
         limit = getattr(self.fleet.planner, "leg_time_limit", None)
         self._leg_limit = float(limit) if isinstance(limit, (int, float)) else None
         # pause, e-stop, cancel, priority, send, manual drive (services and topics: operator_services.py)
@@ -261,35 +252,12 @@ class PlannerNode(Node):
     def _publish_heard(self, now: float) -> None:
         """Whom the planner hears (``fleet/heard@1``, signed with keys): the robots' leases (fleet/lease.py)."""
         try:
-            with self._heard_lock:
-                record = self.keys.sign(self.fleet.heard(now), self._heard_pub.topic_name)
-                self._heard_pub.publish(record_to_string(record))
+            self._heard_pub.publish(record_to_string(self.keys.sign(self.fleet.heard(now), self._heard_pub.topic_name)))
         except Exception as exc:  # (never out of a callback; the robots then stop: their leases run out)
             self.get_logger().error(f"heard record not sent: {exc!r}", throttle_duration_sec=5.0)
 
-    def _keep_heard(self) -> None:
-        """While a step runs (``_stepping``), heard records go out every lease / HEARD_PER_LEASE s of the clock (wall
-        s by the measured rate), as the timer would send them if it could fire. Ours: on one executor the timer
-        waits for the step, and a step longer than ``silence_s`` of the clock (9 s by default: 0.9 s wall on a
-        clock at 10x, which a loaded machine's step took) stopped every robot; a planner stall must not. Safe: the
-        record names the statuses the planner took in before the step (it takes in none during it, so it marks
-        nobody offline meanwhile), each robot's ``stale_since`` is set as the record is built, and a robot cut
-        off from the planner stops ``silence_s`` after the last record it had, as before (fleet/lease.py)."""
-        while not self._closing.is_set():
-            if not self._stepping.wait(timeout=0.5):
-                continue
-            period = self.fleet.params.lease / HEARD_PER_LEASE / max(self._rate, 1e-3)
-            if self._closing.wait(max(HEARD_KEEP_MIN_S, period)):
-                return
-            if self._stepping.is_set():
-                self._publish_heard(self._now())
-
     def destroy_node(self) -> None:
-        """Also lets go of the job store (its lock: another planner may open it then) and ends the heard keeper."""
-        closing = getattr(self, "_closing", None)
-        if closing is not None:
-            closing.set()
-            self._keeper.join(timeout=2.0)
+        """Also lets go of the job store (its lock: another planner may open it then)."""
         super().destroy_node()
         fleet = getattr(self, "fleet", None)
         if fleet is not None and fleet.store is not None:
@@ -442,15 +410,12 @@ class PlannerNode(Node):
         now = self._now()
         self._pace(now)
         wall = time.monotonic()
-        self._stepping.set()   # (heard records keep going out meanwhile: _keep_heard)
         try:
             decisions = self.operator.step(now)  # the fleet's step, with the operator's part
         except Exception as exc:
             self.get_logger().error(f"planning step failed: {exc!r}\n{traceback.format_exc(limit=-8)}",
                                     throttle_duration_sec=5.0)
             return
-        finally:
-            self._stepping.clear()
         self._publish(decisions, now)
         # its legs reached the robots this late: the next ones start later (FleetManager.note_pace)
         self.fleet.note_pace(self._rate, time.monotonic() - wall)
