@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..geometry import polyline_length
 from ..grid import GridMap
 from ..model import Behavior, PlanningError, Point
 from ..paths import PathFinder
@@ -736,7 +737,7 @@ class BehaviorController:
             path = self.finder.find(q, self.goal, avoid=keep)
             if path is None:
                 continue
-            length = math.dist(self.pos, q) + float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
+            length = math.dist(self.pos, q) + polyline_length(path)
             if best is None or length < best[0]:
                 best = (length, path)
         if best is None:
