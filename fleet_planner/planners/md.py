@@ -90,10 +90,6 @@ COMPARE_REFINE_S = 0.2
 HOLD_CELLS = 4
 
 
-#: the dense solver's kernels are loaded in this process (:meth:`MDPlanner.warm_up`)
-_DENSE_WARM = False
-
-
 class _SearchFailed(Exception):
     """md found no plan within its budget: the last refusal and how many attempts were made."""
 
@@ -268,17 +264,16 @@ class MDPlanner(Planner):
         self._warm_up(dense=False)
 
     def _warm_up(self, dense: bool) -> None:
-        """:meth:`warm_up`; the dense solver's kernels too with ``dense`` (one-shot plans)."""
-        global _DENSE_WARM
+        """:meth:`warm_up`; the dense solver's kernels too with ``dense`` (one-shot plans). Each
+        module's warm-up runs once per process and returns at once after."""
         from .. import _md_kernels, paths
 
         paths.warm_up()
         _md_kernels.warm_up()
-        if dense and self.fallback is not None and self.holds == "anywhere" and not _DENSE_WARM:
+        if dense and self.fallback is not None and self.holds == "anywhere":
             from . import get_planner
 
             get_planner(self._dense_name()).warm_up()
-            _DENSE_WARM = True
 
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
         self._warm_up(dense=True)
