@@ -78,6 +78,7 @@ class Sim:
                 a.on_task(tk)
             out += self.fm.submit(tk, self.t)
         self.events += out
+        self.fm.announced()
         return out
 
     def run_until(self, condition, limit=600.0):
@@ -118,6 +119,7 @@ class Sim:
             for rid, a in self.agents.items():
                 if rid not in self.dead | self.mute:
                     a.on_event(ev)
+        self.fm.announced()   # (as the planner node after publishing them)
 
     def last(self, task_id):
         evs = [e for e in self.events if e.task_id == task_id]

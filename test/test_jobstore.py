@@ -154,12 +154,66 @@ def test_picked_goods_whose_robot_never_reports_fail_with_the_reason(tmp_path):
     fm.submit(TASKS[0], 0.0)
     store.update("J0", "picked", "active", "r9", True, 5.0)
     fm = FleetManager(WH, FAST, DispatchParams(offline_timeout_s=3.0), store=JobStore(path))
-    assert fm.step(10.0).events == []
+    # never announced before the restart (nobody called announced()): the first step announces them
+    assert [(e.task_id, e.event, e.robot_id, e.stamp) for e in fm.step(10.0).events] == [
+        ("J0", "accepted", None, 0.0), ("J0", "picked", "r9", 5.0)]
+    fm.announced()
     fm.on_status(status("r1", "cargo", 2.25, 10.75, stamp=12.0), 12.0)
     events = fm.step(13.5).events
     assert [(e.task_id, e.event) for e in events] == [("J0", "failed")]
     assert "r9 held the goods" in events[0].reason
     assert JobStore(path).get("J0").state == "failed"
+
+
+def test_changes_committed_but_not_announced_when_the_planner_died_are_announced_once_after(tmp_path):
+    """The outbox: a planner killed in the middle of a step (its pick committed, the step's events
+    not yet published) - the next planner on the file announces that pick in its first step, with
+    the original stamp and robot; what went out before (announced()) is not announced again, and
+    neither is the replay after the second planner announced it."""
+    path = tmp_path / "jobs.db"
+    sim = Sim(FLEET[:1])
+    sim.fm = FleetManager(WH, FAST, DispatchParams(), PARKING, store=JobStore(path))
+    sim.submit(TASKS[1])
+    assert sim.run_until(lambda: sim.last("J1") == "assigned")
+    before = list(sim.events)
+    fm = sim.fm
+    step = fm.step
+
+    def dies_before_publishing(now):  # the step commits the pick; the process dies before its events go out
+        d = step(now)
+        if any(e.event == "picked" for e in d.events):
+            raise SystemExit("killed")
+        return d
+
+    fm.step = dies_before_publishing
+    with pytest.raises(SystemExit):
+        sim.run_until(lambda: False, limit=300.0)
+    assert JobStore(path).get("J1").picked and sim.last("J1") == "assigned"   # committed, never announced
+    agents = sim.agents
+    sim = restarted(path)
+    sim.agents = agents
+    assert sim.run_until(lambda: sim.last("J1") == "done", limit=300.0)
+    events = [(e.event, e.robot_id) for e in before + sim.events if e.task_id == "J1"]
+    assert events == [("accepted", None), ("assigned", "r1"), ("picked", "r1"), ("placed", "r1"), ("done", "r1")]
+    picked = next(e for e in sim.events if e.event == "picked")
+    assert picked.stamp == JobStore(path).history("J1")[2].stamp   # the original stamp: a replay can be told
+    third = restarted(path)  # everything went out: nothing to announce again
+    assert third.fm.step(9999.0).events == [] and JobStore(path).unannounced() == []
+
+
+def test_a_store_from_before_the_outbox_counts_its_history_as_announced(tmp_path):
+    path = tmp_path / "jobs.db"
+    store = JobStore(path)
+    store.add(task("J0"), 0, 1.0)
+    store._db.execute("DROP TABLE outbox")   # as a file written before the outbox existed
+    store.close()
+    store = JobStore(path)
+    assert store.unannounced() == []
+    n = store.update("J0", "assigned", "active", "r1", False, 2.0)
+    assert [(job, t.event) for job, t in store.unannounced()] == [("J0", "assigned")]
+    store.mark_announced(n)
+    store.mark_announced(n - 1)   # never moves back
+    assert store.unannounced() == []
 
 
 def test_a_store_that_cannot_write_rejects_instead_of_accepting(tmp_path):
@@ -239,6 +293,9 @@ class PlannerDown:
     def step(self, now):
         return Decisions()
 
+    def announced(self):
+        pass
+
 
 def planner_killed_when(path, condition, robot_did, **params):
     """A one-robot Sim on a store at ``path``: J1 runs until ``condition(sim)``; the planner dies (the
@@ -285,7 +342,7 @@ def test_a_status_naming_a_placed_job_the_store_had_not_seen_picked_finishes_it_
     path = tmp_path / "jobs.db"
     store = JobStore(path)
     FleetManager(WH, FAST, store=store).submit(TASKS[1], 0.0)
-    store.update("J1", "assigned", "active", "r1", False, 5.0)
+    store.mark_announced(store.update("J1", "assigned", "active", "r1", False, 5.0))   # (said before the restart)
     fm = FleetManager(WH, FAST, store=JobStore(path))
     fm.on_status(status("r1", "cargo", 2.25, 10.75, stamp=9.0, loaded=False, placed_task_id="J1"), 9.0)
     assert [(e.event, e.robot_id) for e in fm.step(10.0).events] == [("picked", "r1"), ("placed", "r1"),

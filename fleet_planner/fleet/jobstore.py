@@ -10,7 +10,12 @@ returned: an event seen on the wire is in the store. Tables:
 * ``jobs`` - one row per accepted task: its JSON (``fleet/task@1``), its submission order, its
   state (queued | active | done | failed), the robot on it, whether its goods were picked;
 * ``transitions`` - one row per change: the job, the event (accepted, assigned, picked, placed,
-  done, failed, requeued, reloaded), state, robot, picked, stamp and reason.
+  done, failed, requeued, reloaded), state, robot, picked, stamp and reason;
+* ``outbox`` - one row: the number of the last transition whose task events went out (the
+  publisher says so, :meth:`JobStore.mark_announced`). A change committed and not yet announced
+  when the planner died (killed in the middle of a step: committed, not yet published) is announced
+  by the next planner on the file (:meth:`JobStore.unannounced`): events are at least once across a
+  restart, never lost; a replay repeats the original's stamp, so a subscriber can tell it.
 """
 from __future__ import annotations
 
@@ -104,6 +109,10 @@ CREATE TABLE IF NOT EXISTS transitions (
     stamp REAL NOT NULL,
     reason TEXT
 );
+CREATE TABLE IF NOT EXISTS outbox (
+    id INTEGER PRIMARY KEY CHECK (id = 0),
+    announced INTEGER NOT NULL
+);
 """
 
 
@@ -155,6 +164,9 @@ class JobStore:
         self._db.execute("PRAGMA synchronous=FULL")
         self._db.execute("PRAGMA foreign_keys=ON")
         self._db.executescript(_SCHEMA)
+        if self._db.execute("SELECT 1 FROM outbox").fetchone() is None:  # new, or from before the outbox:
+            self._db.execute("INSERT OR IGNORE INTO outbox (id, announced) "   # what is there went out
+                             "SELECT 0, COALESCE(MAX(n), 0) FROM transitions")
 
     def close(self) -> None:
         self._db.close()
@@ -169,15 +181,16 @@ class JobStore:
         self.close()
 
     # -- writes: one transaction each ----------------------------------------------------------
-    def add(self, task: Task, seq: int, stamp: float) -> None:
-        """Record a newly accepted job (state queued). DuplicateJob if its id is known."""
+    def add(self, task: Task, seq: int, stamp: float) -> int:
+        """Record a newly accepted job (state queued): the number of its transition (see
+        :meth:`mark_announced`). DuplicateJob if its id is known."""
         db = self._db
         db.execute("BEGIN IMMEDIATE")
         try:
             db.execute("INSERT INTO jobs (id, task, seq, state, robot, picked, updated) "
                        "VALUES (?, ?, ?, 'queued', NULL, 0, ?)", (task.id, task.to_json(), seq, stamp))
-            db.execute("INSERT INTO transitions (job, event, state, robot, picked, stamp, reason) "
-                       "VALUES (?, 'accepted', 'queued', NULL, 0, ?, NULL)", (task.id, stamp))
+            cur = db.execute("INSERT INTO transitions (job, event, state, robot, picked, stamp, reason) "
+                             "VALUES (?, 'accepted', 'queued', NULL, 0, ?, NULL)", (task.id, stamp))
         except sqlite3.IntegrityError:
             db.execute("ROLLBACK")
             raise DuplicateJob(f"task.id: duplicate task id {task.id!r}") from None
@@ -185,10 +198,12 @@ class JobStore:
             db.execute("ROLLBACK")
             raise
         db.execute("COMMIT")
+        return int(cur.lastrowid or 0)
 
     def update(self, job_id: str, event: str, state: str, robot: str | None, picked: bool, stamp: float,
-               reason: str | None = None) -> None:
-        """Record a change of the job ``job_id``: its new state, robot and picked flag."""
+               reason: str | None = None) -> int:
+        """Record a change of the job ``job_id``: its new state, robot and picked flag. The number of
+        the transition (see :meth:`mark_announced`)."""
         db = self._db
         db.execute("BEGIN IMMEDIATE")
         try:
@@ -196,12 +211,17 @@ class JobStore:
                              (state, robot, int(picked), stamp, job_id))
             if cur.rowcount != 1:
                 raise KeyError(f"job {job_id!r} is not in the store")
-            db.execute("INSERT INTO transitions (job, event, state, robot, picked, stamp, reason) "
-                       "VALUES (?, ?, ?, ?, ?, ?, ?)", (job_id, event, state, robot, int(picked), stamp, reason))
+            cur = db.execute("INSERT INTO transitions (job, event, state, robot, picked, stamp, reason) "
+                             "VALUES (?, ?, ?, ?, ?, ?, ?)", (job_id, event, state, robot, int(picked), stamp, reason))
         except BaseException:
             db.execute("ROLLBACK")
             raise
         db.execute("COMMIT")
+        return int(cur.lastrowid or 0)
+
+    def mark_announced(self, upto: int) -> None:
+        """The task events of every transition up to number ``upto`` went out (never moves back)."""
+        self._db.execute("UPDATE outbox SET announced = ? WHERE id = 0 AND announced < ?", (upto, upto))
 
     def replace_task(self, task: Task, event: str, stamp: float, reason: str | None = None) -> None:
         """Record a changed task of a known job (the operator changed its priority), with the change."""
@@ -245,6 +265,12 @@ class JobStore:
         rows = self._db.execute("SELECT event, state, robot, picked, stamp, reason FROM transitions "
                                 "WHERE job = ? ORDER BY n", (job_id,)).fetchall()
         return [Transition(e, s, r, bool(p), float(t), why) for e, s, r, p, t, why in rows]
+
+    def unannounced(self) -> list[tuple[str, Transition]]:
+        """The transitions committed after the last one marked announced, in order, with their job's id."""
+        rows = self._db.execute("SELECT job, event, state, robot, picked, stamp, reason FROM transitions "
+                                "WHERE n > (SELECT announced FROM outbox WHERE id = 0) ORDER BY n").fetchall()
+        return [(job, Transition(e, s, r, bool(p), float(t), why)) for job, e, s, r, p, t, why in rows]
 
     def counts(self) -> dict[str, int]:
         """How many jobs are in each state."""

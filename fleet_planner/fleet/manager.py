@@ -40,6 +40,7 @@ from typing import Any, cast
 import numpy as np
 
 from msg_schemas.records import (
+    EVENTS_NEEDING_REASON,
     MAX_NAME_CHARS,
     MAX_RECORD_BYTES,
     Heard,
@@ -61,7 +62,7 @@ from .coordination import Coordination, LegNotPlanned, get_coordination, room_to
 from .dispatch import Candidate, DispatchPolicy, TravelTimes, assign, queue_spots, staging_spots
 from .gate import GateBook
 from .intake import Roster
-from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, current_event
+from .jobstore import CLOSED, RESENT, DuplicateJob, JobStore, Transition, current_event
 from .lease import STRETCH_STEP_M, heard_record, reachable, stopped_by
 from .legs import ACTING, AT_STATION_M, EVADE, MAX_CLOCK_SKEW_S, Decisions, DispatchParams, Leg, lag_allowance
 from .obstacles import OBSTACLE_LOOKAHEAD, ObstacleMap, ObstacleParams
@@ -195,6 +196,9 @@ class FleetManager:
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
         self._deaf = False   # no robot heard for half the offline timeout (noted once: _find_immobile)
         self._seq = 0
+        #: events committed before a restart and not announced then (JobStore.unannounced): the first step's
+        self._replay: list[TaskEvent] = []
+        self._committed_n = self._announced_n = 0   # the store's last transition committed / announced
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
         #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
         self.gates = GateBook() if gated and self.strategy.sends_gates else None
@@ -223,14 +227,16 @@ class FleetManager:
         again if its goods were not picked, and fails, with the reason, if they were (never picked
         again, :meth:`_orphans`)."""
         self._seq = store.next_seq()
+        self._replay = [ev for job_id, t in store.unannounced() for ev in replayed(job_id, t)]
         for stored in store.open_jobs():
             task = stored.task
             pick = self.warehouse.stations.get(task.pick)
             place = self._storing_site(task.place)
             job = Job(task, pick, place, stored.seq) if pick is not None and place is not None else None
             if job is None:
-                store.update(task.id, "failed", "failed", stored.robot, stored.picked, 0.0,
-                             "the warehouse no longer has its stations")
+                gone = "the warehouse no longer has its stations"
+                self._committed_n = store.update(task.id, "failed", "failed", stored.robot, stored.picked, 0.0, gone)
+                self._replay.append(_event(task.id, "failed", 0.0, stored.robot, gone))
                 self._notes.append(f"job {task.id}: failed on reload, its stations are gone")
                 continue
             self.jobs[task.id] = job
@@ -239,7 +245,7 @@ class FleetManager:
                 self._notes.append(f"job {task.id}: reloaded, {'picked by' if stored.picked else 'on'} "
                                    f"{stored.robot}; waiting for it")
             else:
-                store.update(task.id, "reloaded", "queued", None, False, 0.0)
+                self._committed_n = store.update(task.id, "reloaded", "queued", None, False, 0.0)
                 self._notes.append(f"job {task.id}: reloaded and queued")
 
     @property
@@ -281,7 +287,7 @@ class FleetManager:
         seq = self._seq
         if self.store is not None:  # committed before it is acknowledged
             try:
-                self.store.add(task, seq, now)
+                self._committed_n = self.store.add(task, seq, now)
             except DuplicateJob as exc:
                 return [_event(task.id, "rejected", now, reason=str(exc))]
             except sqlite3.Error as exc:
@@ -300,7 +306,7 @@ class FleetManager:
         new_robot = job.robot if isinstance(robot, _Same) else robot
         new_picked = job.picked if picked is None else picked
         if self.store is not None:
-            self.store.update(job.task.id, event, new_state, new_robot, new_picked, now, reason)
+            self._committed_n = self.store.update(job.task.id, event, new_state, new_robot, new_picked, now, reason)
         job.state, job.robot, job.picked = new_state, new_robot, new_picked
         if job.state in CLOSED:
             self._closed.pop(job.task.id, None)
@@ -564,8 +570,8 @@ class FleetManager:
     def step(self, now: float) -> Decisions:
         """Decide what changes now: offline robots, finished picks and places, late robots, legs to
         (re)plan, jobs to assign, robots to send charging or parking."""
-        d = Decisions(notes=self._notes)
-        self._notes = []
+        d = Decisions(notes=self._notes, events=self._replay)
+        self._notes, self._replay = [], []
         self._occ, self._free_spots, self._reserved_at, self._reserved_arr = None, {}, None, None
         self._step_deadline = time.monotonic() + self.step_budget_s
         try:
@@ -575,6 +581,16 @@ class FleetManager:
         if d.legs:
             self._plan_id += 1
         return d
+
+    def announced(self) -> None:
+        """The events handed out so far (by :meth:`submit`, :meth:`step`, the operator) went out: the
+        publisher calls it after publishing them. A planner killed before that (in the middle of a step:
+        its changes committed, their events not yet published) has the next one on the store announce
+        them in its first step (at least once, the original stamps; ``JobStore.unannounced``).
+        sqlite3.Error if the store cannot take it (they are announced again after a restart then)."""
+        if self.store is not None and self._committed_n > self._announced_n:
+            self.store.mark_announced(self._committed_n)
+            self._announced_n = self._committed_n
 
     def note_pace(self, rate: float, step_s: float) -> None:
         """The caller's clock runs ``rate`` times faster than the wall, and its last step took ``step_s``
@@ -1367,6 +1383,20 @@ class FleetManager:
 
 def _event(task_id: str, event: str, now: float, robot_id: str | None = None, reason: str | None = None) -> TaskEvent:
     return TaskEvent(task_id=task_id, event=event, stamp=float(now), robot_id=robot_id, reason=reason)
+
+
+#: the task events a committed transition was announced with (placed and done: one transition)
+_ANNOUNCED_AS = {"accepted": ("accepted",), "assigned": ("assigned",), "picked": ("picked",),
+                 "done": ("placed", "done"), "failed": ("failed",), "cancelled": ("cancelled",)}
+
+
+def replayed(job_id: str, t: Transition) -> list[TaskEvent]:
+    """The task events the transition ``t`` of job ``job_id`` was (or was to be) announced with, as
+    then: stamp, robot and reason of the transition (none for a change that is not announced:
+    requeued, reloaded, a priority)."""
+    with_reason = (*EVENTS_NEEDING_REASON, "cancelled")
+    return [_event(job_id, name, t.stamp, t.robot, t.reason if name in with_reason else None)
+            for name in _ANNOUNCED_AS.get(t.event, ())]
 
 
 def _guess_id(raw: Any) -> str:

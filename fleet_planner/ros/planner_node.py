@@ -12,6 +12,7 @@ logged warning.
 """
 from __future__ import annotations
 
+import sqlite3
 import time
 import traceback
 from collections.abc import Mapping
@@ -465,6 +466,11 @@ class PlannerNode(Node):
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:
             self._events.publish(record_to_string(self.keys.sign(ev, self._events.topic_name)))
+        try:  # out: a planner killed from now on does not announce them again (FleetManager.announced)
+            self.fleet.announced()
+        except sqlite3.Error as exc:
+            self.get_logger().error(f"job store: cannot note the task events as announced ({exc}); "
+                                    "a restart announces them again", throttle_duration_sec=5.0)
 
     def _publisher(self, table: dict[str, Publisher], topic: Any, kind: Any, robot_id: str) -> Publisher:
         if robot_id not in table:

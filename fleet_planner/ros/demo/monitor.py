@@ -32,6 +32,7 @@ class FleetMonitor(Node):
         super().__init__(name, **kwargs)
         self.events: list[TaskEvent] = []
         self.last_event: dict[str, TaskEvent] = {}
+        self._heard_events: set[tuple[str, str, float]] = set()   # (task, event, stamp): one copy of a replay
         #: per robot, its reported positions (x, y, stamp); of a stay at one spot only its first and last
         self.tracks: dict[str, list[tuple[float, float, float]]] = {}
         self.radius: dict[str, float] = {}
@@ -68,6 +69,10 @@ class FleetMonitor(Node):
         except RecordError as exc:
             self.get_logger().warning(f"task event ignored: {exc}")
             return
+        key = (ev.task_id, ev.event, ev.stamp)
+        if key in self._heard_events:  # a restarted planner announcing again what may have gone out (at least once)
+            return
+        self._heard_events.add(key)
         self.events.append(ev)
         self.last_event[ev.task_id] = ev
 
