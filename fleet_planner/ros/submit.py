@@ -106,6 +106,8 @@ class Submitter(Node):
             last = self.events[-1] if self.events else None
             if last is not None and (last.event, last.robot_id) == (ev.event, ev.robot_id):
                 return  # what we heard already
+        elif any((e.event, e.stamp) == (ev.event, ev.stamp) for e in self.events):
+            return  # announced again by a restarted planner (at least once: the original stamp)
         self.events.append(ev)
 
 
