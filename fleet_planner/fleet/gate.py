@@ -93,6 +93,11 @@ class Link:
         return cls(str(d["robot"]), int(d["path_id"]), None if ex is None else float(ex), float(d["entry"]))
 
 
+def _key(d: Mapping[str, Any]) -> tuple[Any, ...]:
+    """A link of a record as a hashable whole (robot, path, exit, entry)."""
+    return d["robot"], d["path_id"], d["exit"], d["entry"]
+
+
 def links_of(record: GateRecord) -> tuple[Link, ...]:
     """The links of ``record``, parsed once per record: a record (immutable) is asked every tick by
     its robot's gate, and a simulator of 100 gated robots spent a third of its time re-parsing them."""
@@ -301,6 +306,8 @@ class GateBook:
         self._boxes: dict[int, tuple[TimedPath, tuple[float, float, float, float]]] = {}
         #: robot -> the robots whose records (may) have links naming it (a superset: checked on use)
         self._named_by: dict[str, set[str]] = {}
+        #: robot -> the path of its latest leg and the links its first record for it had (as sent: :meth:`reach_limits`)
+        self._first: dict[str, tuple[int, frozenset[tuple[Any, ...]]]] = {}
 
     def _live(self, o: FleetRobot) -> dict[int, TimedPath]:
         paths = self.paths.get(o.id, {})
@@ -392,6 +399,7 @@ class GateBook:
         self.paths[r.id][path_id] = path
         out = [self._set(GateRecord(robot_id=r.id, path_id=path_id, seq=0, stamp=float(now),
                                     links=tuple(lk.to_dict() for lk in links), watch=watch))]
+        self._first[r.id] = (path_id, frozenset(_key(d) for d in out[0].links))
         # the records of others that grow or name r (in the records' order), not every record
         named = self._named_by.setdefault(r.id, set())
         rank = {oid: k for k, oid in enumerate(self.records)}
@@ -472,6 +480,29 @@ class GateBook:
                                             links=tuple(d for d in rec.links if d["robot"] != r.id),
                                             watch={k: v for k, v in (rec.watch or {}).items() if k != r.id})))
         return out, stuck
+
+    def reach_limits(self, r: FleetRobot, fleet: Iterable[FleetRobot], until: float) -> dict[int, float]:
+        """How far along the path of its latest leg (path id -> m) robot ``r``, unheard, can have driven by ``until``
+        whatever record of that leg it holds and whatever statuses of others it heard (ours; fleet/lease.py caps
+        the stretch it reserves with it). Only links of the leg's first record count that every later record kept
+        (a later record may not have reached it; one it holds has every link of the first that the planner did
+        not drop), and of them only those whose robot the planner heard at ``until`` or later still on the link's
+        path short of its exit (path ids and travelled lengths only grow: ``r`` cannot have seen it beyond the
+        exit by ``until``). Empty: no limit known."""
+        rec, first = self.records.get(r.id), self._first.get(r.id)
+        if rec is None or first is None or first[0] != rec.path_id:
+            return {}
+        heard = {o.id: o.status for o in fleet}
+        limit = math.inf
+        for d in rec.links:
+            if _key(d) not in first[1]:
+                continue
+            lk = Link.from_dict(d)
+            st = heard.get(lk.robot)
+            done = travelled(st) if st is not None and st.stamp >= until and st.path_id == lk.path_id else None
+            if done is not None and (lk.exit is None or done <= lk.exit):
+                limit = min(limit, lk.entry)
+        return {rec.path_id: limit} if math.isfinite(limit) else {}
 
     def limit_of(self, r: FleetRobot, fleet: Iterable[FleetRobot]) -> float:
         """How far (m along the path its status names) ``r``'s gate lets it drive, by the statuses

@@ -25,7 +25,7 @@ Times are seconds on one clock (ROS time): ``now`` is always passed in.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -150,16 +150,19 @@ def stopped_by(r: FleetRobot, now: float, silence_s: float, slack_s: float = LEA
     return shown + silence_s + braking_s(r.kind) + slack_s
 
 
-def reachable(r: FleetRobot, paths: dict[int, TimedPath], until: float) -> np.ndarray:
+def reachable(r: FleetRobot, paths: dict[int, TimedPath], until: float,
+              limits: Mapping[int, float] | None = None) -> np.ndarray:
     """Where unheard robot ``r`` may stand at ``until`` (n x 2 points): its last heard position, and on
     each of its live ``paths`` (path id -> timed path, absolute times) the stretch it could have driven
     by then - from where its status says it was on the path it drove (from the start of one it had not
     yet taken) to where the path is due at ``until`` (a robot is never ahead of its schedule) or its top
-    speed could take it, whichever is nearer."""
+    speed could take it, or (ours) where its gate must have held it (``limits``, path id -> m:
+    ``GateBook.reach_limits``), whichever is nearest."""
     st = r.status
+    limits = limits or {}
     out = [np.array([[st.x, st.y]])]
     for pid, path in paths.items():
-        due = arc_at(path, until)
+        due = min(arc_at(path, until), limits.get(pid, math.inf))
         if pid == st.path_id:
             done = st.travelled_m if st.travelled_m is not None else st.progress * path.length
             hi = min(due, done + r.kind.max_speed * max(0.0, until - st.stamp))
