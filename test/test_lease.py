@@ -264,8 +264,9 @@ def test_braking_never_takes_a_robot_past_where_its_gate_holds_it(monkeypatch, n
 def _unheard_before_a_crossing(o_stamp, o_travelled, third=False):
     """r drives east along y = 5 from x = 0 at 1 m/s; o, northbound across x = 10, passes the crossing first, so r's
     first record holds r short of it until o is out. r is last heard at 2 m (t = 2); the stretch it can have reached
-    by t = 30 (its leg is due at 28 m), with o last heard at ``o_stamp`` ``o_travelled`` m along its way. ``third``: q
-    then gets a leg that crosses r's way at x = 16 first (r's record grows a link r may never have had)."""
+    by t = 30 (its leg is due at 28 m), with o last heard at ``o_stamp`` ``o_travelled`` m along its way (late: by
+    plan it left the crossing at t ~ 6). ``third``: q then gets a leg that crosses r's way at x = 16 first (r's
+    record grows a link r may never have had; q is heard at t = 30 at its start)."""
     from fleet_planner.fleet.gate import GateBook
     from fleet_planner.fleet.state import FleetRobot
 
@@ -285,22 +286,22 @@ def _unheard_before_a_crossing(o_stamp, o_travelled, third=False):
         assert any(lk.robot == "q" for lk in links_of(book.records["r"]))
     r.status = status("r", "cargo", 2.0, 5.0, stamp=2.0, path_id=2, progress=0.1, travelled_m=2.0)
     o.status = status("o", "cargo", 10.0, o_travelled, stamp=o_stamp, path_id=1, progress=0.1, travelled_m=o_travelled)
-    q.status = status("q", "cargo", 16.0, 9.0, stamp=31.0, path_id=3, progress=0.0, travelled_m=0.0)
+    q.status = status("q", "cargo", 16.0, 9.0, stamp=30.0, path_id=3, progress=0.0, travelled_m=0.0)
     limits = book.reach_limits(r, [r, o, q], 30.0)
     return reachable(r, {2: path}, 30.0, limits), entry, limits
 
 
 def test_an_unheard_robots_reserved_stretch_ends_where_its_gate_must_have_held_it():
-    """An unheard robot's reserve (fleet/lease.py) ends at the entry where its gate holds it for a robot the planner
-    heard, at the reserve's time or later, still short of the region's exit: it cannot have driven past (it was 26 m,
-    the whole leg as due). Controls: with that robot last heard before then (it may have been seen out of the region)
-    or beyond its exit, the stretch is the leg as due; a link the record only got later (it may never have reached
-    the robot) does not cap it."""
-    could, entry, limits = _unheard_before_a_crossing(31.0, 1.0)
+    """An unheard robot's reserve (fleet/lease.py) ends at the entry where its gate holds it for a robot that cannot
+    have left the region by the reserve's time (last heard short of the exit, too near it in time to get out at
+    its top speed): it cannot have driven past (it was 26 m, the whole leg as due). Controls: with that robot last
+    heard long before (it may be out by then) or beyond its exit, the stretch is the leg as due; a link the record
+    only got later (it may never have reached the robot) does not cap it."""
+    could, entry, limits = _unheard_before_a_crossing(29.9, 1.0)
     assert limits == {2: entry} and 6.0 < entry < 10.0
     assert could[:, 0].max() <= entry + 1e-9 and could[:, 0].max() > entry - 0.2
-    for o_stamp, o_travelled in ((29.0, 1.0), (31.0, 9.0)):
+    for o_stamp, o_travelled in ((20.0, 1.0), (29.9, 9.0)):
         could, entry, limits = _unheard_before_a_crossing(o_stamp, o_travelled)
         assert limits == {} and could[:, 0].max() > 27.0
-    could, entry, limits = _unheard_before_a_crossing(29.0, 1.0, third=True)   # (q's link came later: no cap)
+    could, entry, limits = _unheard_before_a_crossing(20.0, 1.0, third=True)   # (q's link came later: no cap)
     assert limits == {} and could[:, 0].max() > 27.0

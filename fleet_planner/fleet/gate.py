@@ -481,26 +481,37 @@ class GateBook:
                                             watch={k: v for k, v in (rec.watch or {}).items() if k != r.id})))
         return out, stuck
 
-    def reach_limits(self, r: FleetRobot, fleet: Iterable[FleetRobot], until: float) -> dict[int, float]:
+    def reach_limits(self, r: FleetRobot, fleet: Iterable[FleetRobot], until: float,
+                     skew: float = 0.0) -> dict[int, float]:
         """How far along the path of its latest leg (path id -> m) robot ``r``, unheard, can have driven by ``until``
         whatever record of that leg it holds and whatever statuses of others it heard (ours; fleet/lease.py caps
         the stretch it reserves with it). Only links of the leg's first record count that every later record kept
         (a later record may not have reached it; one it holds has every link of the first that the planner did
-        not drop), and of them only those whose robot the planner heard at ``until`` or later still on the link's
-        path short of its exit (path ids and travelled lengths only grow: ``r`` cannot have seen it beyond the
-        exit by ``until``). Empty: no limit known."""
+        not drop), and of them only those whose robot cannot have left the region by ``until`` (+ ``skew``, the
+        clocks' difference): last heard on the link's path short of the exit, and its due position or its top
+        speed from there keeps it short of the exit by then (path ids and travelled lengths only grow: ``r``
+        cannot have seen it beyond the exit). Empty: no limit known."""
         rec, first = self.records.get(r.id), self._first.get(r.id)
         if rec is None or first is None or first[0] != rec.path_id:
             return {}
-        heard = {o.id: o.status for o in fleet}
+        by_id = {o.id: o for o in fleet}
         limit = math.inf
         for d in rec.links:
             if _key(d) not in first[1]:
                 continue
             lk = Link.from_dict(d)
-            st = heard.get(lk.robot)
-            done = travelled(st) if st is not None and st.stamp >= until and st.path_id == lk.path_id else None
-            if done is not None and (lk.exit is None or done <= lk.exit):
+            o = by_id.get(lk.robot)
+            if o is None or o.status.path_id != lk.path_id:
+                continue
+            done = travelled(o.status)
+            if done is None:
+                continue
+            then = until + skew
+            bound = done + o.kind.max_speed * max(0.0, then - o.status.stamp)
+            path = self.paths.get(o.id, {}).get(lk.path_id)
+            if path is not None:   # (never ahead of its schedule)
+                bound = min(bound, max(done, arc_at(path, then)))
+            if lk.exit is None or bound <= lk.exit:
                 limit = min(limit, lk.entry)
         return {rec.path_id: limit} if math.isfinite(limit) else {}
 

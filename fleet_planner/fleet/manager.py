@@ -675,7 +675,8 @@ class FleetManager:
         if r.unheard is not None and r.leg is not None:
             paths = dict(self.gates.paths.get(r.id, {})) if self.gates is not None else {}
             paths[r.leg.path_id] = r.leg.path
-            limits = self.gates.reach_limits(r, self.robots.values(), r.unheard[0]) if self.gates is not None else None
+            limits = (self.gates.reach_limits(r, self.robots.values(), r.unheard[0], self.max_clock_skew_s)
+                      if self.gates is not None else None)
             where = reachable(r, paths, r.unheard[0], limits)
         r.reach, r.unheard = (where if len(where) > 1 else None), None
         r.immobile = True
