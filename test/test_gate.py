@@ -316,6 +316,34 @@ def test_a_leg_that_comes_before_its_record_waits_for_it_and_is_joined_where_the
     assert st.rejected_path_id is None and st.path_id == 11 and st.progress == 1.0
 
 
+def _beside_a_robot_that_refused_its_leg(refused):
+    """a drove east along y = 5 and stands at 4 m on its path 1; its next leg (2, north from where it stands) never
+    moved it: with ``refused`` its status names leg 2 as rejected. b, standing just beyond the gate's pad south of
+    a, gets a leg south, away from a: does it start in a region a may be in?"""
+    book = GateBook()
+    a, b = robot("a", 0.0, 5.0), robot("b", 4.0, 5.0 + 2 * R + 0.03)
+    book.on_leg(a, 1, straight("a", (0.0, 5.0), (10.0, 5.0), 0.0), [a, b], 0.0)
+    a.status = RobotStatus.from_dict({**said("a", 1, 4.0).to_dict(), "x": 4.0, "y": 5.0, "stamp": 8.0})
+    assert book.on_leg(a, 2, straight("a", (4.0, 5.0), (4.0, 0.0), 8.0), [a, b], 8.0) is not None
+    a.status = RobotStatus.from_dict({**a.status.to_dict(), "stamp": 9.0, "mode": "waiting",
+                                      "rejected_path_id": 2 if refused else None})
+    b.status = RobotStatus.from_dict({**b.status.to_dict(), "stamp": 9.0})
+    return book, a, b, book.on_leg(b, 3, straight("b", b.pos, (4.0, 10.0), 9.5), [a, b], 9.5, refuse_conflicts=True)
+
+
+def test_a_new_leg_beside_a_robot_that_refused_its_latest_leg_passes_first():
+    """A robot whose status names its latest leg as rejected stands where it is until its next leg (its driver
+    stopped): a new leg starting beside it is taken, with no link on it (its next leg is ranked against the new one
+    when it comes). Control: while its latest leg is not refused (it may take it any moment and drive off on it),
+    the same leg is refused. (bench_dispatch --robots 22 --delay 6: r11 refused leg 754.5 mid-aisle; every leg of
+    r12 beside it, the breaker's hold too, was refused for 740 s: the fleet stalled at 78-80 of 100 jobs.)"""
+    book, a, b, out = _beside_a_robot_that_refused_its_leg(True)
+    assert out is not None and book.conflicts == []
+    assert not [lk for lk in links_of(book.records["b"]) if lk.robot == "a"]
+    book, a, b, out = _beside_a_robot_that_refused_its_leg(False)
+    assert out is None and set(book.conflicts) == {"a"}
+
+
 def test_a_standing_robots_leg_that_starts_where_another_may_be_is_refused_and_the_other_re_plans():
     """A robot that stands (no leg) gets no leg starting in a region another robot may be in: taken, it
     ranked the other first, whose way passes where it stands (late messages: the other was behind the

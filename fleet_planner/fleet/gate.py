@@ -14,7 +14,8 @@ passes first comes from the plan's times (the curve of the two travelled lengths
 on one side of the region), except where reality decides: a robot that may already be in the
 region (its due position, which it is never ahead of, reaches it soon) passes first, and a robot
 whose new path starts inside a region passes it first (unless the other may be in it already and
-does not stand for good at the end of its latest path: ours, :data:`STILL_MPS`).
+does not stand for good at the end of its latest path, or after refusing its latest leg: ours, :data:`STILL_MPS`,
+:func:`stands_refused`).
 
 The robot's end is pure and small: :func:`gate_limit` says how far the robot may drive along its
 path now, given its :class:`~msg_schemas.records.GateRecord` and the other robots' last statuses
@@ -294,6 +295,21 @@ def first_by_plan(new: _Samples, new_path: TimedPath, other: _Samples, i_new: np
 # -------------------------------------------------------------------------------------------------
 # the planner's end
 # -------------------------------------------------------------------------------------------------
+def stands_refused(o: FleetRobot, latest: int) -> bool:
+    """Whether ``o`` stands for good because it refused ``latest``, the newest leg it was given (ours): its status
+    names that leg as rejected and shows it slower than :data:`STILL_MPS`, not driven by hand. It stops where it
+    is until its next leg (``CentralDriver.refused``) and never drives the refused one, so neither path of it
+    has a region with a new leg: the new leg is planned round it standing, and its next leg is ranked against
+    the new leg when it comes. Taken as one that may still drive on (its refused leg kept as its latest path),
+    it made every leg starting near it a conflict, the hold the breaker gave the robot it blocked too:
+    ``bench_dispatch --robots 22 --delay 6 --status-delay 1`` stalled at 78-80 of 100 jobs from t = 1100 s, r11
+    standing mid-aisle after refusing leg 754.5, r12 stopped by its net short of it, neither given a leg for
+    740 s."""
+    st = o.status
+    return (st.rejected_path_id is not None and st.rejected_path_id >= latest and not o.manual
+            and math.hypot(st.vx, st.vy) <= STILL_MPS)
+
+
 class GateBook:
     """Every robot's gate record and live paths, on the planner's end (pure)."""
 
@@ -348,10 +364,16 @@ class GateBook:
                 continue
             latest = max(paths)
             recorded = o.id in self.records and self.records[o.id].path_id == latest
+            # (ours) it refused the latest leg it was given (its status says so): it never drives that leg, and it
+            # stands where it is until its next one, which is ranked against this one when it comes (see
+            # :func:`stands_refused`)
+            refused = stands_refused(o, latest)
             # a path whose bounding box keeps farther than the regions' reach from the new leg's
             # has no region with it (its samples lie in that box): skipped, nothing else changes
             near = r.radius + o.radius + self.pad_m + self.sample_m + 1e-6
             for pid, p in paths.items():
+                if refused:
+                    continue
                 bx0, by0, bx1, by1 = self._box(p)
                 if bx0 > hx + near or by0 > hy + near or bx1 < lx - near or by1 < ly - near:
                     continue
