@@ -304,10 +304,11 @@ def stands_refused(o: FleetRobot, latest: int) -> bool:
     it made every leg starting near it a conflict, the hold the breaker gave the robot it blocked too:
     ``bench_dispatch --robots 22 --delay 6 --status-delay 1`` stalled at 78-80 of 100 jobs from t = 1100 s, r11
     standing mid-aisle after refusing leg 754.5, r12 stopped by its net short of it, neither given a leg for
-    740 s."""
+    740 s. Only once the planner dropped the refused leg (``o.leg``; ``FleetManager._find_rejected``): until then
+    it plans others round that leg, not round the robot standing."""
     st = o.status
     return (st.rejected_path_id is not None and st.rejected_path_id >= latest and not o.manual
-            and math.hypot(st.vx, st.vy) <= STILL_MPS)
+            and (o.leg is None or o.leg.path_id != st.rejected_path_id) and math.hypot(st.vx, st.vy) <= STILL_MPS)
 
 
 class GateBook:
