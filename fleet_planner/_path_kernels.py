@@ -438,30 +438,43 @@ def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src
 
 @_jit
 def components(heads, weights):
-    """Connected component of each node over the allowed moves (they are symmetric)."""
+    """Weakly connected component of each node over the allowed moves (a move joins its two ends
+    whichever way it runs), numbered in the order of each component's first node. Where every move
+    has its reverse (the map's own moves) these are the connected components; on a road map of
+    one-way lanes that is not strongly connected, two nodes in different components have no path
+    either way, while one in the same component may still have none (the search finds that out):
+    the labels only prune. Union-find with path halving over the moves, then one numbering pass."""
     v_count = heads.shape[0]
+    parent = np.arange(v_count)
+    for u in range(v_count):
+        a = u        # u's root
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        for d in range(8):
+            if weights[u, d] == _INF:
+                continue
+            b = heads[u, d]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            # the larger root under the smaller: a root is its component's first node
+            if b < a:
+                parent[a] = b
+                a = b
+            elif a < b:
+                parent[b] = a
     label = np.full(v_count, -1, dtype=np.int64)
-    stack = np.empty(v_count, dtype=np.int64)
     n = 0
     for s in range(v_count):
-        if label[s] >= 0:
-            continue
-        label[s] = n
-        top = 0
-        stack[0] = s
-        top = 1
-        while top > 0:
-            top -= 1
-            u = stack[top]
-            for d in range(8):
-                if weights[u, d] == _INF:
-                    continue
-                v = heads[u, d]
-                if label[v] < 0:
-                    label[v] = n
-                    stack[top] = v
-                    top += 1
-        n += 1
+        root = s
+        while parent[root] != root:
+            root = parent[root]
+        if root == s:   # the first node of its component: a new number
+            label[s] = n
+            n += 1
+        else:           # the root comes before s, so it is numbered already
+            label[s] = label[root]
     return label
 
 

@@ -120,7 +120,9 @@ class MoveGraph:
         return (9 * self.node_of[flat][:, None] + np.arange(8)[None, :])[want]
 
     def labels(self) -> np.ndarray:
-        """Connected component of each padded cell (-1 where not traversable; moves are symmetric)."""
+        """Weakly connected component of each padded cell (-1 where not traversable): cells with
+        different labels have no path either way (on one-way lanes, one with the same label may
+        still have none: the labels only prune, :func:`fleet_planner._path_kernels.components`)."""
         if self._labels is None:
             from . import _path_kernels as K
 

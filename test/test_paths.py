@@ -560,3 +560,31 @@ def test_landmark_bounds_keep_the_search_exact_on_a_warehouse_map():
                       shape=(graph.n_cells, graph.n_cells))
     assert np.array_equal(K.distances(graph.heads, graph.weights, 7), dijkstra(full, indices=7))
     assert _compare_with_dijkstra(finder, rng, 30, 12, (0.5, 1.5)) > 20
+
+
+def test_component_labels_are_scipys_weak_components_numbered_by_first_node():
+    # the path finder prunes a search whose start and goal have different labels, so the labels
+    # must never part two nodes joined by a path: on the map's own moves (symmetric) and on moves
+    # with no reverse (one-way lanes, not strongly connected) they are the weakly connected parts
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from fleet_planner import _path_kernels as K
+
+    rng = np.random.default_rng(5)
+    counts = []
+    for density in (0.1, 0.3, 0.45):
+        graph = PathFinder(random_map(rng, 30, 40, density), 0.45)._move_graph()
+        for drop in (0.0, 0.6):            # then more than half of the moves one-way
+            weights = np.where(rng.random(graph.weights.shape) < drop, np.inf, graph.weights)
+            tails, dirs = np.nonzero(np.isfinite(weights))
+            adj = csr_matrix((np.ones(len(tails)), (tails, graph.heads[tails, dirs])),
+                             shape=(graph.n_cells, graph.n_cells))
+            count, want = connected_components(adj, directed=True, connection="weak")
+            got = K.components(graph.heads, np.ascontiguousarray(weights))
+            first = np.unique(want, return_index=True)[1]          # each part's first node
+            renumber = np.empty(count, dtype=np.int64)
+            renumber[np.argsort(first)] = np.arange(count)
+            assert np.array_equal(got, renumber[want]), (density, drop)
+            counts.append(count)
+    assert max(counts) > 5          # maps of many parts among them

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fleet_planner._pathgraph import DIRS as _DIRS
 from fleet_planner.checker import check_plan
 from fleet_planner.grid import GridMap
 from fleet_planner.model import RobotSpec
@@ -253,6 +254,34 @@ def _no_westward_run(wp: np.ndarray) -> bool:
         if on_row and x1 < x0 - 1e-6 and min(x0, x1) < 10.0 and max(x0, x1) > 2.0:
             return False
     return True
+
+
+def test_a_path_is_found_into_a_part_of_the_lanes_that_has_no_way_back():
+    """A road map need not be strongly connected (a lanes file rejects dead ends, not traps): the
+    west-bound bottom lane leads from the east room into the west room, which has no way back. The
+    path finder's pruning of unreachable pairs must not read that as two unconnected parts."""
+    grid = GridMap.from_rows(["..@..",
+                              "..@..",
+                              "....."])
+    lanes = parse_lanes({"lanes": [{"from": [4, 2], "to": [0, 2]}]}, grid, R)
+    assert lanes.dead_ends(free_cells(grid, R)) == []
+    finder = PathFinder(with_lanes(grid, lanes), R)
+    move_ok = lanes.move_mask(lanes.shape)
+    # the west room's corner comes first in the cells' order (the one a labelling starts from)
+    for start, goal in [((3.5, 0.5), (0.5, 0.5)), ((4.5, 1.5), (1.5, 2.5)), ((3.5, 2.5), (0.5, 1.5))]:
+        path = finder.find(start, goal)
+        assert path is not None, (start, goal)
+        assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
+        for a, b in zip(path, path[1:]):      # corners of a grid path: every step an allowed move
+            step = np.sign(b - a).astype(int)
+            cell = np.floor(a).astype(int)
+            for _ in range(int(np.abs(b - a).max())):
+                bit = _DIRS.index((int(step[0]), int(step[1])))
+                assert move_ok[cell[1], cell[0]] & (1 << bit), (start, goal, cell, step)
+                cell = cell + step
+    # and there is truly no way back
+    assert finder.find((0.5, 0.5), (3.5, 0.5)) is None
+    assert finder.find((1.5, 2.5), (4.5, 2.5)) is None
 
 
 def test_a_road_map_of_another_map_is_refused():

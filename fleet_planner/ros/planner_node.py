@@ -447,7 +447,8 @@ class PlannerNode(Node):
                 path_pub, auth_pub = self._path_publisher(leg.robot_id)
                 if auth_pub is not None:  # the signature first: the agent holds the path until it has both
                     auth = self.keys.path_auth(msg, leg.robot_id, auth_pub.topic_name)
-                    auth_pub.publish(record_to_string(auth))
+                    if auth is not None:   # (there is an auth publisher only with a signing key)
+                        auth_pub.publish(record_to_string(auth))
                 path_pub.publish(msg)
             except ValueError as exc:
                 log.error(f"robot {leg.robot_id}: timed path not sent: {exc}")

@@ -10,6 +10,7 @@ answered with the reason naming the field, never an exception.
 from __future__ import annotations
 
 import concurrent.futures
+import functools
 import math
 import queue
 import threading
@@ -141,8 +142,8 @@ class ConsoleNode(OperatorClient):
                 return
             self.status[st.id] = st
         if new:  # its legs, latched: the current one comes at once
-            self.create_subscription(Path, topics.timed_path_topic(st.id),
-                                     lambda m, rid=st.id: self._on_path(rid, m), topics.TIMED_PATH_QOS)
+            self.create_subscription(Path, topics.timed_path_topic(st.id), functools.partial(self._on_path, st.id),
+                                     topics.TIMED_PATH_QOS)
 
     def _on_path(self, rid: str, msg: Path) -> None:
         try:
@@ -201,7 +202,7 @@ class ConsoleNode(OperatorClient):
             data = load_json(msg.data, "obstacle")
             if not isinstance(data, dict) or not isinstance(data.get("id"), str) or len(data["id"]) > MAX_NAME_CHARS:
                 raise RecordError("obstacle.id: must be a non-empty string")
-            x, y, r = (data.get(k) for k in ("x", "y", "radius"))
+            x, y, r = (data.get(k, math.nan) for k in ("x", "y", "radius"))   # (missing: not finite)
             if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in (x, y, r)):
                 raise RecordError("obstacle.x: x, y and radius must be finite numbers")
         except RecordError as exc:
@@ -366,11 +367,13 @@ class ConsoleNode(OperatorClient):
             pending.service = self._set_bool(topics.robot_topic(rid, "manual"), on)
         elif kind == "drive":
             rid = _robot_id(data.get("robot_id"))
-            linear, angular = data.get("linear"), data.get("angular")
-            for name, value in (("linear", linear), ("angular", angular)):
+            speeds = []
+            for name in ("linear", "angular"):
+                value = data.get(name)
                 if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                     raise BadRequest(f"{name}: must be a finite number (got {str(value)[:40]!r})")
-            self.drive(rid, float(linear), float(angular))   # the agent checks the limits
+                speeds.append(float(value))
+            self.drive(rid, speeds[0], speeds[1])   # the agent checks the limits
         else:
             fields = data.get("task")
             if not isinstance(fields, dict):

@@ -108,7 +108,7 @@ def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], 
         site_of = np.array([site_names.index(sites.get(j.place, j.place)) for j in jobs], dtype=int)
         for c in range(len(site_names)):
             mask = site_of == c
-            site_taken[:, mask] = active[:, mask].any(axis=1)[:, None]
+            site_taken[:, mask] = active[:, mask].any(axis=1, keepdims=True)
     seconds = dict.fromkeys(CATEGORIES, 0.0)
     for rid, log in modes.items():
         if not log:
@@ -157,8 +157,8 @@ def time_use(modes: Mapping[str, Sequence[tuple]], events: Iterable[TaskEvent], 
         if not track or pose is None:
             continue
         stamps = np.array([p[2] for p in track])
-        k = max(0, int(np.searchsorted(stamps, assigned[i], side="right")) - 1)
-        approach.append(float(np.hypot(track[k][0] - pose[0], track[k][1] - pose[1])))
+        last = max(0, int(np.searchsorted(stamps, assigned[i], side="right")) - 1)   # the pose when assigned
+        approach.append(float(np.hypot(track[last][0] - pose[0], track[last][1] - pose[1])))
     done = np.isfinite(ended) & np.isfinite(picked)
 
     def span(start: np.ndarray, end: np.ndarray) -> float:
