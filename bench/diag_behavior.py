@@ -261,9 +261,9 @@ def main() -> None:
     p.add_argument("--snapshot", default="out/diag_behavior.pkl",
                    help="the snapshot file; a '{t}' in it is replaced by the simulated time (keeps every snapshot)")
     p.add_argument("--resume", type=Path, default=None, help="go on from a snapshot (the map options are ignored)")
-    p.add_argument("--admit", type=int, default=ADMIT,
-                   help="robots admitted to a station at a time, the others wait out of the crowd; 0: no limit "
-                        "(the paper's fleet) (default: %(default)s)")
+    p.add_argument("--admit", type=int, default=0,
+                   help=f"robots admitted to a station at a time, the others wait out of the crowd (ours; e.g. "
+                        f"{ADMIT}); 0: no limit, the paper's fleet (default: %(default)s)")
     p.add_argument("--budget", action="store_true",
                    help="where the driving robots' time goes (behaviour, moving/standing, place) and detours")
     a = p.parse_args()

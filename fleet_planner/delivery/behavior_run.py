@@ -22,7 +22,9 @@ from .problem import DeliveryProblem
 from .result import DeliveryResult, RunLimits, RunTally, SimProgress, mean_velocity
 from .stations import _DeliveryRules, _SimRobot
 
-#: robots admitted to a station at a time in the behaviour fleet (ours; see :mod:`.stations`)
+#: robots admitted to a station at a time when the behaviour fleet's admission is on (ours; see
+#: :mod:`.stations`): the 200-robot stress run on `large` (``bench/diag_behavior.py --admit``). Off by
+#: default (``admit=None``): the paper's fleet, and the paper table's rows stay as they were.
 ADMIT = 2
 
 
@@ -30,7 +32,7 @@ class _BehaviorRun:
     """One run of the behaviour fleet: its steps, the distances driven, the overlaps seen."""
 
     def __init__(self, problem: DeliveryProblem, dt: float, limits: RunLimits, record: bool,
-                 progress: SimProgress | None, admit: int | None = ADMIT):
+                 progress: SimProgress | None, admit: int | None = None):
         self.tally = RunTally()
         self.problem = problem
         self.dt = dt
@@ -158,7 +160,7 @@ class _BehaviorRun:
 
 
 def simulate_behavior(problem: DeliveryProblem, limits: RunLimits, dt: float = 0.1, record: bool = False,
-                      progress: SimProgress | None = None, admit: int | None = ADMIT) -> DeliveryResult:
+                      progress: SimProgress | None = None, admit: int | None = None) -> DeliveryResult:
     """Run the deliveries with the behaviour fleet, stepped by ``dt``; ``record`` keeps the positions;
     ``admit``: robots admitted to a station at a time (None: no limit, the paper's fleet)."""
     return _BehaviorRun(problem, dt, limits, record, progress, admit).run()

@@ -435,6 +435,8 @@ class _DeliveryRules:
         for i in handed:
             r = self.robots[i]
             assert r.station is not None
+            if r.phase == "need" and r.booked_spot is not None:   # its leg to a waiting place never began
+                self.parking.owner[r.booked_spot], r.booked_spot = None, None
             self._need(r, self.problem.stations[r.station], r.station_kind, r.station, t)
             out.append(r)
         return out
