@@ -270,8 +270,9 @@ def main() -> None:
     if a.resume is not None:
         run = load(a.resume)
         problem = run.problem
-        # the wall-clock cap counts from the resume (the snapshot's clock started in another process)
-        run.limits = dataclasses.replace(run.limits, wall_cap_s=a.wall_cap)
+        # the wall-clock cap counts from the resume (the snapshot's clock started in another process); the
+        # simulated-time cap is the one given now (a run stopped at its --cap goes on)
+        run.limits = dataclasses.replace(run.limits, wall_cap_s=a.wall_cap, cap_s=a.cap)
         run.tally.started = time.perf_counter()
     else:
         args = argparse.Namespace(per_robot=a.per_robot, dock=5.0, seed=0, stations=8, maps_dir=a.maps_dir)
