@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench.bench_delivery import make_problem  # noqa: E402
-from fleet_planner.delivery.behavior_run import _BehaviorRun  # noqa: E402
+from fleet_planner.delivery.behavior_run import ADMIT, _BehaviorRun  # noqa: E402
 from fleet_planner.delivery.result import RunLimits  # noqa: E402
 
 
@@ -63,6 +63,7 @@ def load(path: Path):
     from fleet_planner.behavior import BehaviorController
 
     fleet = run.fleet
+    run.rules.__dict__.setdefault("admission", None)   # older code: no station admission
     # move graphs of older code: the search's fields added since start empty (made at first use)
     for graph in getattr(run.problem.grid, "_path_move_graphs", {}).values():
         graph.__dict__.setdefault("_landmarks", None)
@@ -83,7 +84,8 @@ def report(run, near: bool = False, quiet: bool = False) -> collections.Counter:
     """The robots stuck on a leg (no progress for 120 s) with their wait chains; the kinds counted."""
     fleet = run.fleet
     t = fleet.time
-    stuck = [r for r in run.robots if run.rules.busy(r) and r.phase != "dock" and t - r.progress_t > 120]
+    stuck = [r for r in run.robots
+             if run.rules.busy(r) and r.phase not in ("dock", "queued") and t - r.progress_t > 120]
     kinds: collections.Counter = collections.Counter()
     for r in stuck:
         c = fleet.controller(r.id)
@@ -259,14 +261,18 @@ def main() -> None:
     p.add_argument("--snapshot", default="out/diag_behavior.pkl",
                    help="the snapshot file; a '{t}' in it is replaced by the simulated time (keeps every snapshot)")
     p.add_argument("--resume", type=Path, default=None, help="go on from a snapshot (the map options are ignored)")
+    p.add_argument("--admit", type=int, default=0,
+                   help=f"robots admitted to a station at a time, the others wait out of the crowd (ours; e.g. "
+                        f"{ADMIT}); 0: no limit, the paper's fleet (default: %(default)s)")
     p.add_argument("--budget", action="store_true",
                    help="where the driving robots' time goes (behaviour, moving/standing, place) and detours")
     a = p.parse_args()
     if a.resume is not None:
         run = load(a.resume)
         problem = run.problem
-        # the wall-clock cap counts from the resume (the snapshot's clock started in another process)
-        run.limits = dataclasses.replace(run.limits, wall_cap_s=a.wall_cap)
+        # the wall-clock cap counts from the resume (the snapshot's clock started in another process); the
+        # simulated-time cap is the one given now (a run stopped at its --cap goes on)
+        run.limits = dataclasses.replace(run.limits, wall_cap_s=a.wall_cap, cap_s=a.cap)
         run.tally.started = time.perf_counter()
     else:
         args = argparse.Namespace(per_robot=a.per_robot, dock=5.0, seed=0, stations=8, maps_dir=a.maps_dir)
@@ -282,10 +288,11 @@ def main() -> None:
 
             problem = lanes_problem(problem, load_lanes(a.lanes, problem.grid, problem.radius))
         limits = RunLimits(cap_s=a.cap, stall_s=a.stall, no_progress_s=120.0, retry_s=2.0, wall_cap_s=a.wall_cap)
-        run = _BehaviorRun(problem, 0.1, limits, False, None)
+        run = _BehaviorRun(problem, 0.1, limits, False, None, a.admit or None)
         for r in run.robots:
             run.rules.next_target(r, 0.0)
-            run._assign(r, 0.0)
+            if r.phase == "need":   # not queued for its station
+                run._assign(r, 0.0)
     from tqdm import tqdm
 
     cpu0, wall0, steps0 = time.process_time(), time.time(), run.steps
@@ -320,7 +327,8 @@ def main() -> None:
             if a.report_every > 0 and t >= next_report:
                 next_report += a.report_every
                 kinds = report(run, quiet=True)
-                tqdm.write(f"t={t:.0f} s done={run.rules.completed} stuck={sum(kinds.values())} "
+                queued = sum(r.phase == "queued" for r in run.robots)
+                tqdm.write(f"t={t:.0f} s done={run.rules.completed} stuck={sum(kinds.values())} queued={queued} "
                            f"{dict(kinds.most_common(4))}", file=sys.stdout)
                 sys.stdout.flush()
             if a.snapshot_every > 0 and t >= next_snap:

@@ -523,3 +523,23 @@ def test_two_robots_refused_a_few_cm_short_of_diagonal_waypoints_head_on():
     _drive(control, limit_s=120.0)
     assert not control.arrived("d") and not control.arrived("f")
     assert np.allclose(control.positions()[:2], [(3.269, 1.731), (2.732, 2.268)])
+
+
+def test_a_robot_parked_inside_the_docking_region_of_the_station_it_left_releases_it():
+    """A robot that docked at S and then parks 1.2 m from it (inside the 1.5 m docking region) used
+    to hold S for good: IV.A releases a station when its robot leaves the region, and this one never
+    does (measured: 200 robots on `large`, r77 parked 1.5 m from B098, two robots waiting 1200 s).
+    Arrived at a goal that is not S, it has left S (ours): the robot waiting for S docks there."""
+    grid = GridMap.from_rows(["." * 10] * 4)
+    fleet = BehaviorFleet(grid, [RobotSpec("a", 0.35, 1.0, (1.5, 1.5), (1.5, 1.5)),
+                                 RobotSpec("b", 0.35, 1.0, (8.5, 1.5), (8.5, 1.5))])
+    fleet.assign("a", (4.5, 1.5), station="S")
+    _drive(fleet, limit_s=20.0)
+    assert fleet.arrived("a") and fleet.controller("a").holds is not None
+    fleet.assign("a", (4.5, 2.7))              # park 1.2 m from S
+    _drive(fleet, limit_s=40.0)
+    assert fleet.arrived("a")
+    fleet.assign("b", (4.5, 1.5), station="S")
+    _drive(fleet, limit_s=80.0)
+    assert fleet.arrived("b"), fleet.behaviors()
+    assert fleet.controller("b").holds is not None and fleet.controller("a").holds is None

@@ -373,6 +373,8 @@ class BehaviorController:
         if self.escape_to is not None:
             self._end_escape(sensed)
         if self.path is None:                   # idle, or parked on its goal (docked if it holds)
+            if self.holds is not None and self.holds[0] != self.station and self.escape_to is None:
+                self._parked_in_docking_region()
             self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
             return
         if self.holds is not None:              # IV.B.5: Dock keeps moving, the others give way
@@ -402,6 +404,17 @@ class BehaviorController:
               and self.time - self.progress_at > self.params.escape_after and self.time >= self.escape_ready):
             if not self._escape(sensed):
                 self._step_out(sensed)
+
+    def _parked_in_docking_region(self) -> None:
+        """Interpretation (ours, issue 13): a robot that left the station it held for a goal inside
+        that station's docking region (a parking spot 1.5 m away, ``dock_region``) never left the
+        region, so it held the station for good once parked there (IV.A releases a station when the
+        robot leaves); arrived at a goal that is not that station, it has left it. Measured: 200
+        robots on `large` with admission, r77 parked 1.5 m from B098 after its last delivery, the two
+        robots bound for B098 waiting for it 1200 s (597/600, stall)."""
+        assert self.holds is not None
+        self.docking.release(self.holds[0], self.id)
+        self.holds, self.dock_since = None, None
 
     def _select_holding(self, me: RobotView, sensed: list[RobotView]) -> None:
         """A robot holding its station docks (IV.B.5), unless it leaves the station and must give

@@ -4,7 +4,9 @@
 Sun, Kleiner & Nebel, "Behavior-based Multi-Robot Collision Avoidance" (BBMRCA): each robot plans
 its own A* path to the target the rules give it, and the behaviours resolve conflicts locally
 (stations by the fleet's docking arbiter, so the rules here claim none). Overlaps are counted at
-every step.
+every step. ``admit`` (ours, issue 13): at most that many robots bound for a station at a time,
+the others wait on parking spots out of the crowd round the loading stations (see
+:mod:`.stations`); None: every robot drives to its station at once (the paper's fleet).
 """
 from __future__ import annotations
 
@@ -20,18 +22,23 @@ from .problem import DeliveryProblem
 from .result import DeliveryResult, RunLimits, RunTally, SimProgress, mean_velocity
 from .stations import _DeliveryRules, _SimRobot
 
+#: robots admitted to a station at a time when the behaviour fleet's admission is on (ours; see
+#: :mod:`.stations`): the 200-robot stress run on `large` (``bench/diag_behavior.py --admit``). Off by
+#: default (``admit=None``): the paper's fleet, and the paper table's rows stay as they were.
+ADMIT = 2
+
 
 class _BehaviorRun:
     """One run of the behaviour fleet: its steps, the distances driven, the overlaps seen."""
 
     def __init__(self, problem: DeliveryProblem, dt: float, limits: RunLimits, record: bool,
-                 progress: SimProgress | None):
+                 progress: SimProgress | None, admit: int | None = None):
         self.tally = RunTally()
         self.problem = problem
         self.dt = dt
         self.limits = limits
         self.progress = progress
-        self.rules = _DeliveryRules(problem, claims=False)
+        self.rules = _DeliveryRules(problem, claims=False, admit=admit)
         self.robots = self.rules.robots
         specs = [RobotSpec(r.id, problem.radius, problem.max_speed, r.pos, r.pos) for r in self.robots]
         self.fleet = BehaviorFleet(problem.grid, specs)
@@ -49,7 +56,8 @@ class _BehaviorRun:
     def run(self) -> DeliveryResult:
         for r in self.robots:
             self.rules.next_target(r, 0.0)
-            self._assign(r, 0.0)
+            if r.phase == "need":   # not queued for its station
+                self._assign(r, 0.0)
         stop = "done"
         while self.rules.ctime is None:
             why = self._stop_now()
@@ -65,7 +73,7 @@ class _BehaviorRun:
         t, limits = self.fleet.time, self.limits
         if t >= limits.cap_s:
             return "cap"
-        stuck = [r for r in self.robots if self.rules.busy(r) and r.phase != "dock"]
+        stuck = [r for r in self.robots if self.rules.busy(r) and r.phase not in ("dock", "queued")]
         if stuck and all(t - r.progress_t > limits.stall_s for r in stuck):
             return "stall"
         if self.tally.wall_s() > limits.wall_cap_s:
@@ -103,6 +111,8 @@ class _BehaviorRun:
         self._count_overlaps()
         for r in self.robots:
             self._update(r, t)
+        for r in self.rules.take_handed_over(t):   # admitted to their station: on to it now
+            self._assign(r, t)
 
     def _count_overlaps(self) -> None:
         pos, reach = self.pos, self.reach
@@ -142,7 +152,7 @@ class _BehaviorRun:
             avg_velocity=mean_velocity(self.driven, t), decision_s=tally.decide_wall_s / max(self.steps, 1),
             decision_unit="step", planner_wall_s=tally.decide_wall_s, legs=tally.legs,
             failed_plans=tally.failed_plans, collisions=self.overlap_events, min_gap=self.min_gap,
-            deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock",)), wall_s=tally.wall_s(),
+            deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock", "queued")), wall_s=tally.wall_s(),
             positions=np.array(self.log) if self.record else None,
             times=np.array(self.times) if self.record else None,
             extra={"mean_phase_s": rules.mean_phase_s(t),
@@ -150,6 +160,7 @@ class _BehaviorRun:
 
 
 def simulate_behavior(problem: DeliveryProblem, limits: RunLimits, dt: float = 0.1, record: bool = False,
-                      progress: SimProgress | None = None) -> DeliveryResult:
-    """Run the deliveries with the behaviour fleet, stepped by ``dt``; ``record`` keeps the positions."""
-    return _BehaviorRun(problem, dt, limits, record, progress).run()
+                      progress: SimProgress | None = None, admit: int | None = None) -> DeliveryResult:
+    """Run the deliveries with the behaviour fleet, stepped by ``dt``; ``record`` keeps the positions;
+    ``admit``: robots admitted to a station at a time (None: no limit, the paper's fleet)."""
+    return _BehaviorRun(problem, dt, limits, record, progress, admit).run()

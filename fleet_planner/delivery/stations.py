@@ -14,6 +14,17 @@ queues there, first come first served (:class:`_StationQueues`). A robot that wo
 others queue for (its next leg leaves more than :data:`EVACUATE_S` later, or cannot be planned)
 clears it for a parking spot when that is sooner (:meth:`_DeliveryRules.evacuate`, decided by the
 central run). These rules are the simulation's, the same for md and prior.
+
+Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
+(Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
+certain distance" and wait, first come first served (the fleet's docking arbiter); with 200 robots
+on `large` every robot bound for the 11 chutes waited so, inside the one band that also carries the
+loaded robots out, and the band locked (:class:`_StationAdmission`). Here a station admits at most
+K robots at a time; a robot it does not admit waits for its turn on a *waiting place* (a parking
+spot at least :data:`WAIT_AWAY` from every loading station, the closest free one to its station),
+parked, out of the congested zone, and drives to the station when a robot admitted before it has
+docked there. The behaviours (IV.B) and the docking arbiter are untouched: a waiting robot stands
+as a parked robot does, an obstacle (IV.C.1).
 """
 from __future__ import annotations
 
@@ -36,6 +47,9 @@ RETARGET_S = 5.0
 #: central methods: a robot on a station others queue for whose next leg would leave more than this
 #: much later (s), or could not be planned, drives to a parking spot near it instead if that is sooner
 EVACUATE_S = 10.0
+#: behaviour fleet with admission (ours): waiting places are parking spots at least this far (m,
+#: straight line) from every station a delivery loads at (out of the crowd round the loading stations)
+WAIT_AWAY = 4.0
 
 #: what a robot is doing: idle (before the start), need (a leg to its target, to be planned or
 #: assigned), drive, dock, queued (on a parking spot, for a station), wait (no spot free to queue
@@ -140,27 +154,78 @@ class _StationQueues:
         return out
 
 
+class _StationAdmission:
+    """Behaviour fleet (ours, see the module text): at most ``cap`` robots are *admitted* to a
+    station at a time (bound for it, until they have docked there); the others queue for it, first
+    come first served, and are admitted in that order as admitted robots dock. ``force`` admits
+    over the cap (a robot with no waiting place free goes to its station as before)."""
+
+    def __init__(self, stations: list[str], cap: int):
+        if cap < 1:
+            raise ValueError(f"admit: must be >= 1 robot per station (got {cap})")
+        self.cap = cap
+        self.admitted: dict[str, set[int]] = {s: set() for s in stations}
+        self.waiting: dict[str, list[int]] = {s: [] for s in stations}
+        self.handed_over: list[int] = []   # robots just admitted from the queue
+
+    def admit(self, station: str, idx: int) -> bool:
+        """Robot ``idx`` may drive to ``station`` (admitted now or before); robots queued go first."""
+        mine = self.admitted[station]
+        if idx not in mine and len(mine) < self.cap and not self.waiting[station]:
+            mine.add(idx)
+        return idx in mine
+
+    def force(self, station: str, idx: int) -> None:
+        self.admitted[station].add(idx)
+
+    def join(self, station: str, idx: int) -> None:
+        if idx not in self.waiting[station]:
+            self.waiting[station].append(idx)
+
+    def docked(self, station: str, idx: int) -> None:
+        """Robot ``idx`` docked at ``station``: the next in its queue is admitted."""
+        mine = self.admitted[station]
+        mine.discard(idx)
+        while self.waiting[station] and len(mine) < self.cap:
+            first = self.waiting[station].pop(0)
+            mine.add(first)
+            self.handed_over.append(first)
+
+    def take_handed_over(self) -> list[int]:
+        out, self.handed_over = self.handed_over, []
+        return out
+
+
 class _DeliveryRules:
     """The delivery sequence, station claims and queues, parking spots, the lower bound, progress.
 
     Every method calls the events (:meth:`left`, :meth:`arrived`, :meth:`docked`) as they happen;
     the rules set the robot's next ``phase``, ``target`` and ``wake``."""
 
-    def __init__(self, problem: DeliveryProblem, claims: bool):
+    def __init__(self, problem: DeliveryProblem, claims: bool, admit: int | None = None):
         self.problem = problem
         self.claims = claims
+        #: behaviour fleet: at most ``admit`` robots bound for a station at a time (None: no limit)
+        self.admission = None if claims or admit is None else _StationAdmission(list(problem.stations), admit)
         self.solo_time = _SoloTimes(problem)
         self.robots = [_SimRobot(i, rid, problem.spots[i], spot=i, solo_at=problem.spots[i])
                        for i, rid in enumerate(problem.robot_ids())]
         self.parking = _ParkingSpots(problem.spots, problem.n_robots)
         #: central: driving distance from each station to each parking spot, to queue close by
         self.spot_dist: dict[str, np.ndarray] = {}
-        if claims:
+        if claims or self.admission is not None:
             drive = driving_distances(problem.grid, self.solo_time.finder.free, list(problem.stations.values()))
             cells = [problem.grid.cell_of(*p) for p in problem.spots]
             at = [row * problem.grid.width + col for col, row in cells]
             self.spot_dist = {s: drive[k, at] for k, s in enumerate(problem.stations)}
         self.queues = _StationQueues(list(problem.stations))
+        #: behaviour fleet with admission: the parking spots robots may wait on for their station
+        self.waiting_place = np.zeros(len(problem.spots), dtype=bool)
+        if self.admission is not None:
+            loads = np.array([problem.stations[s] for s in sorted({d.pick for d in problem.deliveries})])
+            spots = np.asarray(problem.spots, dtype=float)
+            near = np.hypot(spots[:, None, 0] - loads[None, :, 0], spots[:, None, 1] - loads[None, :, 1])
+            self.waiting_place = near.min(axis=1) >= WAIT_AWAY
         self.next_delivery = 0
         self.completed = 0
         self.ctime: float | None = None     # when the last delivery was done
@@ -215,6 +280,9 @@ class _DeliveryRules:
         robot leaves it again, so a claim made from afar would idle it for the whole drive);
         from afar, or when it is taken, wait on a parking spot near it first."""
         goal = self.problem.stations[station]
+        if self.admission is not None:
+            self._admit_or_wait(r, station, kind, t)
+            return
         if not self.claims:
             self._need(r, goal, kind, station, t)
             return
@@ -240,6 +308,38 @@ class _DeliveryRules:
         else:                                 # nowhere to queue yet: decide again a little later
             self.enter(r, "wait", t)
             r.station, r.station_kind, r.wake = station, kind, t + RETARGET_S
+
+    def _admit_or_wait(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
+        """Behaviour fleet with admission (ours, see the module text): to the station when it admits
+        r; else r queues for it, standing on the parking spot it stands on, or on the free waiting
+        place closest to the station (it drives there); with none free it goes as before."""
+        admission = self.admission
+        assert admission is not None
+        if admission.admit(station, r.idx):
+            self._need(r, self.problem.stations[station], kind, station, t)
+            return
+        admission.join(station, r.idx)
+        on_spot = (r.spot is not None and self.parking.owner[r.spot] == r.idx
+                   and r.pos == self.problem.spots[r.spot])
+        if on_spot:
+            self._queue_admitted(r, station, kind, t)
+            return
+        dist = np.where(self.waiting_place, self.spot_dist[station], np.inf)
+        spot = self.parking.nearest_free(dist)
+        if spot is None or not math.isfinite(dist[spot]):
+            admission.waiting[station].remove(r.idx)
+            admission.force(station, r.idx)
+            self._need(r, self.problem.stations[station], kind, station, t)
+            return
+        self.parking.owner[spot] = r.idx
+        r.booked_spot, r.station_kind = spot, kind
+        self._need(r, self.problem.spots[spot], "hold", station, t)
+        self.hold_legs += 1
+
+    def _queue_admitted(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
+        """r (in its station's admission queue) stands and waits to be admitted."""
+        self.enter(r, "queued", t)
+        r.station, r.wake, r.station_kind = station, math.inf, kind
 
     def _queue(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         self.enter(r, "queued", t)
@@ -295,6 +395,9 @@ class _DeliveryRules:
         if r.target_kind in ("pick", "drop"):
             self.enter(r, "dock", t)
             r.wake, r.on_station = t + self.problem.dock_s, r.station if self.claims else None
+        elif r.target_kind == "hold" and self.admission is not None:
+            assert r.station is not None   # admitted meanwhile: handed over, its leg re-assigned
+            self._queue_admitted(r, r.station, r.station_kind, t)
         elif r.target_kind == "hold":
             station = r.station
             assert station is not None
@@ -312,6 +415,8 @@ class _DeliveryRules:
     def docked(self, r: _SimRobot, t: float) -> None:
         """r's docking time is over."""
         r.progress_t = t
+        if self.admission is not None and r.station is not None:
+            self.admission.docked(r.station, r.idx)
         if r.target_kind == "pick":
             r.loaded = True
         else:
@@ -324,9 +429,14 @@ class _DeliveryRules:
     def take_handed_over(self, t: float) -> list[_SimRobot]:
         """Robots that were queued and now hold their station: they need their leg to it."""
         out = []
-        for i in self.queues.take_handed_over():
+        handed = self.queues.take_handed_over()
+        if self.admission is not None:
+            handed += self.admission.take_handed_over()
+        for i in handed:
             r = self.robots[i]
             assert r.station is not None
+            if r.phase == "need" and r.booked_spot is not None:   # its leg to a waiting place never began
+                self.parking.owner[r.booked_spot], r.booked_spot = None, None
             self._need(r, self.problem.stations[r.station], r.station_kind, r.station, t)
             out.append(r)
         return out
