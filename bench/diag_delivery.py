@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Where a central method's delivery run loses time (issue 8): per leg, the wait before departing,
 the holds en route and the detour (against the shortest path on the empty map), by target kind;
-per station, its visits, how long it stood idle between one robot leaving it and the next one
-arriving while others queued for it (turnover) and its busy span; optionally (``--against prior``)
+per station, its visits, the time from one robot leaving it to the next one arriving (turnover)
+and its span; optionally (``--against prior``)
 the same leg planned by another planner on exactly the same situation (its arrival against the
 method's).
 
@@ -106,8 +106,8 @@ def main(argv=None) -> int:
           f"{res.failed_plans} failed, {time.perf_counter() - wall:.0f} s wall")
     print("mean s per robot by phase:", res.extra["mean_phase_s"])
     ok = [x for x in legs if x["ok"]]
-    print(f"\nlegs by target kind (mean s per leg): depart = wait before leaving, hold = waits en route, "
-          f"detour = (length - shortest) / v")
+    print("\nlegs by target kind (mean s per leg): depart = wait before leaving, hold = waits en route, "
+          "detour = (length - shortest) / v")
     print(f"{'kind':<6} {'legs':>5} {'depart':>7} {'hold':>7} {'detour':>7} {'total':>7} {'sum s':>8}")
     v = problem.max_speed
     for kind in ("pick", "drop", "hold", "evac", "park", "all"):
@@ -143,8 +143,8 @@ def main(argv=None) -> int:
         import json
 
         args.dump.write_text(json.dumps(legs))
-    print(f"\nstations (busiest first): visits, dock s, span first arrival .. last leave, idle s while others "
-          f"queued (leave -> next arrive), mean turnover s")
+    print("\nstations (busiest first): visits, dock s, span (first arrival .. last leave), turnover (a robot "
+          "leaving it -> the next one arriving)")
     busy = sorted(station_log, key=lambda s: -len(station_log[s]))[:args.top]
     for s in busy:
         ev = sorted(station_log[s], key=lambda e: e[1])
