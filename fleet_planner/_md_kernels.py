@@ -522,7 +522,7 @@ HOLD_COLUMNS = ("X_SEG", "Y_SEG", "PHI_LO", "PHI_HI", "XS_LO", "XS_HI", "XE_LO",
 
 @_jit_numpy_errors
 def hold_constraints(P, cols, cols_sw, sw, who, first, last, arr_all, dep_all, cum_j):
-    """The forbidden intervals of :meth:`fleet_planner.scheduler.DelayScheduler._hold_constraints`
+    """The forbidden intervals of :meth:`fleet_planner.scheduler.DelayScheduler.hold_constraints`
     from its pieces ``P`` (columns ``cols`` in the order of HOLD_COLUMNS; rows with ``sw`` set list
     j in the x columns and i in the y columns, their columns are ``cols_sw`` and their phi range is
     negated: read as seen from j, with no swapped copy of the table), each

@@ -296,7 +296,7 @@ class DelayScheduler:
             self.dep.append(dep)
         self.delays[x] = float(self.dep[x][0]) if len(self.dep[x]) > 1 else 0.0
 
-    def _hold_constraints(self, j: int, higher: list[int]):
+    def hold_constraints(self, j: int, higher: list[int]):
         """What the higher robots' timed trajectories forbid robot j on its path, from the exact
         pieces of the collision regions (one per pair of segments): ``G`` rows (segment of j, lo,
         hi, owner): j must not enter that segment at a time in the open interval (lo, hi); ``F``
@@ -340,7 +340,7 @@ class DelayScheduler:
         if not higher:
             self.set_timing(j, 0.0)
             return None
-        (g_key, g_lo, g_hi, g_own), (f_key, f_lo, f_hi, f_own) = self._hold_constraints(j, higher)
+        (g_key, g_lo, g_hi, g_own), (f_key, f_lo, f_hi, f_own) = self.hold_constraints(j, higher)
         nv = len(m.paths[j])
         if nv == 1:   # j never moves: nobody may come near it, ever
             self.set_timing(j, 0.0)

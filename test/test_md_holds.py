@@ -445,7 +445,7 @@ def test_the_compiled_hold_constraints_are_the_numpy_ones(monkeypatch, seed):
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
     import bench_md
 
-    compiled = DelayScheduler._hold_constraints
+    compiled = DelayScheduler.hold_constraints
     calls = []
 
     def both(self, j, higher):
@@ -457,7 +457,7 @@ def test_the_compiled_hold_constraints_are_the_numpy_ones(monkeypatch, seed):
         calls.append(sum(len(a[0]) for a in got))
         return got
 
-    monkeypatch.setattr(DelayScheduler, "_hold_constraints", both)
+    monkeypatch.setattr(DelayScheduler, "hold_constraints", both)
     from fleet_planner.planners import md
 
     monkeypatch.setattr(md, "IMPROVE_ABOVE", 0.0)   # the improvement search runs however little the robots wait

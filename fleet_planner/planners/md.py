@@ -846,7 +846,7 @@ class _Session:
         if not higher or len(arr) < 2:
             return None
         k = int(np.argmax(dep[:-1] - arr[:-1]))
-        (g_key, g_lo, g_hi, g_own), (f_key, f_lo, f_hi, f_own) = self.sched._hold_constraints(x, higher)
+        (g_key, g_lo, g_hi, g_own), (f_key, f_lo, f_hi, f_own) = self.sched.hold_constraints(x, higher)
         span = 6   # vertices after the wait in which the binding constraint is looked for
         g = (g_key >= k) & (g_key < k + span)
         f = (f_key > k) & (f_key <= k + span)
