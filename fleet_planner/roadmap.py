@@ -606,8 +606,8 @@ def armo_roadmap(grid: GridMap, radius: float, stations: Mapping[str, Point],
     it becomes one-way, the clearest first, unless that breaks the strong connectivity of the free
     space (every cell keeps a way to every other, so no lane is a dead end and every station
     reaches every other both ways); then the flows are solved again along the lanes. Runs no flow
-    uses stay two-way. No new round starts after ``time_limit_s`` CPU seconds (of this thread). ``demand[(a, b)]``: how often
-    robots drive from station a to station b (any scale).
+    uses stay two-way. No new round starts after ``time_limit_s`` CPU seconds (of this thread).
+    ``demand[(a, b)]``: how often robots drive from station a to station b (any scale).
 
     ``parked`` (ours): where robots stand parked (their homes): the lanes are laid out round them,
     so a parked robot never cuts the only way along the lanes (on a map of two-way moves a robot
