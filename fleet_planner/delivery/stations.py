@@ -322,7 +322,7 @@ class _DeliveryRules:
         on_spot = (r.spot is not None and self.parking.owner[r.spot] == r.idx
                    and r.pos == self.problem.spots[r.spot])
         if on_spot:
-            self._queue_admitted(r, station, kind, t)
+            self._queue(r, station, kind, t)   # (in the admission queue: waits to be admitted)
             return
         dist = np.where(self.waiting_place, self.spot_dist[station], np.inf)
         spot = self.parking.nearest_free(dist)
@@ -335,11 +335,6 @@ class _DeliveryRules:
         r.booked_spot, r.station_kind = spot, kind
         self._need(r, self.problem.spots[spot], "hold", station, t)
         self.hold_legs += 1
-
-    def _queue_admitted(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
-        """r (in its station's admission queue) stands and waits to be admitted."""
-        self.enter(r, "queued", t)
-        r.station, r.wake, r.station_kind = station, math.inf, kind
 
     def _queue(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         self.enter(r, "queued", t)
@@ -397,7 +392,7 @@ class _DeliveryRules:
             r.wake, r.on_station = t + self.problem.dock_s, r.station if self.claims else None
         elif r.target_kind == "hold" and self.admission is not None:
             assert r.station is not None   # admitted meanwhile: handed over, its leg re-assigned
-            self._queue_admitted(r, r.station, r.station_kind, t)
+            self._queue(r, r.station, r.station_kind, t)
         elif r.target_kind == "hold":
             station = r.station
             assert station is not None
