@@ -82,6 +82,20 @@ class Row:
     precompute_s: float = 0.0   # armo: wall time of the road map's program
 
 
+def planner_options(p: argparse.ArgumentParser, items: list[str]) -> dict:
+    """The planner options of repeated ``--option KEY=VALUE`` arguments: true / false, numbers, else
+    the text (the parser's error for an item without ``=``)."""
+    options: dict = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            p.error(f"--option: expected KEY=VALUE (got {item!r})")
+        low = value.lower()
+        options[key] = True if low == "true" else False if low == "false" else float(value) \
+            if value.replace(".", "", 1).isdigit() else value
+    return options
+
+
 def _args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true",

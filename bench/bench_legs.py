@@ -40,14 +40,7 @@ def main(argv=None) -> int:
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="a planner option for every method (e.g. early_holds=true), repeatable")
     args = p.parse_args(argv)
-    options: dict = {}
-    for item in args.option:
-        key, sep, value = item.partition("=")
-        if not sep:
-            p.error(f"--option: expected KEY=VALUE (got {item!r})")
-        low = value.lower()
-        options[key] = True if low == "true" else False if low == "false" else float(value) \
-            if value.replace(".", "", 1).isdigit() else value
+    options = bench_delivery.planner_options(p, args.option)
     print(f"{'map':<10} {'N':>4} {'method':<13} {'legs':>5} {'p50 ms':>7} {'p90 ms':>7} {'p99 ms':>7} "
           f"{'max ms':>7} {'cpu p50':>7} {'cpu p99':>7} {'cpu s':>7} {'done':>9} {'CTime':>8} {'coll':>4} stop")
     for n in [int(s) for s in args.sizes.split(",")]:

@@ -28,6 +28,7 @@ import numpy as np  # noqa: E402
 
 from fleet_planner.delivery import central  # noqa: E402
 from fleet_planner.delivery.result import RunLimits  # noqa: E402
+from fleet_planner.geometry import polyline_length  # noqa: E402
 from fleet_planner.model import PlanningError, RobotSpec  # noqa: E402
 from fleet_planner.paths import PathFinder  # noqa: E402
 from fleet_planner.planners import get_planner  # noqa: E402
@@ -55,11 +56,7 @@ def main(argv=None) -> int:
     legs: list[dict] = []
     station_log: dict[str, list[tuple[str, float, int]]] = defaultdict(list)   # (event, t, robot)
 
-    options = {}
-    for item in args.option:
-        key, _, value = item.partition("=")
-        low = value.lower()
-        options[key] = True if low == "true" else False if low == "false" else float(value)
+    options = bench_delivery.planner_options(p, args.option)
     run = central._CentralRun(problem, args.method, RunLimits(4 * 3600.0, 600.0, 120.0, 2.0, 7200.0), options or None,
                               None)
     plan_leg = run._plan_leg
@@ -72,7 +69,7 @@ def main(argv=None) -> int:
                "from_station": r.on_station is not None}
         if leg is not None:
             path = finder.find(r.pos, goal)
-            short = float(np.hypot(*np.diff(path, axis=0).T).sum()) if path is not None else leg.length
+            short = polyline_length(path) if path is not None else leg.length
             rec.update(depart=leg.start_time - now, arrive=leg.arrival_time - now, length=leg.length, short=short)
             if other is not None:
                 spec = RobotSpec(r.id, problem.radius, problem.max_speed, r.pos, goal)
