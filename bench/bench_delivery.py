@@ -24,6 +24,7 @@ and its wall time. Exit status 1 when any run had a collision (or an invalid tra
         [--sizes 20,40,50,100] [--methods md,prior,behavior] [--deliveries-per-robot 3] [--seed 0]
         [--csv out/bench_delivery.csv] [--plot out/bench_delivery.png] [--lanes config/lanes_warehouse.yaml]
     .venv/bin/python bench/bench_delivery.py --paper002     # paper 002's Tables I-III: ARMO, PRIOR, BBMRCA, md
+    .venv/bin/python bench/bench_delivery.py --paper002 --from-csv out/rows/*.csv   # one table of several runs
 """
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ import csv
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -124,6 +125,9 @@ def _args(argv=None) -> argparse.Namespace:
                         "(options given win; --plot defaults to out/paper002.png)")
     p.add_argument("--lanes", type=Path, default=None,
                    help="a lanes file (config/lanes_*.yaml): every method plans along its road map")
+    p.add_argument("--from-csv", nargs="+", type=Path, default=None, metavar="CSV",
+                   help="run nothing: the table (and --csv, --plot) of the rows in these CSVs (written by --csv, "
+                        "e.g. by several processes), ordered by --maps, N and --methods")
     args = p.parse_args(argv)
     if args.paper002:
         args.maps = args.maps or PAPER002["maps"]
@@ -157,7 +161,7 @@ def _args(argv=None) -> argparse.Namespace:
         value = getattr(args, name)
         if not (math.isfinite(value) and value >= (0 if name == "dock" else 1e-9)):
             p.error(f"--{name.replace('_', '-')}: must be a finite number {'>= 0' if name == 'dock' else '> 0'}")
-    for m in args.maps:
+    for m in args.maps if args.from_csv is None else ():   # (rows from CSVs load no map)
         if m not in BUILTIN_MAPS and not (args.maps_dir / f"{m}.map").is_file():
             p.error(f"--maps: {m!r} is neither {' nor '.join(BUILTIN_MAPS)} nor a map in {args.maps_dir}")
     return args
@@ -232,6 +236,21 @@ def write_csv(rows: list[Row], path: Path) -> None:
             out.writerow(asdict(r))
 
 
+def read_csv(path: Path) -> list[Row]:
+    """The rows of a CSV written by :func:`write_csv` (columns not in :class:`Row` ignored)."""
+    kinds = {f.name: {"int": int, "float": float}.get(str(f.type), str) for f in fields(Row)}
+    with path.open(newline="") as f:
+        return [Row(**{k: kinds[k](v) for k, v in rec.items() if k in kinds}) for rec in csv.DictReader(f)]
+
+
+def ordered(rows: list[Row], maps: list[str], methods: list[str]) -> list[Row]:
+    """The rows by map (in the order of ``maps``, then others as they come), N and method (likewise)."""
+    def rank(order: list[str], key: str) -> int:
+        return order.index(key) if key in order else len(order)
+
+    return sorted(rows, key=lambda r: (rank(maps, r.map), r.n, rank(methods, r.method)))
+
+
 def plot(rows: list[Row], path: Path) -> None:
     import matplotlib
 
@@ -298,6 +317,8 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     args = _args(argv)
+    if args.from_csv is not None:
+        return report(ordered([r for path in args.from_csv for r in read_csv(path)], args.maps, args.methods), args)
     if not args.maps_dir.is_dir() and any(m not in BUILTIN_MAPS for m in args.maps):
         sys.exit(f"bench_delivery: no maps directory {args.maps_dir}")
     rows: list[Row] = []
@@ -320,6 +341,11 @@ def main(argv=None) -> int:
                     bar.update()
                     if args.csv:   # as it goes: a long run stopped early keeps what it measured
                         write_csv(rows, args.csv)
+    return report(rows, args)
+
+
+def report(rows: list[Row], args: argparse.Namespace) -> int:
+    """The tables, CSV and plot of the rows; 1 when there are none or any run had a collision."""
     if not rows:
         print("bench_delivery: nothing ran", file=sys.stderr)
         return 1
