@@ -663,12 +663,13 @@ class BehaviorController:
         them. Measured: 200 robots on `large` (stress25's 599/600), r173 in the 1.3 m gap between two
         rows of robots parked at their homes (2 m apart), its path cutting diagonally through the
         upper row: Avoid of r183 and r21 in turn (the partner changed every step, so the Avoid never
-        timed out), escape after 30 s into the aisle above, round by the far end, a parked robot in
-        the way there, re-plan from 7 m away (out of range of the row) straight through the same
-        robots, and so on every 30 s for 1200 s. Remembered, the re-plan keeps out of the row (its
-        path 0.29 m clear of each disc, outside the drive channel) and r173 delivers. Only after an
-        Avoid of a parked robot: remembering at every such escape slowed BBMRCA at 50 (large 719 s
-        against 699)."""
+        timed out), escape after 30 s towards the aisle above by the west opening, a parked robot in
+        it, re-plan with the virtual wall across the opening from 7 m away (out of range of the row)
+        straight through the same robots to the east one, and so on every 30 s for 1200 s.
+        Remembered, the re-plan keeps out of the row (0.29 m clear of each disc, outside the drive
+        channel): from the 5500 s snapshot 600/600 at t = 5609 s (without: r173 still looping at
+        6200 s, 599). Only after an Avoid of a parked robot: remembering at every such escape slowed
+        BBMRCA at 50 (large 719 s against 699)."""
         partner = next((o for o in sensed if o.id == self.partner), None)
         if self.behavior is B.AVOID and partner is not None and not partner.travelling:
             self._remember(sensed)
