@@ -609,3 +609,40 @@ def test_a_robot_escaping_from_an_avoid_of_parked_robots_remembers_them(monkeypa
     path = replan_after_escape(control)
     assert not {"p13", "p14", "p15"} & set(control.controller("a").seen_standing)
     assert min(_closest_pass(path, p) for p in row) < 2 * 0.354   # through a parked disc
+
+
+def _leaving_beside_a_parked_robot() -> BehaviorFleet:
+    """The scene of 200 robots on `large` (r198 leaving B098, t = 6000 s): d holds station S and
+    leaves it, 0.74 m beside p parked at its home, its first waypoint up past p, then east and down
+    through an opening. The virtual wall of its re-plan (grown by the radius, as walls are) shuts it in
+    its own cell from this very spot."""
+    wall = "@" * 15 + "." * 5 + "@" * 4
+    grid = GridMap.from_rows(["." * 24] * 3 + [wall] * 2 + ["." * 24] * 7 + ["@" * 24], resolution=0.5)
+    fleet = BehaviorFleet(grid, [RobotSpec("d", 0.354, 0.8, (4.75, 3.25), (4.75, 3.25)),
+                                 RobotSpec("p", 0.354, 0.8, (6.75, 3.25), (6.75, 3.25))])
+    fleet.assign("d", (4.75, 3.25), station="S")
+    fleet.step(0.1)
+    d = fleet.controller("d")
+    assert d.holds is not None
+    d.pos = np.array([6.024873276115656, 3.108225084366403])
+    fleet.assign("d", (11.25, 0.75))
+    d._set_path(np.array([[6.25, 4.25], [12.25, 4.25], [11.25, 0.75]]))
+    return fleet
+
+
+def test_a_robot_leaving_its_station_shut_in_by_its_virtual_wall_replans_without_it(monkeypatch):
+    """A leaving Dock robot stopped by a parked robot in its channel re-plans (IV.C.1); from here the
+    virtual wall shuts it in, and holding its station it does not escape: control, 10 failed re-plans
+    and no move in 60 s (measured on `large`: 331 in 1600 s, two robots waiting for the station). Ours
+    (``_replan_leaving``): then it re-plans round the robots in its way without the wall and leaves."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _leaving_beside_a_parked_robot()
+    assert _drive(fleet, limit_s=60.0) >= 0.0
+    assert fleet.arrived("d") and fleet.controller("d").holds is None
+
+    monkeypatch.setattr(BehaviorController, "_replan_leaving", lambda self, sensed, in_way: self._replan(sensed))
+    control = _leaving_beside_a_parked_robot()
+    _drive(control, limit_s=60.0)
+    d = control.controller("d")
+    assert not control.arrived("d") and d.holds is not None and d.replan_failures >= 10
