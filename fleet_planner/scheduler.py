@@ -311,7 +311,7 @@ class DelayScheduler:
         / i holding is i's hold interval when the two points are within reach."""
         tables = self.model.pieces_with(j, higher)   # the smaller robot index in the x columns
         sizes = [len(t) for t in tables]
-        P = np.vstack(tables)
+        P = np.concatenate(tables, axis=0)   # (all (n, 28): no atleast_2d per table, as vstack does)
         higher_a = np.asarray(higher, dtype=np.int64)
         who = np.repeat(higher_a, sizes)
         swapped = np.repeat(higher_a > j, sizes)   # rows with j in the x columns: read swapped
