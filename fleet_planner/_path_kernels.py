@@ -279,7 +279,8 @@ def distances(heads, weights, source):
 def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src_cost, tgt, tgt_cost,
           start_c, start_r, goal_c, goal_r, slack, tie, lm, lm_lo, lm_hi):
     """Nodes of a shortest path from a source node (entered at ``src_cost``) to a target node (left
-    at ``tgt_cost``) over the allowed moves not cut (``cut[9 * v + d] == stamp``) that pass no
+    at ``tgt_cost``) over the allowed moves not cut (``cut[9 * v + d] == stamp``; ``cut`` may be empty
+    when no move is cut) that pass no
     nearer than their keep-out ``discs[k, 2]`` to any disc centre ``discs[k, :2]`` (metres; ``col``
     and ``row`` are padded cell indices, cells ``res`` wide); empty if none.
 
@@ -302,6 +303,7 @@ def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src
     equal-length paths the one nearest that line is found (it pulls straighter); the heuristic
     stays consistent since those costs are >= 0."""
     v_count = heads.shape[0]
+    any_cut = cut.shape[0] > 0   # (an empty ``cut``: no move is cut, none is looked up)
     # the discs by coarse square (CSR): square (bc, br) holds the discs whose centre is in it
     n_discs = discs.shape[0]
     reach_max = _SQRT2 * res
@@ -400,7 +402,7 @@ def astar(heads, weights, col, row, cut, stamp, discs, res, dcol, drow, src, src
                 f = nv
             else:
                 wgt = weights[u, d]
-                if wgt == _INF or cut[9 * u + d] == stamp:
+                if wgt == _INF or (any_cut and cut[9 * u + d] == stamp):
                     continue
                 v = heads[u, d]
                 if closed[v]:

@@ -35,6 +35,9 @@ _TIE = 1e-12          # per cell of distance from the start-goal line, added to 
 #: cells (measured on warehouse-20-40-10-2-2, 38756 cells, 118 searches of md at 100 robots: nodes
 #: expanded per search 3839 with the octile distance alone, 1823 with 4 landmarks, 1523 with 8)
 LANDMARKS = 4
+#: the cut stamps of a search that cuts no move (none is looked up: an array of the graph's edges less to
+#: read per expanded node)
+_NO_CUT = np.zeros(0, dtype=np.int64)
 LANDMARKS_FROM = 2000
 
 
@@ -198,7 +201,7 @@ class MoveGraph:
             cut = self._cut
             if len(removed):
                 cut[removed] = stamp
-            nodes = K.astar(self.heads, self.weights, self.col, self.row, cut, stamp,
+            nodes = K.astar(self.heads, self.weights, self.col, self.row, cut if len(removed) else _NO_CUT, stamp,
                             np.ascontiguousarray(discs, dtype=float).reshape(-1, 3), float(res), _DCOL, _DROW,
                             src, src_cost, tgt, tgt_cost, float(start[0]), float(start[1]), float(goal[0]),
                             float(goal[1]), float(slack), _TIE, lm, lm_lo, lm_hi)

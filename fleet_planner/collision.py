@@ -175,7 +175,23 @@ class CollisionModel:
 
     @property
     def region_count(self) -> int:
-        return sum(len(self.regions(*pair)) for pair in self._pieces)
+        return sum(len(regs) for regs in self._all_regions())
+
+    def region_table(self) -> np.ndarray:
+        """Every region of every pair as rows (x, y, a_lo, a_hi, b_lo, b_hi) with x < y, pair by pair,
+        each pair's regions in the order :meth:`regions` lists them (one pass: the network of a plan
+        reads them all)."""
+        rows = [(r.x, r.y, r.a_lo, r.a_hi, r.b_lo, r.b_hi) for regs in self._all_regions() for r in regs]
+        return np.array(rows, dtype=float).reshape(-1, 6)
+
+    def _all_regions(self) -> list[list[Region]]:
+        """The regions of every pair, in the order of :meth:`pairs` (those not merged yet merged now,
+        with ``fast_merge`` in one batch)."""
+        regions = self._regions
+        missing = next((k for k in self._pieces if k not in regions), None)
+        if missing is not None:
+            self.regions(*missing)   # with fast_merge: every pair still to merge, in one batch
+        return [regions[k] if k in regions else self.regions(*k) for k in self._pieces]
 
     # -- updates --------------------------------------------------------------------------------
     def tau(self, x: int, s):

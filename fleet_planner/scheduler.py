@@ -311,7 +311,7 @@ class DelayScheduler:
         / i holding is i's hold interval when the two points are within reach."""
         tables = self.model.pieces_with(j, higher)   # the smaller robot index in the x columns
         sizes = [len(t) for t in tables]
-        P = np.vstack(tables)
+        P = np.concatenate(tables, axis=0)   # (all (n, 28): no atleast_2d per table, as vstack does)
         higher_a = np.asarray(higher, dtype=np.int64)
         who = np.repeat(higher_a, sizes)
         swapped = np.repeat(higher_a > j, sizes)   # rows with j in the x columns: read swapped
@@ -402,8 +402,9 @@ class DelayScheduler:
             return Blocked(j, blocker, "parks on its goal in the way", "goal")
         return Blocked(j, blocker, "drives through its start disc before it can leave", "start")
 
-    def _times_at(self, x: int, s: np.ndarray, last: bool) -> np.ndarray:
-        """When robot x (as timed) first reaches / last leaves each travelled length in ``s``."""
+    def _times_at(self, x: int, s: np.ndarray, last) -> np.ndarray:
+        """When robot x (as timed) first reaches / last leaves (``last``: one flag, or one per
+        length) each travelled length in ``s``."""
         cum = self.model.cumlen[x]
         k = np.searchsorted(cum, s, side="left")
         kc = np.minimum(k, len(cum) - 1)
@@ -411,10 +412,9 @@ class DelayScheduler:
         seg = np.maximum(k - 1, 0)
         with np.errstate(invalid="ignore"):
             t = self.dep[x][seg] + self.model.tau(x, s) - self.model.times[x][seg]
-        t = np.where(at_vertex, (self.dep[x] if last else self.arr[x])[kc], t)
-        if last:
-            return np.where(s >= cum[-1] - EPS, INF, t)
-        return np.where(s <= EPS, 0.0, t)
+        last = np.broadcast_to(np.asarray(last, dtype=bool), s.shape)
+        t = np.where(at_vertex, np.where(last, self.dep[x][kc], self.arr[x][kc]), t)
+        return np.where(last, np.where(s >= cum[-1] - EPS, INF, t), np.where(s <= EPS, 0.0, t))
 
     def _network_holds(self, order: Sequence[int], ids: Sequence[str]) -> Network:
         """The network under the final timing with holds: a robot's node has its departure and its
@@ -427,30 +427,40 @@ class DelayScheduler:
 
         net = Network([ids[x] for x in order], {ids[x]: float(self.delays[x]) for x in order},
                       {ids[x]: arrival(x) - float(self.delays[x]) for x in order}, mode=self.mode)
-        # every inlet region of every robot as rows (j's rank, i, k along the pair, the region),
-        # its times computed per robot in one batch
-        rows: list[tuple[int, int, int, float, float, float, float]] = []
-        for j in order:
-            rj = rank[j]
-            for i in self.model.neighbours(j):
-                if rank.get(i, INF) >= rj:
-                    continue
-                rows.extend((rj, i, j, *reg.oriented(i)) for reg in self.model.regions(i, j))
-        if not rows:
+        # every inlet region of every robot as rows (j's rank, i, j, i's range, j's range): the
+        # model's regions (x < y) oriented from the higher robot i to the lower j, of robots in
+        # ``order``; their times computed per robot in one batch
+        table = self.model.region_table()
+        n = len(self.model.paths)
+        rank_of = np.full(n, -1, dtype=np.int64)
+        rank_of[np.fromiter(rank, dtype=np.int64, count=len(rank))] = np.fromiter(rank.values(), dtype=np.int64,
+                                                                                    count=len(rank))
+        x, y = table[:, 0].astype(np.int64), table[:, 1].astype(np.int64)
+        table = table[(rank_of[x] >= 0) & (rank_of[y] >= 0)]
+        if not len(table):
             return net
-        R = np.array(rows, dtype=float)
+        x, y = table[:, 0].astype(np.int64), table[:, 1].astype(np.int64)
+        x_first = rank_of[x] < rank_of[y]   # x is the higher robot i
+        i_of, j_of = np.where(x_first, x, y), np.where(x_first, y, x)
+        xf = x_first[:, None]
+        R = np.column_stack([rank_of[j_of], i_of, j_of, np.where(xf, table[:, 2:4], table[:, 4:6]),
+                             np.where(xf, table[:, 4:6], table[:, 2:4])]).astype(float)
         seq = np.arange(len(R))
         # per j (in order): by (b_lo, i), ties in the pair's region order
         R = R[np.lexsort((seq, R[:, 1], R[:, 5], R[:, 0]))]
         who_i, who_j = R[:, 1].astype(np.int64), R[:, 2].astype(np.int64)
-        t1, t4, t2, t3 = (np.empty(len(R)) for _ in range(4))
-        for who, cols in ((who_i, ((3, False, t1), (4, True, t4))), (who_j, ((5, False, t2), (6, True, t3)))):
-            by = np.argsort(who, kind="stable")
-            cuts = np.searchsorted(who[by], np.arange(len(self.model.paths) + 1))
-            for x in np.nonzero(np.diff(cuts))[0].tolist():
-                rows_x = by[cuts[x]:cuts[x + 1]]
-                for col, last, out in cols:
-                    out[rows_x] = self._times_at(x, R[rows_x, col], last)
+        # T1 / T4 (when i first reaches / last leaves its range), T2 / T3 (the same for j), per robot at once
+        nr = len(R)
+        who = np.concatenate([who_i, who_i, who_j, who_j])
+        s_all = np.concatenate([R[:, 3], R[:, 4], R[:, 5], R[:, 6]])
+        last_all = np.repeat(np.array([False, True, False, True]), nr)
+        t_all = np.empty(4 * nr)
+        by = np.argsort(who, kind="stable")
+        cuts = np.searchsorted(who[by], np.arange(n + 1))
+        for r in np.nonzero(np.diff(cuts))[0].tolist():
+            rows_r = by[cuts[r]:cuts[r + 1]]
+            t_all[rows_r] = self._times_at(r, s_all[rows_r], last_all[rows_r])
+        t1, t4, t2, t3 = t_all[:nr], t_all[nr:2 * nr], t_all[2 * nr:3 * nr], t_all[3 * nr:]
         with np.errstate(invalid="ignore"):
             M, D = t3 - t1, t4 - t2
         # k: the link's number among the pair's links, in that order
