@@ -31,6 +31,9 @@ B = Behavior
 _COS_STRAIGHT = math.cos(math.radians(10.0))  # a path bending less than this at a waypoint goes on straight
 _PROGRESS = 0.05  # m: coming this much closer to the goal (straight line) is progress (stats)
 _ESCAPE_HOLD_S = 3.0  # s: an escaped robot stands in its less crowded place at least this long
+#: ours (issue 13): a robot whose re-plan failed may step out against the lanes between escapes too
+#: (see "a step against the lanes"); False: only when an escape is due and finds no place (the control)
+STEP_OUT_BETWEEN_ESCAPES = True
 
 
 def _xy(p: np.ndarray) -> tuple[float, float]:
@@ -726,6 +729,16 @@ class BehaviorController:
     # that the lanes may forbid (the disc fits, it touches no robot), then a path along the lanes
     # to its goal that keeps out of its partner and of the robots standing in range. The shortest
     # such way wins; the paper's re-plan is kept for every other case.
+    # The same robot whose escape *did* find a place may be no better off: the escape's path keeps
+    # only the robots' discs apart, so it may run past the partner inside its critical area, and the
+    # rules stop it at once (it waits for the partner that waits for it; the pair's Exchange finds
+    # no side, its re-plan (IV.C) leads back past the partner, the partner's re-plans fail on the
+    # lanes) until the next escape, 30 s later, the same again (measured: ARMO on `large`, 100
+    # robots, seed 0, the run's one stall, 299/300: r48 in the junction pocket (1.75, 26.25) of the
+    # southbound side aisle x = 1.25, r76 waiting for it in that aisle, from t = 2497 s; escaping
+    # east every 30 s). So the step out is also tried whenever the paper's re-plan of such a robot
+    # finds no way between two escapes (``STEP_OUT_BETWEEN_ESCAPES``), at most once per re-plan
+    # cooldown (``blocked_timeout``); without lanes that restrict a move it never acts.
 
     def _step_out(self, sensed: Sequence[RobotView]) -> bool:
         """Re-plan with a first move against the lanes (see above); True when a way was found."""
@@ -980,13 +993,19 @@ class BehaviorController:
             return
         path = None
         self._remember(sensed)
-        if self.time >= self.replan_after:
+        searched = self.time >= self.replan_after
+        if searched:
             path = self._find_detour(sensed)
             self.replan_after = self.time + self.params.blocked_timeout
         if path is None:
-            if (self.params.escape_after > 0 and self.time >= self.escape_ready
-                    and (self._escape(sensed) or self._step_out(sensed))):
-                return
+            if self.params.escape_after > 0:
+                ready = self.time >= self.escape_ready
+                if ready and self._escape(sensed):
+                    return
+                # ours: a step against the lanes also when the paper's re-plan found no way between
+                # two escapes (an escape that left the partner in its way; see _step_out)
+                if (ready or (searched and STEP_OUT_BETWEEN_ESCAPES)) and self._step_out(sensed):
+                    return
             if self.partner is not None and self.behavior.is_active:
                 self._set(B.WAIT_KEEP_DISTANCE, self.partner)
             return
