@@ -599,7 +599,7 @@ def test_a_robot_whose_escape_leaves_its_partner_in_its_way_steps_out_between_es
     gap = _drive(fleet, limit_s=120.0)   # checks the walls at every step
     assert all(fleet.arrived(i) for i in fleet.ids) and gap > 0, fleet.behaviors()
     assert fleet.controller("p").steps_out >= 1
-    monkeypatch.setattr(controller, "STEP_OUT_BETWEEN_ESCAPES", False)
+    monkeypatch.setattr(controller, "STEP_OUT_AFTER_VAIN_ESCAPE", False)
     control = _escaping_past_its_partner()
     _until_all_arrive(control, 200.0)
     p, q = control.controller("p"), control.controller("q")
