@@ -585,20 +585,21 @@ def _escaping_past_its_partner() -> BehaviorFleet:
     return fleet
 
 
-def test_a_robot_whose_escape_leaves_its_partner_in_its_way_steps_out_between_escapes(monkeypatch):
+def test_a_robot_whose_escape_was_in_vain_steps_out_against_the_lanes(monkeypatch):
     """p and q wait for each other: q stands in p's critical area, p's disc is in q's way. The
-    escape found a place but not a way clear of q, so the paper's rules stop p at once (Exchange
+    escape found a place but no way clear of q, so the paper's rules stop p at once (Exchange
     finds no side in the pocket, its re-plan (IV.C) leads north past q, q's re-plans fail on the
-    lanes); the step against the lanes was tried only when an escape was due and found no place,
-    and every escape (one per 30 s) found one (control: neither arrives in 200 s, as measured on
-    `large`, ARMO, 100 robots: 600 s, the run's one stall). Ours (``STEP_OUT_BETWEEN_ESCAPES``):
-    p steps out when its re-plan finds no way between escapes, and both arrive."""
+    lanes); the step against the lanes was tried only when an escape found no place, and every
+    escape (one per 30 s) found this one again (control: neither arrives in 200 s, as measured on
+    `large`, ARMO, 100 robots: 600 s, the run's one stall). Ours (``STEP_OUT_AFTER_VAIN_ESCAPE``):
+    after one escape in vain p steps out instead of escaping again, and both arrive."""
     from fleet_planner.behavior import controller
 
     fleet = _escaping_past_its_partner()
     gap = _drive(fleet, limit_s=120.0)   # checks the walls at every step
     assert all(fleet.arrived(i) for i in fleet.ids) and gap > 0, fleet.behaviors()
-    assert fleet.controller("p").steps_out >= 1
+    p = fleet.controller("p")
+    assert p.steps_out == 1 and p.escapes == 1     # one escape in vain, then the step out
     monkeypatch.setattr(controller, "STEP_OUT_AFTER_VAIN_ESCAPE", False)
     control = _escaping_past_its_partner()
     _until_all_arrive(control, 200.0)
