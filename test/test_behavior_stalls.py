@@ -648,3 +648,66 @@ def test_a_robot_leaving_its_station_shut_in_by_its_virtual_wall_replans_without
     _drive(control, limit_s=60.0)
     d = control.controller("d")
     assert not control.arrived("d") and d.holds is not None and d.replan_failures >= 10
+
+
+def _escaping_past_its_partner() -> BehaviorFleet:
+    """The west end of `large`'s rack aisles (x 0-7 m, y 22.5-30 m of the map, shifted up by 22 m,
+    and a side aisle x = 7-8.5 m added) on one-way lanes as ARMO laid them: the side aisle x = 1.25
+    southbound (one robot wide), the cross aisle y = 3.75 eastbound out of it, the corner cells of
+    their junction pockets (1.75, 3.25) (out west into the side aisle) and (1.75, 4.25) (out north).
+    p stands in the lower pocket, bound for the lower main aisle; its shortest way runs north into
+    the upper pocket and down the side aisle, where q, bound down that aisle, stands waiting for it
+    (p's disc is 0.5 m from q's way south). p has just escaped (ours, after IV.B.8) east along the
+    cross aisle: its path turns away from q 0.83 m from it, clear of the disc but inside the
+    critical area (0.91 m wide). (Scene by session 25, from the run's snapshot at t = 2750 s.)"""
+    from fleet_planner.roadmap import _BIT, RoadMap, with_lanes
+
+    racks = "@..." + "@" * 10 + "...@"
+    aisle = "@" + "." * 16 + "@"
+    rows = ["@" * 18,                                   # y = 0 (row 0) first
+            *([aisle] * 3), *([racks] * 2), *([aisle] * 3), *([racks] * 2), *([aisle] * 5), "@" * 18]
+    grid = GridMap.from_rows(rows, resolution=0.5)
+    n, s, e, w = (np.uint8(_BIT[d]) for d in ((0, -1), (0, 1), (1, 0), (-1, 0)))
+    allowed = RoadMap.open(grid).allowed.copy()
+    allowed[:8, 2] &= ~n                     # the side aisle x = 1.25: southbound
+    allowed[7, 3:15] &= ~w                   # the cross aisle y = 3.75: eastbound
+    allowed[:, 15] &= ~n                     # the side aisle x = 7.75: southbound
+    allowed[6, 3] &= ~(s | e)                # the upper pocket: out west (or north)
+    allowed[7, 3] &= ~s                      # no way down into the lower pocket ...
+    allowed[8, 3] &= ~(s | e | w)            # ... whose way out is north
+    grid = with_lanes(grid, RoadMap(allowed, 0.5))
+    radius = 0.5 ** 1.5                      # the robots of `large`
+    robots = [RobotSpec("p", radius, 0.8, (1.75, 4.25), (6.25, 6.25)),
+              RobotSpec("q", radius, 0.8, (1.08, 3.26), (1.25, 7.25))]
+    fleet = BehaviorFleet(grid, robots, BehaviorParams())
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    p = fleet.controller("p")                # escaping, as _escape leaves it
+    p._set_path(np.array([[1.75, 3.75], [3.75, 3.75]]))
+    p.escape_to = np.array([3.75, 3.75])
+    p.escape_end = p.escape_ready = 15.0
+    fleet.controller("q")._set_path(np.array([[1.25, 7.25]]))   # straight down the aisle, as it stood
+    return fleet
+
+
+def test_a_robot_whose_escape_was_in_vain_steps_out_against_the_lanes(monkeypatch):
+    """p and q wait for each other: q stands in p's critical area, p's disc is in q's way. The
+    escape found a place but no way clear of q, so the paper's rules stop p at once (Exchange
+    finds no side in the pocket, its re-plan (IV.C) leads north past q, q's re-plans fail on the
+    lanes); the step against the lanes was tried only when an escape found no place, and every
+    escape (one per 30 s) found this one again (control: neither arrives in 200 s, as measured on
+    `large`, ARMO, 100 robots: 600 s, the run's one stall). Ours (``STEP_OUT_AFTER_VAIN_ESCAPE``):
+    after one escape in vain p steps out instead of escaping again, and both arrive."""
+    from fleet_planner.behavior import controller
+
+    fleet = _escaping_past_its_partner()
+    gap = _drive(fleet, limit_s=120.0)   # checks the walls at every step
+    assert all(fleet.arrived(i) for i in fleet.ids) and gap > 0, fleet.behaviors()
+    p = fleet.controller("p")
+    assert p.steps_out == 1 and p.escapes == 1     # one escape in vain, then the step out
+    monkeypatch.setattr(controller, "STEP_OUT_AFTER_VAIN_ESCAPE", False)
+    control = _escaping_past_its_partner()
+    _until_all_arrive(control, 200.0)
+    p, q = control.controller("p"), control.controller("q")
+    assert not control.arrived("p") and not control.arrived("q")
+    assert p.escapes >= 5 and p.steps_out == 0 and q.replan_failures >= 20

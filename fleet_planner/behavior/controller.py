@@ -31,6 +31,9 @@ B = Behavior
 _COS_STRAIGHT = math.cos(math.radians(10.0))  # a path bending less than this at a waypoint goes on straight
 _PROGRESS = 0.05  # m: coming this much closer to the goal (straight line) is progress (stats)
 _ESCAPE_HOLD_S = 3.0  # s: an escaped robot stands in its less crowded place at least this long
+#: ours (issue 13): a robot whose last escape was in vain (see "a step against the lanes") steps out
+#: against the lanes before it escapes again; False: it escapes again (the control of the test)
+STEP_OUT_AFTER_VAIN_ESCAPE = True
 
 
 def _xy(p: np.ndarray) -> tuple[float, float]:
@@ -114,6 +117,8 @@ class BehaviorController:
         self.escape_hold = -math.inf          # standing in the less crowded place at least until then
         self.escape_ready = -math.inf         # no new escape before this time
         self.escape_again = False             # the escape moved on from a place in someone's way (ours)
+        self.escaped_from: tuple[str, np.ndarray, np.ndarray] | None = None  # (partner, its place, mine) at the
+                                              # last escape (see _escaped_in_vain)
         self.seen_standing: dict[str, tuple[Point, float]] = {}  # robots seen standing in its way (see _remember)
         self.deadlocks = self.replans = self.replan_failures = self.yields = self.escapes = self.steps_out = 0
         self.nearly_reached = 0   # waypoints counted reached a few cm short (``_reached_nearly``)
@@ -144,7 +149,7 @@ class BehaviorController:
             self.dock_since = None
         self.goal, self.station, self.arrived = (float(g[0]), float(g[1])), station, False
         self.seen_standing = {}
-        self.escape_to = None
+        self.escape_to = self.escaped_from = None
         self._set_path(path)
         self.best_distance, self.progress_at = math.dist(self.pos, g), self.time
         self._set(B.DOCK if self.holds else B.FOLLOW_WAYPOINT, None)
@@ -662,6 +667,9 @@ class BehaviorController:
                 self.escape_to = np.array(target)
                 if not again:
                     self.escape_end = self.time + self.params.escape_after / 2
+                    partner = next((o for o in sensed if o.id == self.partner), None)
+                    self.escaped_from = (None if partner is None
+                                         else (partner.id, np.asarray(partner.position), self.pos.copy()))
                 self.escape_again = again
                 self.retreat = None
                 self._set_path(path)
@@ -670,9 +678,10 @@ class BehaviorController:
         return False
 
     def _escape_stalled(self, sensed: Sequence[RobotView]) -> None:
-        """No progress for ``escape_after``: escape (else step out against the lanes); a robot that
-        was driving round a standing robot (Avoid, the partner parked) remembers the robots standing
-        in range first, as a failed re-plan does (:meth:`_remember`).
+        """No progress for ``escape_after``: escape, else a step against the lanes
+        (:meth:`_escape_or_step_out`); a robot that was driving round a standing robot (Avoid, the
+        partner parked) remembers the robots standing in range first, as a failed re-plan does
+        (:meth:`_remember`).
 
         Interpretation (ours, issue 13): an escape is what a failed re-plan falls back on, and a
         re-plan remembers the standing robots it failed on; the escape for lack of progress forgot
@@ -689,8 +698,7 @@ class BehaviorController:
         partner = next((o for o in sensed if o.id == self.partner), None)
         if self.behavior is B.AVOID and partner is not None and not partner.travelling:
             self._remember(sensed)
-        if not self._escape(sensed):
-            self._step_out(sensed)
+        self._escape_or_step_out(sensed)
 
     def _end_escape(self, sensed: Sequence[RobotView]) -> None:
         """An escaping robot: back to its goal when the escape took too long, or once it stood
@@ -764,6 +772,36 @@ class BehaviorController:
     # that the lanes may forbid (the disc fits, it touches no robot), then a path along the lanes
     # to its goal that keeps out of its partner and of the robots standing in range. The shortest
     # such way wins; the paper's re-plan is kept for every other case.
+    # The same robot whose escape *did* find a place may be no better off: the escape's path keeps
+    # only the robots' discs apart, so it may run past the partner inside its critical area, and the
+    # rules stop it at once (it waits for the partner that waits for it; the pair's Exchange finds
+    # no side, its re-plan (IV.C) leads back past the partner, the partner's re-plans fail on the
+    # lanes), and the next escape, 30 s later, does the same again (measured: ARMO on `large`, 100
+    # robots, seed 0, the run's one stall, 299/300: r48 in the junction pocket (1.75, 26.25) of the
+    # southbound side aisle x = 1.25, r76 waiting for it in that aisle, from t = 2497 s, r48
+    # escaping east every 30 s). So when an escape is due and the last one was in vain - the robot
+    # and the same partner stand where they stood then, still waiting for each other - the robot
+    # steps out first (``STEP_OUT_AFTER_VAIN_ESCAPE``). Without lanes that restrict a move it never
+    # acts; with them only in that repeated stand-off.
+
+    def _escape_or_step_out(self, sensed: Sequence[RobotView]) -> bool:
+        """An escape (:meth:`_escape`), else a step against the lanes (:meth:`_step_out`); but the
+        step first after an escape in vain (:meth:`_escaped_in_vain`). True when either was taken."""
+        if STEP_OUT_AFTER_VAIN_ESCAPE and self._escaped_in_vain(sensed) and self._step_out(sensed):
+            self.escape_ready = self.time + self.params.escape_after   # counts as the escape due now
+            return True
+        return self._escape(sensed) or self._step_out(sensed)
+
+    def _escaped_in_vain(self, sensed: Sequence[RobotView]) -> bool:
+        """My last escape left me where I was, waiting for the partner I waited for then, which
+        stands where it stood then and waits for me (a two-robot wait cycle the escape did not
+        break; see "a step against the lanes")."""
+        if self.escaped_from is None:
+            return False
+        pid, there, here = self.escaped_from
+        partner = next((o for o in sensed if o.id == pid), None)
+        return (partner is not None and self.partner == pid and partner.partner == self.id
+                and math.dist(partner.position, there) <= self.radius and math.dist(self.pos, here) <= self.radius)
 
     def _step_out(self, sensed: Sequence[RobotView]) -> bool:
         """Re-plan with a first move against the lanes (see above); True when a way was found."""
@@ -795,6 +833,7 @@ class BehaviorController:
             return False
         self.steps_out += 1
         self.retreat = None
+        self.escaped_from = None
         self._set_path(best[1])
         self._set(B.FOLLOW_WAYPOINT, None)
         return True
@@ -1022,8 +1061,7 @@ class BehaviorController:
             path = self._find_detour(sensed)
             self.replan_after = self.time + self.params.blocked_timeout
         if path is None:
-            if (self.params.escape_after > 0 and self.time >= self.escape_ready
-                    and (self._escape(sensed) or self._step_out(sensed))):
+            if self.params.escape_after > 0 and self.time >= self.escape_ready and self._escape_or_step_out(sensed):
                 return
             if self.partner is not None and self.behavior.is_active:
                 self._set(B.WAIT_KEEP_DISTANCE, self.partner)
