@@ -232,13 +232,20 @@ def queue_places(grid: GridMap, stations: dict[str, Point], spots: Sequence[Poin
                     places.take(int(cols[i]), int(rows[i]))
                     out[s].append(grid.centre(int(cols[i]), int(rows[i])))
                     break
-    every = [p for ps in out.values() for p in ps]
-    if every:
-        open_space = ndimage.distance_transform_edt(places.free & ~places.taken)
-        hub_row, hub_col = np.unravel_index(int(np.argmax(open_space)), open_space.shape)
-        shut = set(_shut_in(grid, radius, list(stations.values()), list(spots) + every,
-                            grid.centre(int(hub_col), int(hub_row))))
-        out = {s: [p for p in ps if p not in shut] for s, ps in out.items()}
+    open_space = ndimage.distance_transform_edt(places.free & ~places.taken)
+    hub_row, hub_col = np.unravel_index(int(np.argmax(open_space)), open_space.shape)
+    hub = grid.centre(int(hub_col), int(hub_row))
+    for _ in range(_SPOT_ROUNDS):
+        every = [p for ps in out.values() for p in ps]
+        shut = _shut_in(grid, radius, list(stations.values()), list(spots) + every, hub) if every else []
+        if not shut:
+            break
+        # a shut-in place goes, and so do the new places next to a shut-in parking spot (they shut it in)
+        near = 2 * (2 * radius + SPOT_MARGIN)
+        out = {s: [p for p in ps if p not in shut and all(math.dist(p, q) > near for q in shut)]
+               for s, ps in out.items()}
+    else:
+        out = {s: [] for s in names}
     return out
 
 
