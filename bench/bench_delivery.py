@@ -84,6 +84,7 @@ class Row:
     precompute_s: float = 0.0   # armo: wall time of the road map's program
     cpu_s: float = 0.0          # CPU seconds of the run (this process)
     backstops: int = 0          # central: leg budgets that ran out on their wall-clock backstop (load-dependent)
+    budgets_out: int = 0        # central: planning budgets that ran out (CPU or backstop)
     queue: str = "spots"        # central methods: the queue rule (QUEUE_RULES)
 
 
@@ -128,9 +129,9 @@ def _args(argv=None) -> argparse.Namespace:
                         f"{PAPER002['maps']} at N={PAPER002['sizes']}, printed in the paper's layout "
                         "(options given win; --plot defaults to out/paper002.png)")
     p.add_argument("--queue", default="spots",
-                   help=f"comma-separated queue rules of the central methods, each run in turn: spots (wait for a "
-                        f"station on parking spots near it, session 25's rule) or near (on queue places a few metres "
-                        f"from it, moving up; ours) (default: %(default)s)")
+                   help="comma-separated queue rules of the central methods, each run in turn: spots (wait for a "
+                        "station on parking spots near it, session 25's rule) or near (on queue places a few metres "
+                        "from it, moving up; ours) (default: %(default)s)")
     p.add_argument("--backstop", type=float, default=math.inf,
                    help="md's leg budgets are CPU seconds; they also stop after this many times their seconds of wall "
                         "time (the planners' default 10: a starved run then plans less, and its CTime depends on the "
@@ -205,18 +206,19 @@ def table(rows: list[Row]) -> str:
     w = max([3] + [len(r.map) for r in rows])
     head = (f"{'map':<{w}} {'N':>4} {'method':<8} {'#Del':>5} {'done':>5} {'CTime':>9} {'bound':>7} "
             f"{'ratio':>6} {'avg v':>6} {'plan ms':>12} {'coll':>4} {'dead':>4} {'stop':<5} {'wall s':>7} "
-            f"{'CPU s':>7} {'bk':>3} queue")
+            f"{'CPU s':>7} {'out':>4} {'bk':>3} queue")
     lines = [head, "-" * len(head)]
     for r in rows:
         mark = " " if r.stop == "done" else "!"
         lines.append(f"{r.map:<{w}} {r.n:>4} {r.method:<8} {r.deliveries:>5} {r.completed:>5} {r.ctime:>8.0f}{mark} "
                      f"{r.lower_bound:>7.0f} {r.ctime / r.lower_bound:>6.2f} {r.avg_velocity:>6.3f} "
                      f"{r.decision_ms:>7.2f}/{r.decision_unit:<4} {r.collisions:>4} {r.deadlocks:>4} {r.stop:<5} "
-                     f"{r.wall_s:>7.1f} {r.cpu_s:>7.1f} {r.backstops:>3} {r.queue}")
+                     f"{r.wall_s:>7.1f} {r.cpu_s:>7.1f} {r.budgets_out:>4} {r.backstops:>3} {r.queue}")
     lines.append("")
     lines.append("CTime with '!': the run stopped unfinished (stop: cap = simulated-time cap, stall = nothing "
                  "moved for 600 s, wall = wall-clock cap) and CTime is the stop time.")
-    lines.append("CPU s: the run's CPU seconds; bk: leg budgets stopped by their wall-clock backstop (--backstop); "
+    lines.append("CPU s: the run's CPU seconds; out: planning budgets that ran out; bk: of them, stopped by their "
+                 "wall-clock backstop (--backstop); "
                  "queue: the central methods' queue rule (--queue).")
     lines.append("plan ms: wall time per planned leg (md, prior: central, one call of plan_incremental) or per "
                  "fleet step of dt (behavior: every robot's decisions and motion).")
@@ -302,7 +304,7 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
         t0 = time.perf_counter()
         problem = armo_problem(problem)[0]
         pre = time.perf_counter() - t0
-    cpu0, backstops0 = time.process_time(), planner_base.Budget.backstops
+    cpu0, backstops0, out0 = time.process_time(), planner_base.Budget.backstops, planner_base.Budget.spent
     res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress,
                    queue=queue)
     if res.collisions or res.violations:
@@ -316,6 +318,7 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
     row.precompute_s = pre
     row.cpu_s = time.process_time() - cpu0
     row.backstops = planner_base.Budget.backstops - backstops0
+    row.budgets_out = planner_base.Budget.spent - out0
     row.queue = queue
     return row
 

@@ -90,23 +90,30 @@ class Budget:
 
     #: CPU budgets (of any instance, in this process) that ran out on the wall-clock backstop first
     backstops: ClassVar[int] = 0
+    #: budgets (in this process) that ran out at all, on either clock (checked and found spent)
+    spent: ClassVar[int] = 0
 
     def __init__(self, cpu_s: float | None, wall: bool = False):
         self.cpu_s = cpu_s
         self._cpu_end = math.inf if cpu_s is None or wall else time.thread_time() + cpu_s
         self._wall_end = math.inf if cpu_s is None else time.perf_counter() + (1.0 if wall else WALL_BACKSTOP) * cpu_s
-        self._backstopped = False
+        self._counted = False
 
     def passed(self) -> bool:
         """True once the budget is spent."""
         if time.thread_time() > self._cpu_end:
+            self._count(backstop=False)
             return True
         if time.perf_counter() <= self._wall_end:
             return False
-        if not self._backstopped and self._cpu_end != math.inf:
-            self._backstopped = True
-            Budget.backstops += 1
+        self._count(backstop=self._cpu_end != math.inf)
         return True
+
+    def _count(self, backstop: bool) -> None:
+        if not self._counted:
+            self._counted = True
+            Budget.spent += 1
+            Budget.backstops += backstop
 
     def left(self) -> float:
         """Seconds left (CPU, or wall-clock with ``wall``; 0 once spent, at the backstop too; infinite
