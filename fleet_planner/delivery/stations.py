@@ -68,6 +68,9 @@ QUEUE_REACH = 6.0
 QUEUE_SLOTS = 6
 #: ... of which at most this many are new places (not parking spots of the problem)
 QUEUE_NEW = 4
+#: queue="near": a robot may claim a free station nobody queues for from any distance (False: only from within
+#: CLAIM_RADIUS, as the spots rule; from farther it drives to the station's nearest free place first)
+NEAR_CLAIM_FROM_AFAR = True
 #: the queue rules of the central methods: on parking spots near the station (the default, session 25's
 #: rule), or on queue places near it with moving up (ours, see the module text)
 QUEUE_RULES = ("spots", "near")
@@ -384,7 +387,8 @@ class _DeliveryRules:
         spot when all are taken; the spot r stands on when that is no nearer; nowhere: decide again later)."""
         slots = self.slots.get(station, [])
         bound = any(self.parking.owner[i] is not None and self.parking.owner[i] != r.idx for i in slots)
-        if self.queues.free_for(station, r.idx) and not self.queues.has_queue(station) and not bound:
+        afar = NEAR_CLAIM_FROM_AFAR or not slots or math.dist(r.pos, self.problem.stations[station]) <= CLAIM_RADIUS
+        if self.queues.free_for(station, r.idx) and not self.queues.has_queue(station) and not bound and afar:
             self.queues.claim(station, r.idx)
             self._need(r, self.problem.stations[station], kind, station, t)
             return
