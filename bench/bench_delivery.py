@@ -41,6 +41,7 @@ sys.path.insert(0, str(REPO))
 
 from fleet_planner.delivery import (  # noqa: E402
     METHODS,
+    QUEUE_RULES,
     DeliveryProblem,
     DeliveryResult,
     delivery_problem,
@@ -49,6 +50,7 @@ from fleet_planner.delivery import (  # noqa: E402
     warehouse_problem,
 )
 from fleet_planner.grid import GridMap  # noqa: E402
+from fleet_planner.planners import base as planner_base  # noqa: E402
 from fleet_planner.warehouse import generate_warehouse, load_warehouse  # noqa: E402
 
 BUILTIN_MAPS = ("warehouse", "large", "large2x")
@@ -81,6 +83,10 @@ class Row:
     min_gap: float
     violations: int      # central: other breaches of the plan contract on the driven trajectories
     precompute_s: float = 0.0   # armo: wall time of the road map's program
+    cpu_s: float = 0.0          # CPU seconds of the run (this process)
+    backstops: int = 0          # central: leg budgets that ran out on their wall-clock backstop (load-dependent)
+    budgets_out: int = 0        # central: planning budgets that ran out (CPU or backstop)
+    queue: str = "spots"        # central methods: the queue rule (QUEUE_RULES)
 
 
 def planner_options(p: argparse.ArgumentParser, items: list[str]) -> dict:
@@ -123,6 +129,14 @@ def _args(argv=None) -> argparse.Namespace:
                    help="paper 002's comparison (its Tables I-III): ARMO, PRIOR, BBMRCA and md on "
                         f"{PAPER002['maps']} at N={PAPER002['sizes']}, printed in the paper's layout "
                         "(options given win; --plot defaults to out/paper002.png)")
+    p.add_argument("--queue", default="spots",
+                   help="comma-separated queue rules of the central methods, each run in turn: spots (wait for a "
+                        "station on parking spots near it, session 25's rule) or near (on queue places a few metres "
+                        "from it, moving up; ours) (default: %(default)s)")
+    p.add_argument("--backstop", type=float, default=math.inf,
+                   help="md's leg budgets are CPU seconds; they also stop after this many times their seconds of wall "
+                        "time (the planners' default 10: a starved run then plans less, and its CTime depends on the "
+                        "load; default here: %(default)s, never); column 'bk' counts the budgets it stopped")
     p.add_argument("--lanes", type=Path, default=None,
                    help="a lanes file (config/lanes_*.yaml): every method plans along its road map")
     p.add_argument("--from-csv", nargs="+", type=Path, default=None, metavar="CSV",
@@ -153,6 +167,11 @@ def _args(argv=None) -> argparse.Namespace:
     unknown = [m for m in args.methods if m not in METHODS]
     if unknown or not args.methods:
         p.error(f"--methods: unknown {unknown}; choose from {', '.join(METHODS)}")
+    args.queue = [q.strip() for q in args.queue.split(",") if q.strip()]
+    if not args.queue or any(q not in QUEUE_RULES for q in args.queue):
+        p.error(f"--queue: expected comma-separated rules of {', '.join(QUEUE_RULES)} (got {args.queue})")
+    if not args.backstop >= 1:
+        p.error("--backstop: must be >= 1")
     if args.per_robot < 1:
         p.error("--deliveries-per-robot: must be >= 1")
     if args.stations < 2:
@@ -190,17 +209,21 @@ def to_row(name: str, res: DeliveryResult) -> Row:
 def table(rows: list[Row]) -> str:
     w = max([3] + [len(r.map) for r in rows])
     head = (f"{'map':<{w}} {'N':>4} {'method':<8} {'#Del':>5} {'done':>5} {'CTime':>9} {'bound':>7} "
-            f"{'ratio':>6} {'avg v':>6} {'plan ms':>12} {'coll':>4} {'dead':>4} {'stop':<5} {'wall s':>7}")
+            f"{'ratio':>6} {'avg v':>6} {'plan ms':>12} {'coll':>4} {'dead':>4} {'stop':<5} {'wall s':>7} "
+            f"{'CPU s':>7} {'out':>4} {'bk':>3} queue")
     lines = [head, "-" * len(head)]
     for r in rows:
         mark = " " if r.stop == "done" else "!"
         lines.append(f"{r.map:<{w}} {r.n:>4} {r.method:<8} {r.deliveries:>5} {r.completed:>5} {r.ctime:>8.0f}{mark} "
                      f"{r.lower_bound:>7.0f} {r.ctime / r.lower_bound:>6.2f} {r.avg_velocity:>6.3f} "
                      f"{r.decision_ms:>7.2f}/{r.decision_unit:<4} {r.collisions:>4} {r.deadlocks:>4} {r.stop:<5} "
-                     f"{r.wall_s:>7.1f}")
+                     f"{r.wall_s:>7.1f} {r.cpu_s:>7.1f} {r.budgets_out:>4} {r.backstops:>3} {r.queue}")
     lines.append("")
     lines.append("CTime with '!': the run stopped unfinished (stop: cap = simulated-time cap, stall = nothing "
                  "moved for 600 s, wall = wall-clock cap) and CTime is the stop time.")
+    lines.append("CPU s: the run's CPU seconds; out: planning budgets that ran out; bk: of them, stopped by their "
+                 "wall-clock backstop (--backstop); "
+                 "queue: the central methods' queue rule (--queue).")
     lines.append("plan ms: wall time per planned leg (md, prior: central, one call of plan_incremental) or per "
                  "fleet step of dt (behavior: every robot's decisions and motion).")
     return "\n".join(lines)
@@ -280,9 +303,9 @@ def plot(rows: list[Row], path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
-def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace, bar) -> Row:
+def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace, bar, queue: str = "spots") -> Row:
     """One simulation, its progress on the bar and a loud line if it went wrong."""
-    label = f"{m} N={problem.n_robots} {method}"
+    label = f"{m} N={problem.n_robots} {method}" + ("" if queue == "spots" else f" queue={queue}")
     bar.set_postfix_str(label)
     shown = [0.0]
 
@@ -300,7 +323,9 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
         t0 = time.perf_counter()
         problem = armo_problem(problem)[0]
         pre = time.perf_counter() - t0
-    res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress)
+    cpu0, backstops0, out0 = time.process_time(), planner_base.Budget.backstops, planner_base.Budget.spent
+    res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress,
+                   queue=queue)
     if res.collisions or res.violations:
         bar.write(f"!!! FAIL: {label} seed={args.seed}: {res.collisions} overlapping pair(s), min gap "
                   f"{res.min_gap:.4f} m; {'; '.join(res.violations[:3])}", file=sys.stderr)
@@ -310,6 +335,10 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
                   file=sys.stderr)
     row = to_row(m, res)
     row.precompute_s = pre
+    row.cpu_s = time.process_time() - cpu0
+    row.backstops = planner_base.Budget.backstops - backstops0
+    row.budgets_out = planner_base.Budget.spent - out0
+    row.queue = queue
     return row
 
 
@@ -317,12 +346,15 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     args = _args(argv)
+    planner_base.WALL_BACKSTOP = args.backstop
     if args.from_csv is not None:
         return report(ordered([r for path in args.from_csv for r in read_csv(path)], args.maps, args.methods), args)
     if not args.maps_dir.is_dir() and any(m not in BUILTIN_MAPS for m in args.maps):
         sys.exit(f"bench_delivery: no maps directory {args.maps_dir}")
     rows: list[Row] = []
-    with tqdm(total=len(args.maps) * len(args.sizes) * len(args.methods), unit="run", file=sys.stderr) as bar:
+    runs = [(method, q) for method in args.methods for q in (args.queue if method not in ("behavior", "armo")
+                                                             else ["spots"])]
+    with tqdm(total=len(args.maps) * len(args.sizes) * len(runs), unit="run", file=sys.stderr) as bar:
         for m in args.maps:
             for n in args.sizes:
                 try:
@@ -334,10 +366,10 @@ def main(argv=None) -> int:
                         problem = lanes_problem(problem, load_lanes(args.lanes, problem.grid, problem.radius))
                 except ValueError as exc:
                     bar.write(f"{m} N={n}: skipped: {exc}", file=sys.stderr)
-                    bar.update(len(args.methods))
+                    bar.update(len(runs))
                     continue
-                for method in args.methods:
-                    rows.append(run(problem, m, method, args, bar))
+                for method, queue in runs:
+                    rows.append(run(problem, m, method, args, bar, queue))
                     bar.update()
                     if args.csv:   # as it goes: a long run stopped early keeps what it measured
                         write_csv(rows, args.csv)

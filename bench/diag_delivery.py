@@ -47,6 +47,7 @@ def main(argv=None) -> int:
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="a planner option of the method (e.g. early_clear=true), repeatable")
     p.add_argument("--dump", type=Path, help="also write every leg's record to this JSON file")
+    p.add_argument("--queue", default="spots", help="the queue rule: spots (default) or near (bench_delivery --queue)")
     args = p.parse_args(argv)
     bargs = bench_delivery._args(["--maps-dir", str(args.maps_dir), "--seed", str(args.seed),
                                   "--deliveries-per-robot", str(args.per_robot)])
@@ -58,7 +59,7 @@ def main(argv=None) -> int:
 
     options = bench_delivery.planner_options(p, args.option)
     run = central._CentralRun(problem, args.method, RunLimits(4 * 3600.0, 600.0, 120.0, 2.0, 7200.0), options or None,
-                              None)
+                              None, queue=args.queue)
     plan_leg = run._plan_leg
 
     def logged_plan_leg(r, goal, others, now):

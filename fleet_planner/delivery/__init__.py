@@ -47,6 +47,7 @@ from .central import simulate_central
 from .layout import ROBOT_RADIUS, choose_spots, driving_distances, spread_stations
 from .problem import DOCK_S, TOP_SPEED, Delivery, DeliveryProblem, delivery_problem, warehouse_problem
 from .result import DeliveryResult, RunLimits, SimProgress
+from .stations import QUEUE_RULES
 
 #: every registered planner (central: ``plan_incremental`` per leg), the behaviour fleet, and ARMO
 #: (the behaviour fleet driving along ARMO's road map of directed lanes, :func:`armo_problem`)
@@ -79,7 +80,7 @@ def lanes_problem(problem: DeliveryProblem, lanes) -> DeliveryProblem:
 def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: float = 4 * 3600.0,
              stall_s: float = 600.0, no_progress_s: float = 120.0, retry_s: float = 2.0,
              wall_cap_s: float = math.inf, record: bool = False, planner_options: dict | None = None,
-             progress: SimProgress | None = None) -> DeliveryResult:
+             progress: SimProgress | None = None, queue: str = "spots") -> DeliveryResult:
     """Run the deliveries of ``problem`` with ``method`` (one of :data:`METHODS`).
 
     ``dt``: step of the behaviour simulation (the central methods are event-driven and exact).
@@ -89,10 +90,14 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
     planned is tried again this much later (once another robot got a new leg; at the latest 15
     times as late). ``wall_cap_s``: stop after this much wall-clock time (stop "wall").
     ``record``: keep the behaviour fleet's positions at every step. ``planner_options``: keyword
-    options of the central method's planner (:func:`~fleet_planner.planners.get_planner`).
+    options of the central method's planner (:func:`~fleet_planner.planners.get_planner`). ``queue``: the
+    central methods' queue rule, ``spots`` (robots wait for a station on parking spots near it) or ``near``
+    (on queue places a few metres from it, moving up; ours, :mod:`.stations`); the behaviour fleet has its own.
     """
     if method not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(METHODS)} (got {method!r})")
+    if queue not in QUEUE_RULES:
+        raise ValueError(f"queue: must be one of {', '.join(QUEUE_RULES)} (got {queue!r})")
     for name, value in (("dt", dt), ("cap_s", cap_s), ("stall_s", stall_s), ("no_progress_s", no_progress_s),
                         ("retry_s", retry_s)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -111,10 +116,10 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
         return res
     if method == "behavior":
         return simulate_behavior(problem, limits, dt=dt, record=record, progress=progress)
-    return simulate_central(problem, method, limits, planner_options, progress)
+    return simulate_central(problem, method, limits, planner_options, progress, queue)
 
 
-__all__ = ["DOCK_S", "METHODS", "armo_problem", "lanes_problem",
+__all__ = ["DOCK_S", "METHODS", "QUEUE_RULES", "armo_problem", "lanes_problem",
            "ROBOT_RADIUS", "TOP_SPEED", "Delivery", "DeliveryProblem", "DeliveryResult",
            "RunLimits", "SimProgress", "choose_spots", "delivery_problem", "driving_distances", "simulate",
            "spread_stations", "warehouse_problem"]

@@ -27,14 +27,14 @@ class _CentralRun:
     """One run of a central method: the trajectories being driven, the legs driven, the retries."""
 
     def __init__(self, problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None,
-                 progress: SimProgress | None):
+                 progress: SimProgress | None, queue: str = "spots"):
         self.tally = RunTally()
         self.problem = problem
         self.method = method
         self.limits = limits
         self.progress = progress
         self.planner = get_planner(method, **(planner_options or {}))
-        self.rules = _DeliveryRules(problem, claims=True)
+        self.rules = _DeliveryRules(problem, claims=True, queue=queue)
         self.robots = self.rules.robots
         n = problem.n_robots
         #: per robot: the legs it drove, waypoints (x, y, t); the first one is where it starts
@@ -130,7 +130,7 @@ class _CentralRun:
         if rules.others_queue_here(r) and (leg is None or leg.start_time > now + EVACUATE_S):
             spot = rules.spot_near_here(r)
             if spot is not None:
-                evac = self._plan_leg(r, self.problem.spots[spot], others, now)
+                evac = self._plan_leg(r, rules.spots[spot], others, now)
                 if evac is not None and (leg is None or evac.start_time < leg.start_time):
                     rules.evacuate(r, spot)
                     leg = evac
@@ -166,6 +166,7 @@ class _CentralRun:
 
 
 def simulate_central(problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None = None,
-                     progress: SimProgress | None = None) -> DeliveryResult:
-    """Run the deliveries with a central method (a planner name of the registry: md, md-box, prior)."""
-    return _CentralRun(problem, method, limits, planner_options, progress).run()
+                     progress: SimProgress | None = None, queue: str = "spots") -> DeliveryResult:
+    """Run the deliveries with a central method (a planner name of the registry: md, md-box, prior);
+    ``queue``: the queue rule (:data:`~fleet_planner.delivery.stations.QUEUE_RULES`)."""
+    return _CentralRun(problem, method, limits, planner_options, progress, queue).run()

@@ -201,6 +201,54 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
     return homes[:count] + queued + homes[count:]
 
 
+def queue_places(grid: GridMap, stations: dict[str, Point], spots: Sequence[Point], per_station: int,
+                 reach: float, radius: float = ROBOT_RADIUS, min_gap: float = 0.0) -> dict[str, list[Point]]:
+    """Ours (issue 8, the central methods' ``queue="near"``): up to ``per_station`` places to queue on per
+    station, the closest to it by driving distance, at most ``reach`` m of driving from it and at least
+    ``min_gap`` m (straight line) from it; each cuts no passage with a robot on every station, every
+    parking spot of ``spots`` and every other queue place (:meth:`_StandingPlaces.usable`, then the
+    global check of :func:`choose_spots`: a place from which a robot could not leave is dropped). The
+    stations take turns, closest place first, so every station gets its nearest places; a place goes to
+    one station only. Returns station -> its places, nearest first."""
+    places = _StandingPlaces(grid, radius)
+    for p in list(stations.values()) + list(spots):
+        places.take(*places.cell(p))
+    rows, cols = np.nonzero(places.free & ~places.taken)
+    names = list(stations)
+    out: dict[str, list[Point]] = {s: [] for s in names}
+    if not len(rows) or not names or per_station <= 0:
+        return out
+    dist = driving_distances(grid, places.free, [stations[s] for s in names])[:, rows * grid.width + cols]
+    centres = np.column_stack([(cols + 0.5) * grid.resolution, (rows + 0.5) * grid.resolution])
+    for k, s in enumerate(names):   # too close to the station (straight line), or beyond reach: never
+        dist[k, np.hypot(*(centres - np.asarray(stations[s])).T) < min_gap] = np.inf
+    dist[dist > reach] = np.inf
+    ranked = [[int(i) for i in np.argsort(d, kind="stable") if np.isfinite(d[i])] for d in dist]
+    for _ in range(per_station):      # round by round: every station gets its closest first
+        for k, s in enumerate(names):
+            while ranked[k]:
+                i = ranked[k].pop(0)
+                if places.usable(int(cols[i]), int(rows[i])):
+                    places.take(int(cols[i]), int(rows[i]))
+                    out[s].append(grid.centre(int(cols[i]), int(rows[i])))
+                    break
+    open_space = ndimage.distance_transform_edt(places.free & ~places.taken)
+    hub_row, hub_col = np.unravel_index(int(np.argmax(open_space)), open_space.shape)
+    hub = grid.centre(int(hub_col), int(hub_row))
+    for _ in range(_SPOT_ROUNDS):
+        every = [p for ps in out.values() for p in ps]
+        shut = _shut_in(grid, radius, list(stations.values()), list(spots) + every, hub) if every else []
+        if not shut:
+            break
+        # a shut-in place goes, and so do the new places next to a shut-in parking spot (they shut it in)
+        near = 2 * (2 * radius + SPOT_MARGIN)
+        out = {s: [p for p in ps if p not in shut and all(math.dist(p, q) > near for q in shut)]
+               for s, ps in out.items()}
+    else:
+        out = {s: [] for s in names}
+    return out
+
+
 def _wall_first(places: _StandingPlaces, rows: np.ndarray, cols: np.ndarray, seed: int) -> np.ndarray:
     """Ours (packed spots): the candidate cells closest to a wall first (rows of robots along it), among
     those the ones in the widest passages, ties in seeded random order; none in a passage narrower than

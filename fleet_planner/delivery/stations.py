@@ -15,6 +15,20 @@ others queue for (its next leg leaves more than :data:`EVACUATE_S` later, or can
 clears it for a parking spot when that is sooner (:meth:`_DeliveryRules.evacuate`, decided by the
 central run). These rules are the simulation's, the same for md and prior.
 
+Queue places near the stations (``queue="near"``; ours, issue 8; the default ``"spots"`` is the rule
+above): the robots waiting for a station stand on *queue places* a few metres from it, not on parking
+spots anywhere (the busiest chute of the default warehouse turned over once in 16-20 s, its queue
+standing on spots far off). Each station gets the places closest to it by driving distance, at most
+:data:`QUEUE_REACH` of driving away and at most :data:`QUEUE_SLOTS` of them: the parking spots that
+are not homes and, besides them, up to :data:`QUEUE_NEW` more places that cut no passage with a robot
+on every station, spot and place (:func:`~fleet_planner.delivery.layout.queue_places`); a place
+belongs to one station and is used only to queue for it. A robot bound for a station claims it at
+once, from any distance, when nobody holds it, queues for it or drives to one of its places;
+otherwise it takes the station's nearest free place (a parking spot near it, as before, when all its
+places are taken) and queues there on arrival, first come first served. When the station is freed
+the first robot in its queue gets it, and the robots behind it move up, in queue order, each to the
+nearest free place closer to the station than its own (:meth:`_DeliveryRules._move_up`).
+
 Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
 (Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
 certain distance" and wait, first come first served (the fleet's docking arbiter); with 200 robots
@@ -36,7 +50,7 @@ import numpy as np
 from ..geometry import polyline_length
 from ..model import Point
 from ..paths import PathFinder
-from .layout import driving_distances
+from .layout import driving_distances, queue_places
 from .problem import Delivery, DeliveryProblem
 
 #: central methods: a robot claims a station only from this close (m, straight line; from a parking
@@ -47,6 +61,19 @@ RETARGET_S = 5.0
 #: central methods: a robot on a station others queue for whose next leg would leave more than this
 #: much later (s), or could not be planned, drives to a parking spot near it instead if that is sooner
 EVACUATE_S = 10.0
+#: central methods with ``queue="near"`` (ours): a station's queue places are at most this far from it (m,
+#: driving distance) ...
+QUEUE_REACH = 6.0
+#: ... at most this many per station ...
+QUEUE_SLOTS = 6
+#: ... of which at most this many are new places (not parking spots of the problem)
+QUEUE_NEW = 4
+#: queue="near": a robot may claim a free station nobody queues for from any distance (False: only from within
+#: CLAIM_RADIUS, as the spots rule; from farther it drives to the station's nearest free place first)
+NEAR_CLAIM_FROM_AFAR = True
+#: the queue rules of the central methods: on parking spots near the station (the default, session 25's
+#: rule), or on queue places near it with moving up (ours, see the module text)
+QUEUE_RULES = ("spots", "near")
 #: behaviour fleet with admission (ours): waiting places are parking spots at least this far (m,
 #: straight line) from every station a delivery loads at (out of the crowd round the loading stations)
 WAIT_AWAY = 4.0
@@ -113,9 +140,10 @@ class _ParkingSpots:
         for i in range(n_robots):   # robot i starts on its home, spot i
             self.owner[i] = i
 
-    def nearest_free(self, dist: np.ndarray) -> int | None:
-        """The free spot of least ``dist`` (one entry per spot), if any is free."""
-        return next((int(i) for i in np.argsort(dist, kind="stable") if self.owner[i] is None), None)
+    def nearest_free(self, dist: np.ndarray, allowed: np.ndarray | None = None) -> int | None:
+        """The free spot of least ``dist`` (one entry per spot), if any is free (and ``allowed``)."""
+        return next((int(i) for i in np.argsort(dist, kind="stable")
+                     if self.owner[i] is None and (allowed is None or allowed[i])), None)
 
 
 class _StationQueues:
@@ -135,7 +163,8 @@ class _StationQueues:
         self.holder[station] = idx
 
     def join(self, station: str, idx: int) -> None:
-        self.waiting[station].append(idx)
+        if idx not in self.waiting[station]:   # (queue="near": a robot moving up is in the queue already)
+            self.waiting[station].append(idx)
 
     def has_queue(self, station: str) -> bool:
         return bool(self.waiting[station])
@@ -202,22 +231,37 @@ class _DeliveryRules:
     Every method calls the events (:meth:`left`, :meth:`arrived`, :meth:`docked`) as they happen;
     the rules set the robot's next ``phase``, ``target`` and ``wake``."""
 
-    def __init__(self, problem: DeliveryProblem, claims: bool, admit: int | None = None):
+    def __init__(self, problem: DeliveryProblem, claims: bool, admit: int | None = None, queue: str = "spots"):
         self.problem = problem
         self.claims = claims
+        if queue not in QUEUE_RULES:
+            raise ValueError(f"queue: must be one of {', '.join(QUEUE_RULES)} (got {queue!r})")
+        if queue != "spots" and not claims:
+            raise ValueError(f"queue: {queue!r} is a rule of the central methods (claims=True)")
+        self.queue_rule = queue
         #: behaviour fleet: at most ``admit`` robots bound for a station at a time (None: no limit)
         self.admission = None if claims or admit is None else _StationAdmission(list(problem.stations), admit)
         self.solo_time = _SoloTimes(problem)
         self.robots = [_SimRobot(i, rid, problem.spots[i], spot=i, solo_at=problem.spots[i])
                        for i, rid in enumerate(problem.robot_ids())]
-        self.parking = _ParkingSpots(problem.spots, problem.n_robots)
-        #: central: driving distance from each station to each parking spot, to queue close by
-        self.spot_dist: dict[str, np.ndarray] = {}
+        #: where robots may stand for long: the problem's parking spots, then (``queue="near"``) new queue places
+        self.spots: list[Point] = list(problem.spots)
+        drive = None
         if claims or self.admission is not None:
             drive = driving_distances(problem.grid, self.solo_time.finder.free, list(problem.stations.values()))
-            cells = [problem.grid.cell_of(*p) for p in problem.spots]
-            at = [row * problem.grid.width + col for col, row in cells]
-            self.spot_dist = {s: drive[k, at] for k, s in enumerate(problem.stations)}
+        #: queue="near": each station's queue places (spot indices, nearest first) and the station of each place
+        self.slots: dict[str, list[int]] = {}
+        self.slot_of: dict[int, str] = {}
+        if queue == "near":
+            assert drive is not None
+            self._place_slots(drive)
+        self.parking = _ParkingSpots(self.spots, problem.n_robots)
+        #: the spots any robot may take (not a station's queue place)
+        self.general = np.array([i not in self.slot_of for i in range(len(self.spots))], dtype=bool)
+        #: central: driving distance from each station to each parking spot, to queue close by
+        self.spot_dist: dict[str, np.ndarray] = {}
+        if drive is not None:
+            self.spot_dist = self._spot_distances(drive)
         self.queues = _StationQueues(list(problem.stations))
         #: behaviour fleet with admission: the parking spots robots may wait on for their station
         self.waiting_place = np.zeros(len(problem.spots), dtype=bool)
@@ -231,6 +275,31 @@ class _DeliveryRules:
         self.ctime: float | None = None     # when the last delivery was done
         self.phase_s: dict[str, float] = {}  # robot-seconds spent in each phase
         self.hold_legs = 0
+
+    def _spot_distances(self, drive: np.ndarray) -> dict[str, np.ndarray]:
+        """Station -> driving distance to each spot of :attr:`spots` (``drive``: from each station to each cell)."""
+        grid = self.problem.grid
+        at = [row * grid.width + col for col, row in (grid.cell_of(*p) for p in self.spots)]
+        return {s: drive[k, at] for k, s in enumerate(self.problem.stations)}
+
+    def _place_slots(self, drive: np.ndarray) -> None:
+        """queue="near": new queue places (appended to :attr:`spots`), then each place - a new one or a
+        parking spot that is not a home - within :data:`QUEUE_REACH` goes to its nearest station, at most
+        :data:`QUEUE_SLOTS` per station, nearest first."""
+        p = self.problem
+        new = queue_places(p.grid, p.stations, p.spots, QUEUE_NEW, QUEUE_REACH, p.radius)
+        self.spots += [q for qs in new.values() for q in qs]
+        dist = np.vstack(list(self._spot_distances(drive).values()))     # (stations, spots)
+        names = list(p.stations)
+        candidates = [i for i in range(p.n_robots, len(self.spots)) if dist[:, i].min() <= QUEUE_REACH]
+        per: dict[str, list[int]] = {s: [] for s in names}
+        for i in candidates:
+            per[names[int(np.argmin(dist[:, i]))]].append(i)
+        for k, s in enumerate(names):
+            mine = sorted(per[s], key=lambda i: (dist[k, i], i))[:QUEUE_SLOTS]
+            if mine:
+                self.slots[s] = mine
+                self.slot_of.update((i, s) for i in mine)
 
     def enter(self, r: _SimRobot, phase: str, t: float) -> None:
         """r goes into ``phase`` at t (the time spent in the old one is counted)."""
@@ -262,13 +331,13 @@ class _DeliveryRules:
         else:
             # home, else the closest free spot (near a station, it would stand in others' way)
             spot = r.idx if self.parking.owner[r.idx] is None else \
-                self.parking.nearest_free(np.hypot(*(self.parking.xy - np.asarray(r.pos)).T))
+                self.parking.nearest_free(np.hypot(*(self.parking.xy - np.asarray(r.pos)).T), self.general)
             if spot is None:                  # every spot taken or promised: stay (nothing left to do)
                 self.enter(r, "done", t)
                 r.wake = math.inf
                 return
             self.parking.owner[spot], r.booked_spot = r.idx, spot
-            self._need(r, self.problem.spots[spot], "park", None, t)
+            self._need(r, self.spots[spot], "park", None, t)
 
     def _drive_solo(self, r: _SimRobot, station: Point) -> None:
         """The lower bound: r drives on to ``station`` alone and docks there."""
@@ -286,10 +355,13 @@ class _DeliveryRules:
         if not self.claims:
             self._need(r, goal, kind, station, t)
             return
+        if self.queue_rule == "near":
+            self._to_station_near(r, station, kind, t)
+            return
         free = self.queues.free_for(station, r.idx)
         drive = self.spot_dist[station]
         spot = self.parking.nearest_free(drive)
-        on_spot = r.spot is not None and r.on_station is None and r.pos == self.problem.spots[r.spot]
+        on_spot = r.spot is not None and r.on_station is None and r.pos == self.spots[r.spot]
         if on_spot:
             close = drive[r.spot] <= CLAIM_RADIUS or (spot is not None and drive[r.spot] <= drive[spot])
         else:
@@ -303,11 +375,59 @@ class _DeliveryRules:
         elif spot is not None:
             self.parking.owner[spot] = r.idx
             r.booked_spot, r.station_kind = spot, kind
-            self._need(r, self.problem.spots[spot], "hold", station, t)
+            self._need(r, self.spots[spot], "hold", station, t)
             self.hold_legs += 1
         else:                                 # nowhere to queue yet: decide again a little later
             self.enter(r, "wait", t)
             r.station, r.station_kind, r.wake = station, kind, t + RETARGET_S
+
+    def _to_station_near(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
+        """queue="near" (ours, see the module text): claim the station when nobody holds it, queues for it
+        or is bound for one of its places; else queue on its nearest free place (the nearest free parking
+        spot when all are taken; the spot r stands on when that is no nearer; nowhere: decide again later)."""
+        slots = self.slots.get(station, [])
+        bound = any(self.parking.owner[i] is not None and self.parking.owner[i] != r.idx for i in slots)
+        afar = NEAR_CLAIM_FROM_AFAR or not slots or math.dist(r.pos, self.problem.stations[station]) <= CLAIM_RADIUS
+        if self.queues.free_for(station, r.idx) and not self.queues.has_queue(station) and not bound and afar:
+            self.queues.claim(station, r.idx)
+            self._need(r, self.problem.stations[station], kind, station, t)
+            return
+        drive = self.spot_dist[station]
+        spot = next((i for i in slots if self.parking.owner[i] is None), None)
+        if spot is None:
+            spot = self.parking.nearest_free(drive, self.general)
+        on_spot = (r.spot is not None and r.on_station is None and self.parking.owner[r.spot] == r.idx
+                   and r.pos == self.spots[r.spot])
+        if on_spot and (spot is None or drive[r.spot] <= drive[spot]):
+            self._queue(r, station, kind, t)   # wait right here
+            self._move_up(t)
+        elif spot is not None:
+            self.parking.owner[spot] = r.idx
+            r.booked_spot, r.station_kind = spot, kind
+            self._need(r, self.spots[spot], "hold", station, t)
+            self.hold_legs += 1
+        else:
+            self.enter(r, "wait", t)
+            r.station, r.station_kind, r.wake = station, kind, t + RETARGET_S
+
+    def _move_up(self, t: float) -> None:
+        """queue="near": robots standing in a queue, in its order, each move to the nearest free place of
+        their station closer to it than where they stand (a freed place goes to the first robot behind)."""
+        for station, waiting in self.queues.waiting.items():
+            slots = self.slots.get(station)
+            if not waiting or not slots:
+                continue
+            for i in waiting:
+                q = self.robots[i]
+                if q.phase != "queued":
+                    continue                   # moving up already
+                rank = slots.index(q.spot) if q.spot in slots else len(slots)
+                spot = next((j for j in slots[:rank] if self.parking.owner[j] is None), None)
+                if spot is not None:
+                    self.parking.owner[spot] = q.idx
+                    q.booked_spot = spot
+                    self._need(q, self.spots[spot], "hold", station, t)
+                    self.hold_legs += 1
 
     def _admit_or_wait(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         """Behaviour fleet with admission (ours, see the module text): to the station when it admits
@@ -357,7 +477,7 @@ class _DeliveryRules:
     def spot_near_here(self, r: _SimRobot) -> int | None:
         """The free parking spot closest to the station r stands on."""
         assert r.on_station is not None
-        return self.parking.nearest_free(self.spot_dist[r.on_station])
+        return self.parking.nearest_free(self.spot_dist[r.on_station], self.general)
 
     def evacuate(self, r: _SimRobot, spot: int) -> None:
         """r clears its station for the parking spot instead of going where it decided (that
@@ -368,7 +488,7 @@ class _DeliveryRules:
                 and self.queues.holder.get(r.station) == r.idx):
             self.queues.release(r.station)
         self.parking.owner[spot], r.booked_spot = r.idx, spot
-        r.target, r.target_kind, r.station = self.problem.spots[spot], "evac", None
+        r.target, r.target_kind, r.station = self.spots[spot], "evac", None
 
     # -- events ---------------------------------------------------------------------------------
     def left(self, r: _SimRobot, t: float) -> None:
@@ -381,6 +501,8 @@ class _DeliveryRules:
             self.queues.release(r.on_station)
             r.on_station = None
         r.progress_t = t
+        if self.queue_rule == "near":
+            self._move_up(t)
 
     def arrived(self, r: _SimRobot, t: float) -> None:
         """r reached its target."""
@@ -396,11 +518,16 @@ class _DeliveryRules:
         elif r.target_kind == "hold":
             station = r.station
             assert station is not None
-            if self.queues.holder.get(station) is None:
+            holder = self.queues.holder.get(station)
+            if holder is None or (self.queue_rule == "near" and holder == r.idx):   # near: handed over en route
+                if r.idx in self.queues.waiting[station]:
+                    self.queues.waiting[station].remove(r.idx)
                 self.queues.claim(station, r.idx)
                 self._need(r, self.problem.stations[station], r.station_kind, station, t)
             else:
                 self._queue(r, station, r.station_kind, t)
+            if self.queue_rule == "near":
+                self._move_up(t)
         elif r.target_kind == "evac":
             self.next_target(r, t)
         else:
@@ -430,10 +557,14 @@ class _DeliveryRules:
         for i in handed:
             r = self.robots[i]
             assert r.station is not None
+            if r.phase == "drive":   # queue="near": moving up; it goes on to the station on arrival
+                continue
             if r.phase == "need" and r.booked_spot is not None:   # its leg to a waiting place never began
                 self.parking.owner[r.booked_spot], r.booked_spot = None, None
             self._need(r, self.problem.stations[r.station], r.station_kind, r.station, t)
             out.append(r)
+        if handed and self.queue_rule == "near":
+            self._move_up(t)
         return out
 
     # -- measures -------------------------------------------------------------------------------

@@ -83,16 +83,37 @@ class Budget:
     at CTime 1170 and 1304 s under different loads with wall-clock budgets). As a backstop it also
     runs out once :data:`WALL_BACKSTOP` times as many wall-clock seconds have passed. ``None``: no
     bound.
-    ``wall``: wall-clock seconds instead (PRIOR's own ``time_limit_s``, as published)."""
+    ``wall``: wall-clock seconds instead (PRIOR's own ``time_limit_s``, as published).
+
+    :attr:`backstops` counts the CPU budgets that ran out on the backstop before their CPU seconds (a
+    starved process: then what the planner did depends on the load; the delivery benchmark reports it)."""
+
+    #: CPU budgets (of any instance, in this process) that ran out on the wall-clock backstop first
+    backstops: ClassVar[int] = 0
+    #: budgets (in this process) that ran out at all, on either clock (checked and found spent)
+    spent: ClassVar[int] = 0
 
     def __init__(self, cpu_s: float | None, wall: bool = False):
         self.cpu_s = cpu_s
         self._cpu_end = math.inf if cpu_s is None or wall else time.thread_time() + cpu_s
         self._wall_end = math.inf if cpu_s is None else time.perf_counter() + (1.0 if wall else WALL_BACKSTOP) * cpu_s
+        self._counted = False
 
     def passed(self) -> bool:
         """True once the budget is spent."""
-        return time.thread_time() > self._cpu_end or time.perf_counter() > self._wall_end
+        if time.thread_time() > self._cpu_end:
+            self._count(backstop=False)
+            return True
+        if time.perf_counter() <= self._wall_end:
+            return False
+        self._count(backstop=self._cpu_end != math.inf)
+        return True
+
+    def _count(self, backstop: bool) -> None:
+        if not self._counted:
+            self._counted = True
+            Budget.spent += 1
+            Budget.backstops += backstop
 
     def left(self) -> float:
         """Seconds left (CPU, or wall-clock with ``wall``; 0 once spent, at the backstop too; infinite
