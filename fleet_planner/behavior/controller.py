@@ -117,6 +117,7 @@ class BehaviorController:
         self.seen_standing: dict[str, tuple[Point, float]] = {}  # robots seen standing in its way (see _remember)
         self.making_way: tuple[str, float] | None = None  # (robot, until): Dock making way (see _dock_make_way)
         self.deadlocks = self.replans = self.replan_failures = self.yields = self.escapes = self.steps_out = 0
+        self.ways_made = 0        # times it made way for a robot pinned in its approach (``_dock_make_way``)
         self.nearly_reached = 0   # waypoints counted reached a few cm short (``_reached_nearly``)
 
     # -- public ---------------------------------------------------------------------------
@@ -479,6 +480,7 @@ class BehaviorController:
         for o, critical in scan_front_area(me, sensed, self.params):
             if critical and o.partner == self.id and o.travelling and o.behavior is not B.DOCK:
                 self.making_way = (o.id, self.time + self.params.avoid_timeout)
+                self.ways_made += 1
                 return o
         return None
 
