@@ -347,7 +347,7 @@ def main() -> None:
     print("  counters:", {k: v for k, v in res.extra.items() if k not in ("mean_phase_s", "stalled")})
     ctl = [run.fleet.controller(i) for i in run.fleet.ids]
     print(f"  escapes {sum(c.escapes for c in ctl)}, yields {sum(c.yields for c in ctl)}, "
-          f"steps against the lanes {sum(c.steps_out for c in ctl)}")
+          f"steps against the lanes {sum(c.steps_out for c in ctl)}, ways made by Dock {sum(c.ways_made for c in ctl)}")
     if budget is not None:
         budget.print()
     kinds = report(run, a.near)

@@ -711,3 +711,53 @@ def test_a_robot_whose_escape_was_in_vain_steps_out_against_the_lanes(monkeypatc
     p, q = control.controller("p"), control.controller("q")
     assert not control.arrived("p") and not control.arrived("q")
     assert p.escapes >= 5 and p.steps_out == 0 and q.replan_failures >= 20
+
+def _docking_across_a_pinned_robot() -> BehaviorFleet:
+    """The north-east corner of warehouse-10-20-10-2-1 at S4 on ARMO's road map (shifted by
+    (-129, -56) m): a top aisle y = 5.5 under the wall, eastbound only, racks below it west of x = 6,
+    the side aisles x = 6.5 and 7.5 northbound, x = 8.5 southbound. d holds station S at (7.5, 5.5)
+    and docks diagonally from the side aisle; b, bound east along the top aisle, stands 0.73 m from
+    it against the wall; q1 queues behind b, q2 (bound for S too) behind d. Positions as measured
+    (100 robots, t = 1000 s: r12, r19, r45, r16); d and b have passed their cells' centres."""
+    from fleet_planner.roadmap import _BIT, RoadMap, with_lanes
+
+    rows = ["@" * 14, "." * 14, "." * 14, "@" * 6 + "." * 8, "@" * 6 + "." * 8, "." * 14, "@" * 14]
+    grid = GridMap.from_rows(rows)
+    n, s, w = (np.uint8(_BIT[d]) for d in ((0, 1), (0, -1), (-1, 0)))
+    allowed = RoadMap.open(grid).allowed.copy()
+    allowed[5, :] &= ~w                      # the top aisle: eastbound
+    allowed[1:6, 6:8] &= ~s                  # x = 6.5, 7.5: northbound
+    allowed[1:6, 8] &= ~n                    # x = 8.5: southbound
+    grid = with_lanes(grid, RoadMap(allowed, grid.resolution))
+    radius = 0.5 ** 1.5
+    robots = [RobotSpec("d", radius, 1.0, (6.92, 4.92), (7.5, 5.5)),
+              RobotSpec("b", radius, 1.0, (6.79, 5.64), (12.5, 1.5)),
+              RobotSpec("q1", radius, 1.0, (5.58, 5.5), (12.5, 2.5)),
+              RobotSpec("q2", radius, 1.0, (6.82, 3.62), (7.5, 5.5))]
+    fleet = BehaviorFleet(grid, robots, BehaviorParams())
+    for r in robots:
+        fleet.assign(r.id, r.goal, station="S" if r.id in ("d", "q2") else None)
+    for k in ("d", "b"):
+        fleet.controller(k).wp = 1           # past the centre of its cell, the path's first waypoint
+    return fleet
+
+
+def test_a_docking_robot_makes_way_for_a_robot_pinned_in_its_approach(monkeypatch):
+    """Dock keeps moving, the others give way (IV.B.5); b cannot (the wall beside it, q1 behind
+    it, q2 where its Avoid would pass d) and waits for d, which the safety layer stops 0.73 m from
+    b: a wait cycle of two that no WaitMessage finds (d does not wait). Control: both stand 120 s
+    (the measured lock: 1477 s, 16 robots behind). Ours (``BehaviorController._dock_make_way``):
+    after ``avoid_timeout`` d backs off from b, still in its docking region, b passes, d docks."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _docking_across_a_pinned_robot()
+    assert _drive(fleet, limit_s=60.0) >= 0.0   # checks the walls at every step
+    d = fleet.controller("d")
+    assert fleet.arrived("d") and fleet.arrived("b"), fleet.behaviors()
+    assert d.holds is not None and np.allclose(d.position, (7.5, 5.5))
+    monkeypatch.setattr(BehaviorController, "_dock_make_way", lambda self, me, sensed: None)
+    control = _docking_across_a_pinned_robot()
+    _drive(control, limit_s=120.0)
+    d = control.controller("d")
+    assert not control.arrived("d") and not control.arrived("b")
+    assert d.holds is not None and d.blocked_since is not None and control.time - d.blocked_since > 100.0
