@@ -410,7 +410,7 @@ class BehaviorController:
             self._replan(sensed)
         elif (self.params.escape_after > 0 and self.escape_to is None and self.behavior is not B.WAIT_FOR_DOCKING
               and self.time - self.progress_at > self.params.escape_after and self.time >= self.escape_ready):
-            self._escape_stalled(sensed)
+            self._escape_or_step_out(sensed)
 
     def _parked_in_docking_region(self) -> None:
         """Interpretation (ours, issue 13): a robot that left the station it held for a goal inside
@@ -445,25 +445,9 @@ class BehaviorController:
         if rival is None and self._leaving() and self._stalled():
             in_way = [o for o in sensed if in_critical_area(me, o, self.params)]
             if any(self._does_not_give_way(o) for o in in_way):
-                self._replan_leaving(sensed, in_way)
+                self._replan(sensed)
             elif any(self._given_up_on(o) for o in in_way) and self.time >= self.replan_after:
                 self._replan_round(in_way)
-
-    def _replan_leaving(self, sensed: Sequence[RobotView], in_way: Sequence[RobotView]) -> None:
-        """A leaving Dock robot stopped by a robot that does not give way re-plans (IV.C.1); when
-        that finds no way, it re-plans round the robots in its way without a virtual wall
-        (:meth:`_replan_round`).
-
-        Interpretation (ours, issue 13): the virtual wall is treated like a wall, grown by the
-        robot's radius, and a wall cell just beyond the radius from the robot (left in the wall)
-        then shuts it in its own cell; a robot holding its station does not escape (:meth:`_escape`).
-        Measured: 200 robots on `large` with ``_escape_stalled``, r198 leaving B098 0.74 m beside
-        r188 parked at its home, the first waypoint past r188: 331 failed re-plans in 1600 s, two
-        robots waiting for B098, the run stalled at 595/600; with this, 600/600 from t = 0 (5622 s)."""
-        failures = self.replan_failures
-        self._replan(sensed)
-        if self.replan_failures > failures:
-            self._replan_round(in_way)
 
     def _dock_make_way(self, me: RobotView, sensed: list[RobotView]) -> RobotView | None:
         """The robot a Dock robot driving to its station makes way for now (or None).
@@ -719,29 +703,6 @@ class BehaviorController:
                 self._set(B.FOLLOW_WAYPOINT, None)
                 return True
         return False
-
-    def _escape_stalled(self, sensed: Sequence[RobotView]) -> None:
-        """No progress for ``escape_after``: escape, else a step against the lanes
-        (:meth:`_escape_or_step_out`); a robot that was driving round a standing robot (Avoid, the
-        partner parked) remembers the robots standing in range first, as a failed re-plan does
-        (:meth:`_remember`).
-
-        Interpretation (ours, issue 13): an escape is what a failed re-plan falls back on, and a
-        re-plan remembers the standing robots it failed on; the escape for lack of progress forgot
-        them. Measured: 200 robots on `large` (stress25's 599/600), r173 in the 1.3 m gap between two
-        rows of robots parked at their homes (2 m apart), its path cutting diagonally through the
-        upper row: Avoid of r183 and r21 in turn (the partner changed every step, so the Avoid never
-        timed out), escape after 30 s towards the aisle above by the west opening, a parked robot in
-        it, re-plan with the virtual wall across the opening from 7 m away (out of range of the row)
-        straight through the same robots to the east one, and so on every 30 s for 1200 s.
-        Remembered, the re-plan keeps out of the row (0.29 m clear of each disc, outside the drive
-        channel): from the 5500 s snapshot 600/600 at t = 5609 s (without: r173 still looping at
-        6200 s, 599). Only after an Avoid of a parked robot: remembering at every such escape slowed
-        BBMRCA at 50 (large 719 s against 699)."""
-        partner = next((o for o in sensed if o.id == self.partner), None)
-        if self.behavior is B.AVOID and partner is not None and not partner.travelling:
-            self._remember(sensed)
-        self._escape_or_step_out(sensed)
 
     def _end_escape(self, sensed: Sequence[RobotView]) -> None:
         """An escaping robot: back to its goal when the escape took too long, or once it stood
