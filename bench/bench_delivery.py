@@ -343,12 +343,20 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
 
 
 def main(argv=None) -> int:
-    from tqdm import tqdm
-
     args = _args(argv)
-    planner_base.WALL_BACKSTOP = args.backstop
     if args.from_csv is not None:
         return report(ordered([r for path in args.from_csv for r in read_csv(path)], args.maps, args.methods), args)
+    before = planner_base.WALL_BACKSTOP
+    planner_base.WALL_BACKSTOP = args.backstop   # for these runs only (a caller's process keeps its own)
+    try:
+        return _run(args)
+    finally:
+        planner_base.WALL_BACKSTOP = before
+
+
+def _run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
     if not args.maps_dir.is_dir() and any(m not in BUILTIN_MAPS for m in args.maps):
         sys.exit(f"bench_delivery: no maps directory {args.maps_dir}")
     rows: list[Row] = []
