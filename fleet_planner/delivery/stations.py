@@ -373,13 +373,21 @@ class _DeliveryRules:
         elif close and on_spot:
             self._queue(r, station, kind, t)  # wait right here
         elif spot is not None:
-            self.parking.owner[spot] = r.idx
-            r.booked_spot, r.station_kind = spot, kind
-            self._need(r, self.spots[spot], "hold", station, t)
-            self.hold_legs += 1
+            self._hold_on(r, spot, station, kind, t)
         else:                                 # nowhere to queue yet: decide again a little later
-            self.enter(r, "wait", t)
-            r.station, r.station_kind, r.wake = station, kind, t + RETARGET_S
+            self._decide_later(r, station, kind, t)
+
+    def _hold_on(self, r: _SimRobot, spot: int, station: str, kind: str, t: float) -> None:
+        """r books ``spot`` and drives there to wait for ``station`` (a "hold" leg)."""
+        self.parking.owner[spot] = r.idx
+        r.booked_spot, r.station_kind = spot, kind
+        self._need(r, self.spots[spot], "hold", station, t)
+        self.hold_legs += 1
+
+    def _decide_later(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
+        """Nowhere to wait for ``station`` yet: r decides again :data:`RETARGET_S` later."""
+        self.enter(r, "wait", t)
+        r.station, r.station_kind, r.wake = station, kind, t + RETARGET_S
 
     def _to_station_near(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         """queue="near" (ours, see the module text): claim the station when nobody holds it, queues for it
@@ -402,13 +410,9 @@ class _DeliveryRules:
             self._queue(r, station, kind, t)   # wait right here
             self._move_up(t)
         elif spot is not None:
-            self.parking.owner[spot] = r.idx
-            r.booked_spot, r.station_kind = spot, kind
-            self._need(r, self.spots[spot], "hold", station, t)
-            self.hold_legs += 1
+            self._hold_on(r, spot, station, kind, t)
         else:
-            self.enter(r, "wait", t)
-            r.station, r.station_kind, r.wake = station, kind, t + RETARGET_S
+            self._decide_later(r, station, kind, t)
 
     def _move_up(self, t: float) -> None:
         """queue="near": robots standing in a queue, in its order, each move to the nearest free place of
@@ -424,10 +428,7 @@ class _DeliveryRules:
                 rank = slots.index(q.spot) if q.spot in slots else len(slots)
                 spot = next((j for j in slots[:rank] if self.parking.owner[j] is None), None)
                 if spot is not None:
-                    self.parking.owner[spot] = q.idx
-                    q.booked_spot = spot
-                    self._need(q, self.spots[spot], "hold", station, t)
-                    self.hold_legs += 1
+                    self._hold_on(q, spot, station, q.station_kind, t)
 
     def _admit_or_wait(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         """Behaviour fleet with admission (ours, see the module text): to the station when it admits
@@ -451,10 +452,7 @@ class _DeliveryRules:
             admission.force(station, r.idx)
             self._need(r, self.problem.stations[station], kind, station, t)
             return
-        self.parking.owner[spot] = r.idx
-        r.booked_spot, r.station_kind = spot, kind
-        self._need(r, self.problem.spots[spot], "hold", station, t)
-        self.hold_legs += 1
+        self._hold_on(r, spot, station, kind, t)
 
     def _queue(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         self.enter(r, "queued", t)
