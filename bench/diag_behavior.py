@@ -21,7 +21,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bench.bench_delivery import make_problem  # noqa: E402
-from fleet_planner.delivery.behavior_run import ADMIT, _BehaviorRun  # noqa: E402
+from fleet_planner.delivery.behavior_run import ADMIT, WAITING_PHASES, _BehaviorRun  # noqa: E402
 from fleet_planner.delivery.result import RunLimits  # noqa: E402
 
 
@@ -85,7 +85,7 @@ def report(run, near: bool = False, quiet: bool = False) -> collections.Counter:
     fleet = run.fleet
     t = fleet.time
     stuck = [r for r in run.robots
-             if run.rules.busy(r) and r.phase not in ("dock", "queued") and t - r.progress_t > 120]
+             if run.rules.busy(r) and r.phase not in WAITING_PHASES and t - r.progress_t > 120]
     kinds: collections.Counter = collections.Counter()
     for r in stuck:
         c = fleet.controller(r.id)
@@ -289,10 +289,7 @@ def main() -> None:
             problem = lanes_problem(problem, load_lanes(a.lanes, problem.grid, problem.radius))
         limits = RunLimits(cap_s=a.cap, stall_s=a.stall, no_progress_s=120.0, retry_s=2.0, wall_cap_s=a.wall_cap)
         run = _BehaviorRun(problem, 0.1, limits, False, None, a.admit or None)
-        for r in run.robots:
-            run.rules.next_target(r, 0.0)
-            if r.phase == "need":   # not queued for its station
-                run._assign(r, 0.0)
+        run.start()
     from tqdm import tqdm
 
     cpu0, wall0, steps0 = time.process_time(), time.time(), run.steps

@@ -26,6 +26,9 @@ from .stations import _DeliveryRules, _SimRobot
 #: :mod:`.stations`): the 200-robot stress run on `large` (``bench/diag_behavior.py --admit``). Off by
 #: default (``admit=None``): the paper's fleet, and the paper table's rows stay as they were.
 ADMIT = 2
+#: phases of a busy robot that make no progress by design (docking; queued for its station's admission):
+#: neither a stall nor a deadlock
+WAITING_PHASES = ("dock", "queued")
 
 
 class _BehaviorRun:
@@ -53,11 +56,15 @@ class _BehaviorRun:
         self.log: list[np.ndarray] = [self.pos.copy()] if record else []   # positions at every step
         self.times: list[float] = [0.0] if record else []
 
-    def run(self) -> DeliveryResult:
+    def start(self) -> None:
+        """Every robot's first target, and its path when it is not queued for its station."""
         for r in self.robots:
             self.rules.next_target(r, 0.0)
             if r.phase == "need":   # not queued for its station
                 self._assign(r, 0.0)
+
+    def run(self) -> DeliveryResult:
+        self.start()
         stop = "done"
         while self.rules.ctime is None:
             why = self._stop_now()
@@ -73,7 +80,7 @@ class _BehaviorRun:
         t, limits = self.fleet.time, self.limits
         if t >= limits.cap_s:
             return "cap"
-        stuck = [r for r in self.robots if self.rules.busy(r) and r.phase not in ("dock", "queued")]
+        stuck = [r for r in self.robots if self.rules.busy(r) and r.phase not in WAITING_PHASES]
         if stuck and all(t - r.progress_t > limits.stall_s for r in stuck):
             return "stall"
         if self.tally.wall_s() > limits.wall_cap_s:
@@ -152,7 +159,7 @@ class _BehaviorRun:
             avg_velocity=mean_velocity(self.driven, t), decision_s=tally.decide_wall_s / max(self.steps, 1),
             decision_unit="step", planner_wall_s=tally.decide_wall_s, legs=tally.legs,
             failed_plans=tally.failed_plans, collisions=self.overlap_events, min_gap=self.min_gap,
-            deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock", "queued")), wall_s=tally.wall_s(),
+            deadlocks=rules.deadlocked(t, self.limits.no_progress_s, WAITING_PHASES), wall_s=tally.wall_s(),
             positions=np.array(self.log) if self.record else None,
             times=np.array(self.times) if self.record else None,
             extra={"mean_phase_s": rules.mean_phase_s(t),
