@@ -420,7 +420,6 @@ class DelayScheduler:
         """The network under the final timing with holds: a robot's node has its departure and its
         time from departure to arrival (holds included); a link's T1 / T2 are when the robot first
         reaches the region, T4 / T3 when it last leaves it."""
-        rank = {x: n for n, x in enumerate(order)}
 
         def arrival(x: int) -> float:
             return float(self.arr[x][-1]) if len(self.arr[x]) > 1 else 0.0
@@ -433,8 +432,7 @@ class DelayScheduler:
         table = self.model.region_table()
         n = len(self.model.paths)
         rank_of = np.full(n, -1, dtype=np.int64)
-        rank_of[np.fromiter(rank, dtype=np.int64, count=len(rank))] = np.fromiter(rank.values(), dtype=np.int64,
-                                                                                    count=len(rank))
+        rank_of[np.asarray(order, dtype=np.int64)] = np.arange(len(order))   # -1: not in ``order``
         x, y = table[:, 0].astype(np.int64), table[:, 1].astype(np.int64)
         table = table[(rank_of[x] >= 0) & (rank_of[y] >= 0)]
         if not len(table):
