@@ -656,3 +656,47 @@ def test_a_docking_robot_makes_way_for_a_robot_pinned_in_its_approach(monkeypatc
     d = control.controller("d")
     assert not control.arrived("d") and not control.arrived("b")
     assert d.holds is not None and d.blocked_since is not None and control.time - d.blocked_since > 100.0
+
+
+def _leaving_past_a_parked_robot() -> BehaviorFleet:
+    """BBMRCA on `large`, 40 robots, at chute_7 (x 40-62 m of the map, shifted by -40 m): d leaves
+    the station it still holds (Dock) north through the 2.5 m gap between two racks, where p is
+    parked at its home (4.75, 4.25); d's path to (8.75, 5.75) runs through p's disc, and the safety
+    layer stopped d 0.74 m from p (the sum of radii is 0.71 m). Its re-plan (the virtual wall
+    closes the gap) runs east round the racks, its first step again bearing towards p. Positions
+    as measured (r14, r20, t = 548 s)."""
+    rack, aisle = "@@@@@@.....@@@@@@@@@@@@@@@@@@@@@@@@.....@@@@", "." * 44   # y from 0 up, 0.5 m rows
+    rows = ["@" * 44] + ["......@@@..........@@@..........@@@........."] * 2 + [aisle] * 5 + [rack] * 2 \
+        + [aisle] * 3 + [rack] * 2 + [aisle] * 3
+    grid = GridMap.from_rows(rows, resolution=0.5)
+    radius, station = 0.5 ** 1.5, (3.75, 2.25)
+    fleet = BehaviorFleet(grid, [RobotSpec("d", radius, 1.0, station, station),
+                                 RobotSpec("p", radius, 1.0, (4.75, 4.25), (4.75, 4.25))])
+    fleet.assign("p", (4.75, 4.25))            # parked: arrived where it stands
+    fleet.assign("d", station, station="chute_7")
+    fleet.step(0.1)
+    d = fleet.controller("d")
+    assert d.holds is not None
+    d.pos = np.array([4.373, 3.609])
+    fleet.assign("d", (8.75, 5.75))
+    d._set_path(np.array([[5.25, 5.75], [8.75, 5.75]]))
+    return fleet
+
+
+def test_a_robot_leaving_its_station_slides_past_a_parked_robot_its_path_grazes(monkeypatch):
+    """Every motion of d along its path brings it closer to p inside the safety margin, so the
+    safety layer refuses it, and d's re-plans cannot keep out of p's disc, which d stands in
+    already: control, d stands 120 s (measured: 600 s, 130 re-plans, the run's last delivery
+    never made). Ours (``BehaviorController._slide_past_standing``): after half
+    ``blocked_timeout`` d drops the part of its step that points at p and slides round it."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _leaving_past_a_parked_robot()
+    assert _drive(fleet, limit_s=60.0) >= 0.0   # checks the walls at every step
+    assert fleet.arrived("d") and fleet.controller("d").slides >= 1
+    assert np.allclose(fleet.positions()[1], (4.75, 4.25))   # p never moved
+    monkeypatch.setattr(BehaviorController, "_slide_past_standing", lambda self, wanted, sensed: None)
+    control = _leaving_past_a_parked_robot()
+    _drive(control, limit_s=120.0)
+    assert not control.arrived("d")
+    assert np.linalg.norm(control.positions()[0] - (4.373, 3.609)) < 0.05
