@@ -39,6 +39,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from fleet_planner import budget  # noqa: E402
 from fleet_planner.delivery import (  # noqa: E402
     METHODS,
     QUEUE_RULES,
@@ -50,7 +51,6 @@ from fleet_planner.delivery import (  # noqa: E402
     warehouse_problem,
 )
 from fleet_planner.grid import GridMap  # noqa: E402
-from fleet_planner.planners import base as planner_base  # noqa: E402
 from fleet_planner.warehouse import generate_warehouse, load_warehouse  # noqa: E402
 
 BUILTIN_MAPS = ("warehouse", "large", "large2x")
@@ -323,7 +323,7 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
         t0 = time.perf_counter()
         problem = armo_problem(problem)[0]
         pre = time.perf_counter() - t0
-    cpu0, backstops0, out0 = time.process_time(), planner_base.Budget.backstops, planner_base.Budget.spent
+    cpu0, backstops0, out0 = time.process_time(), budget.Budget.backstops, budget.Budget.spent
     res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress,
                    queue=queue)
     if res.collisions or res.violations:
@@ -336,8 +336,8 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
     row = to_row(m, res)
     row.precompute_s = pre
     row.cpu_s = time.process_time() - cpu0
-    row.backstops = planner_base.Budget.backstops - backstops0
-    row.budgets_out = planner_base.Budget.spent - out0
+    row.backstops = budget.Budget.backstops - backstops0
+    row.budgets_out = budget.Budget.spent - out0
     row.queue = queue
     return row
 
@@ -346,12 +346,12 @@ def main(argv=None) -> int:
     args = _args(argv)
     if args.from_csv is not None:
         return report(ordered([r for path in args.from_csv for r in read_csv(path)], args.maps, args.methods), args)
-    before = planner_base.WALL_BACKSTOP
-    planner_base.WALL_BACKSTOP = args.backstop   # for these runs only (a caller's process keeps its own)
+    before = budget.WALL_BACKSTOP
+    budget.WALL_BACKSTOP = args.backstop   # for these runs only (a caller's process keeps its own)
     try:
         return _run(args)
     finally:
-        planner_base.WALL_BACKSTOP = before
+        budget.WALL_BACKSTOP = before
 
 
 def _run(args: argparse.Namespace) -> int:

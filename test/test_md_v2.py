@@ -231,7 +231,7 @@ def test_md_budgets_count_cpu_seconds_not_wall_clock_seconds():
     import threading
     import time
 
-    from fleet_planner.planners.base import WALL_BACKSTOP, Budget
+    from fleet_planner.budget import WALL_BACKSTOP, Budget
 
     budget = Budget(0.2)   # (its backstop, 2 s wall, leaves room for a loaded machine)
     threading.Event().wait(0.3)   # more than the budget in wall-clock time, no CPU

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..budget import Budget
 from ..collision import CollisionModel
 from ..geometry import polyline_keeps_off, polyline_passes_near
 from ..grid import GridMap
@@ -41,7 +42,7 @@ from ..model import (
 )
 from ..scheduler import HOLDS, Blocked, DelayScheduler
 from . import md_crowd
-from .base import Budget, Planner, Progress
+from .base import Planner, Progress
 from .md_crowd import crowding, sum_of_arrivals
 from .md_search import PrioritySearch
 
@@ -158,7 +159,7 @@ class MDPlanner(Planner):
     wait and takes the candidate with the earliest arrival under holds. ``search`` (default on):
     when greedy re-ordering gives up, the priority search of :mod:`.md_search` tries further orders
     until ``time_limit`` s of CPU have been spent since planning began (at most 10 + 2 N attempts;
-    md's budgets are CPU seconds, :class:`~.base.Budget`, so that its plans do not depend on the load);
+    md's budgets are CPU seconds, :class:`~fleet_planner.budget.Budget`, so that its plans do not depend on the load);
     ``fallback`` (default "crowd"; a registered ``dense`` planner is preferred when there is one):
     the dense solver that plans when the search fails, named in the plan's ``info["fallback"]``;
     None refuses instead (and switches off the two uses of the dense solver that follow; so do

@@ -45,10 +45,11 @@ import shapely
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components, dijkstra
 
+from ..budget import Budget
 from ..geometry import segment_point_distance_xy
 from ..grid import GridMap
 from ..model import Plan, PlanningError, RobotSpec, TimedPath
-from .base import Budget, Planner, Progress, incremental_problem
+from .base import Planner, Progress, incremental_problem
 
 ORDERS = ("given", "shortest", "longest")
 
@@ -101,7 +102,7 @@ class PriorPlanner(Planner):
         self.max_wait_s = float(max_wait_s)
         self.margin = float(margin)
         self.max_reorders = max_reorders
-        #: ``time_limit_s`` counts CPU seconds of this process (a :class:`~.base.Budget`), not wall-clock
+        #: ``time_limit_s`` counts CPU seconds of this process (a :class:`~fleet_planner.budget.Budget`), not wall-clock
         #: seconds: md's route search for legs sets it, so that its legs do not depend on the load
         self.cpu_time = False
         self._roadmaps: dict[tuple, _Roadmap] = {}
