@@ -40,6 +40,11 @@ def _xy(p: np.ndarray) -> tuple[float, float]:
     return float(p[0]), float(p[1])
 
 
+def _sensed(sensed: Sequence[RobotView], robot_id: str | None) -> RobotView | None:
+    """The view of ``robot_id`` among the robots sensed (None if out of range, or no id)."""
+    return next((o for o in sensed if o.id == robot_id), None)
+
+
 def _checked_start(grid: GridMap, robot_id: str, radius: float, max_speed: float, position: Point) -> np.ndarray:
     """The robot's start as an array, once its figures are checked (ValueError names the bad one)."""
     for name, value in (("radius", radius), ("max_speed", max_speed)):
@@ -516,7 +521,7 @@ class BehaviorController:
             return None
         if self.making_way is not None:
             rid, until = self.making_way
-            other = next((o for o in sensed if o.id == rid), None)
+            other = _sensed(sensed, rid)
             if (other is not None and self.time < until
                     and (other.partner == self.id or in_critical_area(me, other, self.params))):
                 return other
@@ -736,7 +741,7 @@ class BehaviorController:
                 self.escape_to = np.array(target)
                 if not again:
                     self.escape_end = self.time + self.params.escape_after / 2
-                    partner = next((o for o in sensed if o.id == self.partner), None)
+                    partner = _sensed(sensed, self.partner)
                     self.escaped_from = (None if partner is None
                                          else (partner.id, np.asarray(partner.position), self.pos.copy()))
                 self.escape_again = again
@@ -845,7 +850,7 @@ class BehaviorController:
         if self.escaped_from is None:
             return False
         pid, there, here = self.escaped_from
-        partner = next((o for o in sensed if o.id == pid), None)
+        partner = _sensed(sensed, pid)
         return (partner is not None and self.partner == pid and partner.partner == self.id
                 and math.dist(partner.position, there) <= self.radius and math.dist(self.pos, here) <= self.radius)
 
@@ -854,7 +859,7 @@ class BehaviorController:
         lanes = lanes_of(self.grid)
         if lanes is None or not lanes.restricts or self.partner is None or self.goal is None or self.holds:
             return False
-        partner = next((o for o in sensed if o.id == self.partner), None)
+        partner = _sensed(sensed, self.partner)
         if partner is None or partner.partner != self.id:   # only a wait cycle of the two of us
             return False
         touch = [(o.position, self.radius + o.radius + self.params.safety_margin) for o in sensed]
@@ -916,7 +921,7 @@ class BehaviorController:
         b = self.behavior
         if b not in (B.AVOID, B.EXCHANGE, B.GO_THROUGH, B.WAIT_KEEP_DISTANCE, B.WAIT_FOR_GO_THROUGH):
             return
-        partner = next((o for o in sensed if o.id == self.partner), None)
+        partner = _sensed(sensed, self.partner)
         done = partner is None or all(o.id != partner.id for o in in_front)
         if b is B.AVOID and partner is not None and not partner.travelling:
             done = not in_critical_area(me, partner, self.params)  # a standing obstacle: once my channel is clear
@@ -1039,7 +1044,7 @@ class BehaviorController:
         ``blocked_timeout``, or a behaviour running for that long while the robot came no closer
         to its goal for ``avoid_timeout``, counts as no free space. Robots standing without a path
         are obstacles like the partner, not "other robots"."""
-        partner = next((o for o in sensed if o.id == self.partner), None)
+        partner = _sensed(sensed, self.partner)
         if partner is None or self._frame() is None:
             return False
         if not stalled:
@@ -1246,7 +1251,7 @@ class BehaviorController:
             return []
         step = speed * dt
         b = self.behavior
-        partner = next((o for o in sensed if o.id == self.partner), None) if self.partner is not None else None
+        partner = _sensed(sensed, self.partner)
         if b in (B.FOLLOW_WAYPOINT, B.GO_THROUGH, B.DOCK) or (b in (B.AVOID, B.EXCHANGE) and partner is None):
             return [self._along_path(step), self._along_path(step / 2)]
         if b in (B.AVOID, B.EXCHANGE) and partner is not None:
