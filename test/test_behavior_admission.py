@@ -67,3 +67,25 @@ def test_admission_is_first_come_first_served_and_hands_over_on_docking():
     assert admission.admitted["A"] == {2, 3} and admission.waiting["A"] == []
     with pytest.raises(ValueError, match="admit"):
         _StationAdmission(["A"], cap=0)
+
+
+def test_a_robot_admitted_while_it_drives_to_its_waiting_place_goes_on_to_the_station():
+    """b queues for A (admit=1, a admitted) away from any parking spot, so it books a waiting place
+    and drives there; a docks and hands A over to b while b is still driving: b's leg goes to A now.
+    (Skipping it - a rule of the central methods' `near` queue - left b, on arrival, queued for a
+    station that had admitted it, and every robot after it waiting for ever: the 200-robot stress
+    run on `large` stopped at 575/600 with 25 robots queued.)"""
+    rules = _DeliveryRules(_dead_end(4), claims=False, admit=1)
+    assert rules.admission is not None
+    a, b = rules.robots[0], rules.robots[1]
+    assert rules.admission.admit("A", a.idx)
+    rules.left(b, 0.0)                                   # b drove off its home spot
+    b.pos = (6.25, 2.25)
+    rules._admit_or_wait(b, "A", "pick", 0.0)
+    assert b.target_kind == "hold" and b.booked_spot is not None and rules.admission.waiting["A"] == [b.idx]
+    rules.left(b, 0.0)
+    rules.enter(b, "drive", 0.0)                         # on its way to the waiting place
+    rules.admission.docked("A", a.idx)
+    assert rules.take_handed_over(1.0) == [b]
+    assert b.phase == "need" and b.target == rules.problem.stations["A"] and b.target_kind == "pick"
+    assert rules.admission.admitted["A"] == {b.idx}
