@@ -457,6 +457,7 @@ class BehaviorController:
             self._replan(sensed)
         elif (self.params.escape_after > 0 and self.escape_to is None and self.behavior is not B.WAIT_FOR_DOCKING
               and self.time - self.progress_at > self.params.escape_after and self.time >= self.escape_ready):
+            self._remember(sensed)   # what it made no progress past: kept out of on its way back (see _remember)
             self._escape_or_step_out(sensed)
 
     def _parked_in_docking_region(self) -> None:
