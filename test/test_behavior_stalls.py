@@ -700,3 +700,43 @@ def test_a_robot_leaving_its_station_slides_past_a_parked_robot_its_path_grazes(
     _drive(control, limit_s=120.0)
     assert not control.arrived("d")
     assert np.linalg.norm(control.positions()[0] - (4.373, 3.609)) < 0.05
+
+
+def _between_two_rows_of_parked_robots() -> BehaviorFleet:
+    """The 200-robot stress run on `large` (x 56-74 m of the map, shifted by -56 m; t = 5300 s):
+    16 robots parked in the corridor south of the racks, among them two rows 2 m apart (y = 1.25
+    and 3.25 at x = 9.75-12.25) and two at the west gap to the aisle y = 5.75, where d's station
+    is. d drives east along the path it planned when those were out of range: at a slant through
+    the two rows to the east gap, round the racks and back west."""
+    rows = ["@" * 36, "@@@...........@@@..........@@@.....@", "@@@...........@@@..........@@@.....@"] \
+        + ["." * 35 + "@"] * 5 + ["@@@.....@@@@@@@@@@@@@@@@@@@@@@@@...@"] * 2 + ["." * 35 + "@"] * 3 + ["@" * 36]
+    grid = GridMap.from_rows(rows, resolution=0.5)   # y from 0 up
+    parked = [(15.75, 1.25), (3.75, 3.75), (4.75, 3.25), (6.25, 1.25), (2.25, 1.25), (9.75, 1.25), (12.25, 3.25),
+              (11.25, 3.25), (12.25, 1.25), (5.25, 1.25), (10.75, 1.25), (3.75, 1.25), (3.25, 4.75), (5.75, 3.25),
+              (16.75, 2.25), (10.25, 3.25)]
+    radius = 0.5 ** 1.5
+    robots = [RobotSpec(f"p{k}", radius, 0.8, p, p) for k, p in enumerate(parked)]
+    robots.append(RobotSpec("d", radius, 0.8, (2.75, 2.75), (7.25, 5.75)))
+    fleet = BehaviorFleet(grid, robots, BehaviorParams())
+    for r in robots:
+        fleet.assign(r.id, r.goal)
+    fleet.controller("d")._set_path(np.array([[6.25, 2.25], [16.75, 3.75], [16.25, 5.75], [7.25, 5.75]]))
+    return fleet
+
+
+def test_a_robot_escaping_from_robots_it_cannot_pass_keeps_out_of_them_on_its_way_back(monkeypatch):
+    """d's Avoid switches between the two rows (the robot closest in its critical area changes as
+    it steps aside), it makes no progress and escapes west; its way back, planned out of range of
+    the rows, runs through them as before: control, 9 escapes in 300 s and d never arrives. Ours
+    (``BehaviorController._escape_for_no_progress``): escaping, it remembers the robots standing
+    in range, and its way back keeps out of them: straight through the middle of the two rows."""
+    from fleet_planner.behavior.controller import BehaviorController
+
+    fleet = _between_two_rows_of_parked_robots()
+    assert _drive(fleet, limit_s=150.0) >= 0.0   # checks the walls at every step
+    assert fleet.arrived("d") and fleet.controller("d").escapes >= 1
+    monkeypatch.setattr(BehaviorController, "_escape_for_no_progress",
+                        lambda self, sensed: self._escape_or_step_out(sensed))
+    control = _between_two_rows_of_parked_robots()
+    _drive(control, limit_s=300.0)
+    assert not control.arrived("d") and control.controller("d").escapes >= 5
