@@ -12,6 +12,20 @@ from fleet_planner.grid import GridMap
 from fleet_planner.model import RobotSpec
 
 
+def _leaving(fleet: BehaviorFleet, station: tuple[float, float], at: tuple[float, float],
+             path: list[tuple[float, float]]) -> None:
+    """Robot d docks at ``station`` (it holds it), then stands at ``at``, leaving the station for the
+    end of ``path`` along it (a scene as measured in a run)."""
+    fleet.assign("d", station, station="chute")
+    for _ in range(10):
+        fleet.step(0.1)
+    d = fleet.controller("d")
+    assert d.holds is not None
+    d.pos = np.array(at)
+    fleet.assign("d", path[-1])
+    d._set_path(np.array(path))
+
+
 def test_a_docking_robot_pushed_behind_a_wall_corner_replans():
     """Dock keeps moving (IV.B.5) but its straight way to the next waypoint may graze a wall
     corner once it was pushed off its path (WaitForDocking backs off): it must re-plan from where
@@ -280,14 +294,7 @@ def _pinned_in_a_one_way_aisle() -> BehaviorFleet:
     d0, p0 = (5.25, 2.95), (4.93, 0.87)
     fleet = BehaviorFleet(grid, [RobotSpec("d", 0.354, 0.8, d0, d0), RobotSpec("p", 0.354, 0.8, p0, p0)],
                           BehaviorParams(escape_after=0.0))
-    fleet.assign("d", (5.25, 3.0), station="chute")
-    for _ in range(10):
-        fleet.step(0.1)
-    d = fleet.controller("d")
-    assert d.holds is not None
-    d.pos = np.array([5.05, 1.59])
-    fleet.assign("d", (19.25, 1.25))
-    d._set_path(np.array([[5.39, 1.25], [19.25, 1.25]]))
+    _leaving(fleet, (5.25, 3.0), (5.05, 1.59), [(5.39, 1.25), (19.25, 1.25)])
     fleet.assign("p", (19.25, 1.75))
     fleet.controller("p")._set_path(np.array([[4.6, 1.5], [19.25, 1.75]]))
     return fleet
@@ -496,16 +503,9 @@ def _short_of_diagonal_waypoints(params: BehaviorParams) -> BehaviorFleet:
     fleet = BehaviorFleet(grid, robots, params)
     for k, p in enumerate(crowd):
         fleet.assign(f"c{k}", p)            # parked: arrived where they stand
-    fleet.assign("d", station, station="chute")
-    for _ in range(10):
-        fleet.step(0.1)
-    d, f = fleet.controller("d"), fleet.controller("f")
-    assert d.holds is not None
-    d.pos = np.array([3.269, 1.731])
-    fleet.assign("d", (0.75, 1.75))
-    d._set_path(np.array([[3.25, 1.75], [0.75, 1.75]]))
+    _leaving(fleet, station, (3.269, 1.731), [(3.25, 1.75), (0.75, 1.75)])
     fleet.assign("f", (7.25, 2.25))
-    f._set_path(np.array([[2.75, 2.25], [3.75, 2.25], [7.25, 2.25]]))
+    fleet.controller("f")._set_path(np.array([[2.75, 2.25], [3.75, 2.25], [7.25, 2.25]]))
     return fleet
 
 
@@ -673,13 +673,7 @@ def _leaving_past_a_parked_robot() -> BehaviorFleet:
     fleet = BehaviorFleet(grid, [RobotSpec("d", radius, 1.0, station, station),
                                  RobotSpec("p", radius, 1.0, (4.75, 4.25), (4.75, 4.25))])
     fleet.assign("p", (4.75, 4.25))            # parked: arrived where it stands
-    fleet.assign("d", station, station="chute_7")
-    fleet.step(0.1)
-    d = fleet.controller("d")
-    assert d.holds is not None
-    d.pos = np.array([4.373, 3.609])
-    fleet.assign("d", (8.75, 5.75))
-    d._set_path(np.array([[5.25, 5.75], [8.75, 5.75]]))
+    _leaving(fleet, station, (4.373, 3.609), [(5.25, 5.75), (8.75, 5.75)])
     return fleet
 
 
