@@ -210,12 +210,31 @@ class CollisionModel:
             self._set_bbox(x)
         dirty = set(changed)
         for x in dirty:
-            for y in self._adj.pop(x, ()):
-                key = (min(x, y), max(x, y))
-                self._pieces.pop(key, None)
-                self._regions.pop(key, None)
-                self._adj.get(y, set()).discard(x)
+            self._forget(x)
         self._compute(sorted(dirty), all_pairs=False)
+
+    def _forget(self, x: int) -> None:
+        """Drop every pair of robot x (its pieces, regions and adjacency)."""
+        adj, pieces, regions = self._adj, self._pieces, self._regions
+        for y in adj.pop(x, ()):
+            key = (x, y) if x < y else (y, x)
+            pieces.pop(key, None)
+            regions.pop(key, None)
+            theirs = adj.get(y)
+            if theirs is not None:
+                theirs.discard(x)
+
+    def _link(self, x: int, y: int) -> None:
+        """Record that robots x and y have a pair (both ways)."""
+        adj = self._adj
+        mine = adj.get(x)
+        if mine is None:
+            mine = adj[x] = set()
+        mine.add(y)
+        theirs = adj.get(y)
+        if theirs is None:
+            theirs = adj[y] = set()
+        theirs.add(x)
 
     def checkpoint(self) -> tuple:
         """What :meth:`rollback` needs to put the whole model back as it is now (an improvement
@@ -248,11 +267,7 @@ class CollisionModel:
         """Robot x back as it was at :meth:`snapshot` (its path may have changed since, nobody
         else's)."""
         x, path, times, cumlen, length, travel, segs, pieces, regions = snap
-        for y in self._adj.pop(x, ()):
-            key = (min(x, y), max(x, y))
-            self._pieces.pop(key, None)
-            self._regions.pop(key, None)
-            self._adj.get(y, set()).discard(x)
+        self._forget(x)
         self.paths[x], self.times[x], self.cumlen[x] = path, times, cumlen
         self.lengths[x], self.travel[x] = length, travel
         self._segs[x] = segs
@@ -262,8 +277,7 @@ class CollisionModel:
             self._pieces[key] = chunk
             if y in regions:
                 self._regions[key] = regions[y]
-            self._adj.setdefault(x, set()).add(y)
-            self._adj.setdefault(y, set()).add(x)
+            self._link(x, y)
         if x not in self._stale and self._tree_segs is not None:   # its rows in the index are stale
             self._stale.add(x)
             self._stale_rows += len(segs.p0)
@@ -346,14 +360,15 @@ class CollisionModel:
         pieces = pieces[np.lexsort((pieces[:, P_Y_SEG], pieces[:, P_X_SEG], pieces[:, P_B_LO], pieces[:, P_A_LO],
                                     pieces[:, P_Y], pieces[:, P_X]))]
         pair_key = pieces[:, P_X] * len(self.paths) + pieces[:, P_Y]
-        cuts = [0, *(np.nonzero(np.diff(pair_key))[0] + 1).tolist(), len(pieces)]
-        xs, ys = pieces[:, P_X].astype(np.int64).tolist(), pieces[:, P_Y].astype(np.int64).tolist()
-        for c0, c1 in zip(cuts[:-1], cuts[1:]):
-            x, y = xs[c0], ys[c0]
-            self._pieces[(x, y)] = pieces[c0:c1]
-            self._regions.pop((x, y), None)
-            self._adj.setdefault(x, set()).add(y)
-            self._adj.setdefault(y, set()).add(x)
+        first = np.concatenate([[0], np.nonzero(np.diff(pair_key))[0] + 1])
+        cuts = [*first.tolist(), len(pieces)]
+        keys = list(zip(pieces[first, P_X].astype(np.int64).tolist(), pieces[first, P_Y].astype(np.int64).tolist()))
+        self._pieces.update(zip(keys, [pieces[c0:c1] for c0, c1 in zip(cuts[:-1], cuts[1:])]))
+        regions = self._regions
+        for key in keys:
+            if regions:
+                regions.pop(key, None)
+            self._link(*key)
 
     def _direct(self, robots: list[int], others: Iterable[int], mine: _Segs, lo: np.ndarray, hi: np.ndarray,
                 reach: float) -> tuple[_Segs, np.ndarray, np.ndarray]:

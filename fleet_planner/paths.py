@@ -43,6 +43,8 @@ Disc = tuple[Point, float]
 
 _SQRT2 = math.sqrt(2.0)
 _TOL = 1e-9
+_NO_CELLS = np.zeros((0, 2), dtype=np.int64)   # no extra wall cells (read-only)
+_NO_CELLS.flags.writeable = False
 _RESULT_CACHE_SIZE = 256   # find() answers remembered per PathFinder (same inputs, same answer)
 # bit d of a cell's move mask says move _DIRS[d] = (dcol, drow) is allowed
 _BIT = {d: 1 << k for k, d in enumerate(_DIRS)}
@@ -262,6 +264,8 @@ class PathFinder:
 
     # -- cut moves ----------------------------------------------------------------------------
     def _extra_cells(self, blocked_cells: Iterable[tuple[int, int]]) -> np.ndarray:
+        if isinstance(blocked_cells, (tuple, list)) and not blocked_cells:
+            return _NO_CELLS
         cells = np.array(list(blocked_cells), dtype=float).reshape(-1, 2)
         if not len(cells):
             return np.zeros((0, 2), dtype=np.int64)
@@ -360,14 +364,14 @@ def _discs_near(discs: np.ndarray, pts: np.ndarray) -> np.ndarray:
     discs = np.ascontiguousarray(discs, dtype=float).reshape(-1, 3)
     if len(discs) < 8:
         return discs
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    reach = discs[:, 2:]
-    return np.ascontiguousarray(discs[np.all((discs[:, :2] >= lo - reach) & (discs[:, :2] <= hi + reach), axis=1)])
+    (x0, y0), (x1, y1) = pts.min(axis=0).tolist(), pts.max(axis=0).tolist()
+    x, y, reach = discs[:, 0], discs[:, 1], discs[:, 2]
+    return discs[(x >= x0 - reach) & (x <= x1 + reach) & (y >= y0 - reach) & (y <= y1 + reach)]
 
 
 def _point(name: str, p) -> np.ndarray:
     arr = np.asarray(p, dtype=float)
-    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+    if arr.shape != (2,) or not (math.isfinite(arr[0]) and math.isfinite(arr[1])):
         raise ValueError(f"{name}: expected a finite (x, y) point, got {p!r}")
     return arr
 

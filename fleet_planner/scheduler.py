@@ -234,7 +234,7 @@ class DelayScheduler:
         for n in range(start_at, len(order)):
             x = order[n]
             if (dirty is None or x in dirty or x not in self._done
-                    or any(h in changed for h in self.model.neighbours(x) if rank[h] < n)):
+                    or (changed and any(h in changed for h in self.model.neighbours(x) if rank[h] < n))):
                 before = self.delays[x]
                 before_dep = self.dep[x].copy() if self.holds == "anywhere" else None
                 blocked = self.schedule_robot(x, rank)
@@ -310,16 +310,17 @@ class DelayScheduler:
         i moving is the window in which i's segment passes within reach of j's vertex; j standing
         / i holding is i's hold interval when the two points are within reach."""
         tables = self.model.pieces_with(j, higher)   # the smaller robot index in the x columns
-        sizes = [len(t) for t in tables]
+        sizes = np.fromiter(map(len, tables), dtype=np.int64, count=len(tables))
         P = np.concatenate(tables, axis=0)   # (all (n, 28): no atleast_2d per table, as vstack does)
         higher_a = np.asarray(higher, dtype=np.int64)
         who = np.repeat(higher_a, sizes)
         swapped = np.repeat(higher_a > j, sizes)   # rows with j in the x columns: read swapped
         # each row's segment ends as timed: i's vertex times of all higher robots in one array
-        lens = np.array([len(self.arr[i]) for i in higher], dtype=np.int64)
+        arrs = [self.arr[i] for i in higher]
+        lens = np.fromiter(map(len, arrs), dtype=np.int64, count=len(arrs))
         first = np.repeat(np.cumsum(lens) - lens, sizes)
         last = np.repeat(lens - 1, sizes)
-        arr_all = np.concatenate([self.arr[i] for i in higher])
+        arr_all = np.concatenate(arrs)
         dep_all = np.concatenate([self.dep[i] for i in higher])
         # the candidates of each kind for every row, compiled (fleet_planner._md_kernels): j moving
         # / i moving (the piece's range of t_i(a) - t_j(b) shifted by i's entry time), j moving / i
@@ -336,7 +337,8 @@ class DelayScheduler:
         search over (vertex, safe interval), as in SIPP, against the higher robots' trajectories as
         timed, holds included); robots in ``start_only`` wait only before they depart."""
         m = self.model
-        higher = [i for i in m.neighbours(j) if rank.get(i, INF) < rank[j]]
+        mine = rank[j]
+        higher = [i for i in m.neighbours(j) if rank.get(i, INF) < mine]
         if not higher:
             self.set_timing(j, 0.0)
             return None
