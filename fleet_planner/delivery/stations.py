@@ -50,7 +50,7 @@ import numpy as np
 from ..geometry import polyline_length
 from ..model import Point
 from ..paths import PathFinder
-from .layout import driving_distances, queue_places
+from .layout import KEPT, driving_distances, queue_places
 from .problem import Delivery, DeliveryProblem
 
 #: central methods: a robot claims a station only from this close (m, straight line; from a parking
@@ -71,9 +71,20 @@ QUEUE_NEW = 4
 #: queue="near": a robot may claim a free station nobody queues for from any distance (False: only from within
 #: CLAIM_RADIUS, as the spots rule; from farther it drives to the station's nearest free place first)
 NEAR_CLAIM_FROM_AFAR = True
+#: central methods with ``queue="close"`` (ours): at most this many new places per station, placed before the
+#: problem's parking spots that are not homes (those stay only where they still fit beside the places)
+CLOSE_NEW = 6
+#: ... for the stations with at least this share of the busiest station's visits (the others get near's places)
+CLOSE_BUSY = 0.5
+#: queue="close": a new place never cuts a passage two robots wide (:class:`~.layout._TwoLanes`; False: only no
+#: cut passage, as near's places - the control of the tests)
+CLOSE_TWO_LANES = True
 #: the queue rules of the central methods: on parking spots near the station (the default, session 25's
-#: rule), or on queue places near it with moving up (ours, see the module text)
-QUEUE_RULES = ("spots", "near")
+#: rule), or on queue places near it with moving up (ours, see the module text): ``near`` among the problem's
+#: parking spots, ``close`` in the room next to the station the parking spots would take
+QUEUE_RULES = ("spots", "near", "close")
+#: the rules with queue places and moving up
+PLACE_RULES = ("near", "close")
 #: behaviour fleet with admission (ours): waiting places are parking spots at least this far (m,
 #: straight line) from every station a delivery loads at (out of the crowd round the loading stations)
 WAIT_AWAY = 4.0
@@ -252,7 +263,7 @@ class _DeliveryRules:
         #: queue="near": each station's queue places (spot indices, nearest first) and the station of each place
         self.slots: dict[str, list[int]] = {}
         self.slot_of: dict[int, str] = {}
-        if queue == "near":
+        if queue in PLACE_RULES:
             assert drive is not None
             self._place_slots(drive)
         self.parking = _ParkingSpots(self.spots, problem.n_robots)
@@ -287,7 +298,23 @@ class _DeliveryRules:
         parking spot that is not a home - within :data:`QUEUE_REACH` goes to its nearest station, at most
         :data:`QUEUE_SLOTS` per station, nearest first."""
         p = self.problem
-        new = queue_places(p.grid, p.stations, p.spots, QUEUE_NEW, QUEUE_REACH, p.radius)
+        if self.queue_rule == "close":   # the busy stations' places first, then the problem's other spots where
+            homes = p.spots[:p.n_robots]  # they fit, then the other stations' places as near's
+            visits = {s: 0 for s in p.stations}
+            for d in p.deliveries:
+                visits[d.pick] += 1
+                visits[d.drop] += 1
+            top = max(visits.values())
+            busy = {s: CLOSE_NEW if v >= CLOSE_BUSY * top else 0 for s, v in visits.items()}
+            new = queue_places(p.grid, p.stations, homes, busy, QUEUE_REACH, p.radius, keep=p.spots[p.n_robots:],
+                               two_lanes=CLOSE_TWO_LANES, prune_one=True)
+            self.spots = homes + new.pop(KEPT, [])
+            first = [q for qs in new.values() for q in qs]
+            rest = queue_places(p.grid, p.stations, self.spots + first, {s: 0 if busy[s] else QUEUE_NEW for s in busy},
+                                QUEUE_REACH, p.radius, two_lanes=CLOSE_TWO_LANES, prune_one=True)
+            new = {s: new[s] + rest[s] for s in new}
+        else:
+            new = queue_places(p.grid, p.stations, p.spots, QUEUE_NEW, QUEUE_REACH, p.radius)
         self.spots += [q for qs in new.values() for q in qs]
         dist = np.vstack(list(self._spot_distances(drive).values()))     # (stations, spots)
         names = list(p.stations)
@@ -355,7 +382,7 @@ class _DeliveryRules:
         if not self.claims:
             self._need(r, goal, kind, station, t)
             return
-        if self.queue_rule == "near":
+        if self.queue_rule in PLACE_RULES:
             self._to_station_near(r, station, kind, t)
             return
         free = self.queues.free_for(station, r.idx)
@@ -499,7 +526,7 @@ class _DeliveryRules:
             self.queues.release(r.on_station)
             r.on_station = None
         r.progress_t = t
-        if self.queue_rule == "near":
+        if self.queue_rule in PLACE_RULES:
             self._move_up(t)
 
     def arrived(self, r: _SimRobot, t: float) -> None:
@@ -517,14 +544,14 @@ class _DeliveryRules:
             station = r.station
             assert station is not None
             holder = self.queues.holder.get(station)
-            if holder is None or (self.queue_rule == "near" and holder == r.idx):   # near: handed over en route
+            if holder is None or (self.queue_rule in PLACE_RULES and holder == r.idx):   # handed over en route
                 if r.idx in self.queues.waiting[station]:
                     self.queues.waiting[station].remove(r.idx)
                 self.queues.claim(station, r.idx)
                 self._need(r, self.problem.stations[station], r.station_kind, station, t)
             else:
                 self._queue(r, station, r.station_kind, t)
-            if self.queue_rule == "near":
+            if self.queue_rule in PLACE_RULES:
                 self._move_up(t)
         elif r.target_kind == "evac":
             self.next_target(r, t)
@@ -561,7 +588,7 @@ class _DeliveryRules:
                 self.parking.owner[r.booked_spot], r.booked_spot = None, None
             self._need(r, self.problem.stations[r.station], r.station_kind, r.station, t)
             out.append(r)
-        if handed and self.queue_rule == "near":
+        if handed and self.queue_rule in PLACE_RULES:
             self._move_up(t)
         return out
 
