@@ -29,6 +29,16 @@ places are taken) and queues there on arrival, first come first served. When the
 the first robot in its queue gets it, and the robots behind it move up, in queue order, each to the
 nearest free place closer to the station than its own (:meth:`_DeliveryRules._move_up`).
 
+Queue places close to the busy stations (``queue="close"``; ours, issue 8): the same discipline, other places.
+On the default warehouse at 40-50 robots the problem's queue spots for the chutes stand in the chute row 2 m
+and 4.5 m from each chute and in front of the recesses by the chutes; near's places must fit round them, and
+found 0-2 new ones per chute. Here the busy stations (at least :data:`CLOSE_BUSY` of the busiest one's visits:
+the chutes) get up to :data:`CLOSE_NEW` places first, nearest by driving first, with only the stations and
+the robots' homes standing; then the problem's other parking spots stay where they still fit beside them
+(the others are not used), then the other stations get near's places. Every place also keeps every passage
+two robots wide that wide (:class:`~fleet_planner.delivery.layout._TwoLanes`), so a queue does not narrow an
+aisle the traffic needs both ways.
+
 Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
 (Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
 certain distance" and wait, first come first served (the fleet's docking arbiter); with 200 robots
