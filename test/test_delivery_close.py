@@ -134,3 +134,12 @@ def test_a_run_with_close_places_is_valid(chute, method):
     places = [rules.spots[i] for i in rules.slots["A"]]
     stood = sum(any(math.dist(w[:2], q) < 1e-6 for q in places for w in tp.waypoints) for tp in result.trajectories)
     assert stood >= 2                                             # the robots did queue on A's places
+
+
+def test_close_without_a_loading_station_is_the_spots_rule(chute):
+    # every station loaded and unloaded at (stations spread over a MovingAI map): no chute to queue at
+    both_ways = DeliveryProblem("both", chute.grid, chute.stations, [Delivery("A", "B"), Delivery("B", "A")] * 2,
+                                chute.spots, chute.n_robots)
+    rules = _DeliveryRules(both_ways, claims=True, queue="close")
+    assert rules.queue_rule == "spots" and rules.slots == {} and rules.spots == list(chute.spots)
+    assert _DeliveryRules(chute, claims=True, queue="close").queue_rule == "close"   # control: A only loads

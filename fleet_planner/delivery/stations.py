@@ -32,12 +32,15 @@ nearest free place closer to the station than its own (:meth:`_DeliveryRules._mo
 Queue places close to the busy stations (``queue="close"``; ours, issue 8): the same discipline, other places.
 On the default warehouse at 40-50 robots the problem's queue spots for the chutes stand in the chute row 2 m
 and 4.5 m from each chute and in front of the recesses by the chutes; near's places must fit round them, and
-found 0-2 new ones per chute. Here the busy stations (at least :data:`CLOSE_BUSY` of the busiest one's visits:
-the chutes) get up to :data:`CLOSE_NEW` places first, nearest by driving first, with only the stations and
-the robots' homes standing; then the problem's other parking spots stay where they still fit beside them
-(the others are not used), then the other stations get near's places. Every place also keeps every passage
+found 0-2 new ones per chute. Here the busy loading stations (where deliveries load and none unloads, with at
+least :data:`CLOSE_BUSY` of the busiest one's loads: the chutes) get up to :data:`CLOSE_NEW` places first,
+nearest by driving first, with only the stations and the robots' homes standing; then the problem's other
+parking spots stay where they still fit beside them (the others are not used), then the other stations get
+near's places. Every place also keeps every passage
 two robots wide that wide (:class:`~fleet_planner.delivery.layout._TwoLanes`), so a queue does not narrow an
-aisle the traffic needs both ways.
+aisle the traffic needs both ways. A problem without such a station (stations spread over a MovingAI map, each
+loaded and unloaded at) is run with the spots rule: there places beside the stations made CTime worse (md 1156 ->
+1190 s, PRIOR 1213 -> 1424 on warehouse-10-20-10-2-1 at 20 robots).
 
 Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
 (Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
@@ -84,7 +87,8 @@ NEAR_CLAIM_FROM_AFAR = True
 #: central methods with ``queue="close"`` (ours): at most this many new places per station, placed before the
 #: problem's parking spots that are not homes (those stay only where they still fit beside the places)
 CLOSE_NEW = 6
-#: ... for the stations with at least this share of the busiest station's visits (the others get near's places)
+#: ... for the loading stations (none unloads there) with at least this share of the busiest one's loads (the
+#: others get near's places; a problem without such a station gets the spots rule)
 CLOSE_BUSY = 0.5
 #: queue="close": a new place never cuts a passage two robots wide (:class:`~.layout._TwoLanes`; False: only no
 #: cut passage, as near's places - the control of the tests)
@@ -259,6 +263,8 @@ class _DeliveryRules:
             raise ValueError(f"queue: must be one of {', '.join(QUEUE_RULES)} (got {queue!r})")
         if queue != "spots" and not claims:
             raise ValueError(f"queue: {queue!r} is a rule of the central methods (claims=True)")
+        if queue == "close" and not self._close_stations(problem):
+            queue = "spots"   # no loading station to queue at: session 25's rule, as it was
         self.queue_rule = queue
         #: behaviour fleet: at most ``admit`` robots bound for a station at a time (None: no limit)
         self.admission = None if claims or admit is None else _StationAdmission(list(problem.stations), admit)
@@ -303,6 +309,18 @@ class _DeliveryRules:
         at = [row * grid.width + col for col, row in (grid.cell_of(*p) for p in self.spots)]
         return {s: drive[k, at] for k, s in enumerate(self.problem.stations)}
 
+    @staticmethod
+    def _close_stations(p: DeliveryProblem) -> set[str]:
+        """queue="close": the busy loading stations - where deliveries load and none unloads (the chutes), with
+        at least :data:`CLOSE_BUSY` of the busiest one's loads."""
+        loads = {s: 0 for s in p.stations}
+        for d in p.deliveries:
+            loads[d.pick] += 1
+        for d in p.deliveries:
+            loads.pop(d.drop, None)
+        top = max(loads.values(), default=0)
+        return {s for s, n in loads.items() if n and n >= CLOSE_BUSY * top}
+
     def _place_slots(self, drive: np.ndarray) -> None:
         """queue="near": new queue places (appended to :attr:`spots`), then each place - a new one or a
         parking spot that is not a home - within :data:`QUEUE_REACH` goes to its nearest station, at most
@@ -310,12 +328,8 @@ class _DeliveryRules:
         p = self.problem
         if self.queue_rule == "close":   # the busy stations' places first, then the problem's other spots where
             homes = p.spots[:p.n_robots]  # they fit, then the other stations' places as near's
-            visits = {s: 0 for s in p.stations}
-            for d in p.deliveries:
-                visits[d.pick] += 1
-                visits[d.drop] += 1
-            top = max(visits.values())
-            busy = {s: CLOSE_NEW if v >= CLOSE_BUSY * top else 0 for s, v in visits.items()}
+            close = self._close_stations(p)
+            busy = {s: CLOSE_NEW if s in close else 0 for s in p.stations}
             new = queue_places(p.grid, p.stations, homes, busy, QUEUE_REACH, p.radius, keep=p.spots[p.n_robots:],
                                two_lanes=CLOSE_TWO_LANES, prune_one=True)
             self.spots = homes + new.pop(KEPT, [])
