@@ -131,8 +131,9 @@ def _args(argv=None) -> argparse.Namespace:
                         "(options given win; --plot defaults to out/paper002.png)")
     p.add_argument("--queue", default="spots",
                    help="comma-separated queue rules of the central methods, each run in turn: spots (wait for a "
-                        "station on parking spots near it, session 25's rule) or near (on queue places a few metres "
-                        "from it, moving up; ours) (default: %(default)s)")
+                        "station on parking spots near it, session 25's rule), near (on queue places a few metres "
+                        "from it, moving up; ours) or close (near's, with the busy stations' places in the room next "
+                        "to them, placed before the other parking spots; ours) (default: %(default)s)")
     p.add_argument("--backstop", type=float, default=math.inf,
                    help="md's leg budgets are CPU seconds; they also stop after this many times their seconds of wall "
                         "time (the planners' default 10: a starved run then plans less, and its CTime depends on the "

@@ -77,7 +77,7 @@ def _start(rules, r, t):
     rules.enter(r, "drive", t)
 
 
-@pytest.mark.parametrize("queue", ["near", "spots"])
+@pytest.mark.parametrize("queue", ["near", "close", "spots"])
 def test_queue_is_first_come_first_served_and_moves_up(busy, queue):
     rules = _DeliveryRules(busy, claims=True, queue=queue)
     robots = rules.robots

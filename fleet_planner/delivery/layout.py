@@ -32,6 +32,8 @@ _SPOT_ROUNDS = 8
 #: packed spots (:func:`choose_spots` ``packed``, ours, for crowds the spread homes cannot hold): this far
 #: from every station, the behaviour layer's docking region (``BehaviorParams.dock_region``)
 PACKED_STATION_CLEARANCE = 1.5
+#: :func:`queue_places` with ``keep``: the key of the parking spots kept
+KEPT = ""
 #: packed spots: only in passages whose free space for a robot's centre is at least this wide (m): a
 #: parked robot against one side leaves a way for another past it
 PACKED_MIN_PASSAGE = 2.0
@@ -118,6 +120,38 @@ class _StandingPlaces:
         return self.grid.cell_of(*p)
 
 
+class _TwoLanes:
+    """Ours (queue places of ``queue="close"``): a parked disc must not cut a passage two robots wide. Two robots
+    side by side pass where a disc of twice the radius passes, so the check is on the map of where the centre of
+    that wide disc fits, clear of every disc parked so far: parking one more may not split a part of it into two
+    parts that each hold the wide disc's own footprint (a nook it cuts off is no passage). A passage narrower than
+    two robots is left to :meth:`_StandingPlaces.usable` (no cut)."""
+
+    def __init__(self, places: _StandingPlaces, radius: float):
+        self.free = PathFinder(places.grid, 2 * radius).free
+        self.taken = np.zeros_like(self.free)
+        res = places.grid.resolution
+        reach = 3 * radius + SPOT_MARGIN   # a parked disc and the wide one just clear of it
+        k = int(math.ceil(reach / res))
+        dc, dr = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1))
+        self.footprint = np.hypot(dc, dr) * res < reach
+        self.min_part = max(1, int(np.count_nonzero(np.hypot(dc, dr) * res < 2 * radius)))
+        self._parts = self._count(self.free)
+
+    def _count(self, mask: np.ndarray) -> int:
+        labels, n = ndimage.label(mask)
+        return int(np.count_nonzero(np.bincount(labels.ravel(), minlength=n + 1)[1:] >= self.min_part))
+
+    def take(self, col: int, row: int) -> None:
+        _stamp(self.taken, col, row, self.footprint)
+        self._parts = self._count(self.free & ~self.taken)
+
+    def kept(self, col: int, row: int) -> bool:
+        parked = np.zeros_like(self.taken)
+        _stamp(parked, col, row, self.footprint)
+        return self._count(self.free & ~(self.taken | parked)) <= self._parts
+
+
 def _stamp(mask: np.ndarray, col: int, row: int, footprint: np.ndarray) -> None:
     """OR a square ``footprint`` centred on (col, row) into ``mask`` (clipped at the edges)."""
     k = footprint.shape[0] // 2
@@ -201,51 +235,80 @@ def choose_spots(grid: GridMap, count: int, seed: int, stations: Sequence[Point]
     return homes[:count] + queued + homes[count:]
 
 
-def queue_places(grid: GridMap, stations: dict[str, Point], spots: Sequence[Point], per_station: int,
-                 reach: float, radius: float = ROBOT_RADIUS, min_gap: float = 0.0) -> dict[str, list[Point]]:
-    """Ours (issue 8, the central methods' ``queue="near"``): up to ``per_station`` places to queue on per
-    station, the closest to it by driving distance, at most ``reach`` m of driving from it and at least
-    ``min_gap`` m (straight line) from it; each cuts no passage with a robot on every station, every
-    parking spot of ``spots`` and every other queue place (:meth:`_StandingPlaces.usable`, then the
-    global check of :func:`choose_spots`: a place from which a robot could not leave is dropped). The
-    stations take turns, closest place first, so every station gets its nearest places; a place goes to
-    one station only. Returns station -> its places, nearest first."""
+def queue_places(grid: GridMap, stations: dict[str, Point], spots: Sequence[Point], per_station: int | dict[str, int],
+                 reach: float, radius: float = ROBOT_RADIUS, min_gap: float = 0.0,
+                 keep: Sequence[Point] = (), two_lanes: bool = False,
+                 prune_one: bool = False) -> dict[str, list[Point]]:
+    """Ours (issue 8, the central methods' ``queue="near"`` and ``"close"``): up to ``per_station`` places to
+    queue on per station (or as many as it gives the station: a dict), the closest to it by driving distance, at
+    most ``reach`` m of driving from it and at least ``min_gap`` m (straight line) from it; each cuts no passage
+    with a robot on every station, every parking spot of ``spots`` and every other queue place
+    (:meth:`_StandingPlaces.usable`, then the global check of :func:`choose_spots`: a place from which a robot
+    could not leave is dropped). The stations take turns, closest place first, so every station gets its
+    nearest places; a place goes to one station only. Returns station -> its places, nearest first.
+
+    ``keep`` (``"close"``): more parking spots, placed *after* the new places where they still fit (a spot
+    that would cut a passage or shut in a place is left out); the kept ones are returned under the key
+    :data:`KEPT` (not a station), in the order of ``keep``. ``two_lanes`` (``"close"``): a new place also
+    cuts no passage two robots wide (:class:`_TwoLanes`). ``prune_one`` (``"close"``): when a robot on a spot
+    or place could not leave, only the new place or kept spot nearest to it goes (else every one within two
+    discs), in more rounds."""
     places = _StandingPlaces(grid, radius)
+    lanes = _TwoLanes(places, radius) if two_lanes else None
     for p in list(stations.values()) + list(spots):
         places.take(*places.cell(p))
+        if lanes is not None:
+            lanes.take(*places.cell(p))
     rows, cols = np.nonzero(places.free & ~places.taken)
     names = list(stations)
     out: dict[str, list[Point]] = {s: [] for s in names}
-    if not len(rows) or not names or per_station <= 0:
-        return out
+    quota = per_station if isinstance(per_station, dict) else dict.fromkeys(names, per_station)
+    if not len(rows) or not names or max(quota.values(), default=0) <= 0:
+        return {**out, KEPT: list(keep)} if keep else out
     dist = driving_distances(grid, places.free, [stations[s] for s in names])[:, rows * grid.width + cols]
     centres = np.column_stack([(cols + 0.5) * grid.resolution, (rows + 0.5) * grid.resolution])
     for k, s in enumerate(names):   # too close to the station (straight line), or beyond reach: never
         dist[k, np.hypot(*(centres - np.asarray(stations[s])).T) < min_gap] = np.inf
     dist[dist > reach] = np.inf
     ranked = [[int(i) for i in np.argsort(d, kind="stable") if np.isfinite(d[i])] for d in dist]
-    for _ in range(per_station):      # round by round: every station gets its closest first
+    for n in range(max(quota.values())):   # round by round: every station gets its closest first
         for k, s in enumerate(names):
-            while ranked[k]:
+            while ranked[k] and quota.get(s, 0) > n:
                 i = ranked[k].pop(0)
-                if places.usable(int(cols[i]), int(rows[i])):
-                    places.take(int(cols[i]), int(rows[i]))
-                    out[s].append(grid.centre(int(cols[i]), int(rows[i])))
+                c, r = int(cols[i]), int(rows[i])
+                if places.usable(c, r) and (lanes is None or lanes.kept(c, r)):
+                    places.take(c, r)
+                    if lanes is not None:
+                        lanes.take(c, r)
+                    out[s].append(grid.centre(c, r))
                     break
+    kept = []
+    for p in keep:   # ("close") the other parking spots where they still fit beside the places
+        if places.usable(*places.cell(p)):
+            places.take(*places.cell(p))
+            kept.append(p)
     open_space = ndimage.distance_transform_edt(places.free & ~places.taken)
     hub_row, hub_col = np.unravel_index(int(np.argmax(open_space)), open_space.shape)
     hub = grid.centre(int(hub_col), int(hub_row))
-    for _ in range(_SPOT_ROUNDS):
-        every = [p for ps in out.values() for p in ps]
+    for _ in range(2 * _SPOT_ROUNDS if prune_one else _SPOT_ROUNDS):
+        every = [p for ps in out.values() for p in ps] + kept
         shut = _shut_in(grid, radius, list(stations.values()), list(spots) + every, hub) if every else []
         if not shut:
             break
         # a shut-in place goes, and so do the new places next to a shut-in parking spot (they shut it in)
         near = 2 * (2 * radius + SPOT_MARGIN)
-        out = {s: [p for p in ps if p not in shut and all(math.dist(p, q) > near for q in shut)]
-               for s, ps in out.items()}
-    else:
-        out = {s: [] for s in names}
+        if prune_one:   # ("close") only the one new place or kept spot nearest to each shut-in spot or place
+            ours = [p for p in every if p not in shut]
+            gone = set(shut) | {min(ours, key=lambda p: math.dist(p, q)) for q in shut
+                                if q not in every and ours and min(math.dist(p, q) for p in ours) <= near}
+        else:
+            gone = set(shut) | {p for p in every if any(math.dist(p, q) <= near for q in shut)}
+        out = {s: [p for p in ps if p not in gone] for s, ps in out.items()}
+        kept = [p for p in kept if p not in gone]
+    else:   # no set of places every robot can leave: none, the parking spots as they were
+        out, kept = {s: [] for s in names}, list(keep)
+    if keep:
+        out[KEPT] = kept
     return out
 
 

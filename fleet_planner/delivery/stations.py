@@ -29,6 +29,19 @@ places are taken) and queues there on arrival, first come first served. When the
 the first robot in its queue gets it, and the robots behind it move up, in queue order, each to the
 nearest free place closer to the station than its own (:meth:`_DeliveryRules._move_up`).
 
+Queue places close to the busy stations (``queue="close"``; ours, issue 8): the same discipline, other places.
+On the default warehouse at 40-50 robots the problem's queue spots for the chutes stand in the chute row 2 m
+and 4.5 m from each chute and in front of the recesses by the chutes; near's places must fit round them, and
+found 0-2 new ones per chute. Here the busy loading stations (where deliveries load and none unloads, with at
+least :data:`CLOSE_BUSY` of the busiest one's loads: the chutes) get up to :data:`CLOSE_NEW` places first,
+nearest by driving first, with only the stations and the robots' homes standing; then the problem's other
+parking spots stay where they still fit beside them (the others are not used), then the other stations get
+near's places. Every place also keeps every passage
+two robots wide that wide (:class:`~fleet_planner.delivery.layout._TwoLanes`), so a queue does not narrow an
+aisle the traffic needs both ways. A problem without such a station (stations spread over a MovingAI map, each
+loaded and unloaded at) is run with the spots rule: there places beside the stations made CTime worse (md 1156 ->
+1190 s, PRIOR 1213 -> 1424 on warehouse-10-20-10-2-1 at 20 robots).
+
 Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
 (Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
 certain distance" and wait, first come first served (the fleet's docking arbiter); with 200 robots
@@ -50,7 +63,7 @@ import numpy as np
 from ..geometry import polyline_length
 from ..model import Point
 from ..paths import PathFinder
-from .layout import driving_distances, queue_places
+from .layout import KEPT, driving_distances, queue_places
 from .problem import Delivery, DeliveryProblem
 
 #: central methods: a robot claims a station only from this close (m, straight line; from a parking
@@ -71,9 +84,21 @@ QUEUE_NEW = 4
 #: queue="near": a robot may claim a free station nobody queues for from any distance (False: only from within
 #: CLAIM_RADIUS, as the spots rule; from farther it drives to the station's nearest free place first)
 NEAR_CLAIM_FROM_AFAR = True
+#: central methods with ``queue="close"`` (ours): at most this many new places per station, placed before the
+#: problem's parking spots that are not homes (those stay only where they still fit beside the places)
+CLOSE_NEW = 6
+#: ... for the loading stations (none unloads there) with at least this share of the busiest one's loads (the
+#: others get near's places; a problem without such a station gets the spots rule)
+CLOSE_BUSY = 0.5
+#: queue="close": a new place never cuts a passage two robots wide (:class:`~.layout._TwoLanes`; False: only no
+#: cut passage, as near's places - the control of the tests)
+CLOSE_TWO_LANES = True
 #: the queue rules of the central methods: on parking spots near the station (the default, session 25's
-#: rule), or on queue places near it with moving up (ours, see the module text)
-QUEUE_RULES = ("spots", "near")
+#: rule), or on queue places near it with moving up (ours, see the module text): ``near`` among the problem's
+#: parking spots, ``close`` in the room next to the station the parking spots would take
+QUEUE_RULES = ("spots", "near", "close")
+#: the rules with queue places and moving up
+PLACE_RULES = ("near", "close")
 #: behaviour fleet with admission (ours): waiting places are parking spots at least this far (m,
 #: straight line) from every station a delivery loads at (out of the crowd round the loading stations)
 WAIT_AWAY = 4.0
@@ -238,6 +263,8 @@ class _DeliveryRules:
             raise ValueError(f"queue: must be one of {', '.join(QUEUE_RULES)} (got {queue!r})")
         if queue != "spots" and not claims:
             raise ValueError(f"queue: {queue!r} is a rule of the central methods (claims=True)")
+        if queue == "close" and not self._close_stations(problem):
+            queue = "spots"   # no loading station to queue at: session 25's rule, as it was
         self.queue_rule = queue
         #: behaviour fleet: at most ``admit`` robots bound for a station at a time (None: no limit)
         self.admission = None if claims or admit is None else _StationAdmission(list(problem.stations), admit)
@@ -252,7 +279,7 @@ class _DeliveryRules:
         #: queue="near": each station's queue places (spot indices, nearest first) and the station of each place
         self.slots: dict[str, list[int]] = {}
         self.slot_of: dict[int, str] = {}
-        if queue == "near":
+        if queue in PLACE_RULES:
             assert drive is not None
             self._place_slots(drive)
         self.parking = _ParkingSpots(self.spots, problem.n_robots)
@@ -282,12 +309,36 @@ class _DeliveryRules:
         at = [row * grid.width + col for col, row in (grid.cell_of(*p) for p in self.spots)]
         return {s: drive[k, at] for k, s in enumerate(self.problem.stations)}
 
+    @staticmethod
+    def _close_stations(p: DeliveryProblem) -> set[str]:
+        """queue="close": the busy loading stations - where deliveries load and none unloads (the chutes), with
+        at least :data:`CLOSE_BUSY` of the busiest one's loads."""
+        loads = {s: 0 for s in p.stations}
+        for d in p.deliveries:
+            loads[d.pick] += 1
+        for d in p.deliveries:
+            loads.pop(d.drop, None)
+        top = max(loads.values(), default=0)
+        return {s for s, n in loads.items() if n and n >= CLOSE_BUSY * top}
+
     def _place_slots(self, drive: np.ndarray) -> None:
         """queue="near": new queue places (appended to :attr:`spots`), then each place - a new one or a
         parking spot that is not a home - within :data:`QUEUE_REACH` goes to its nearest station, at most
         :data:`QUEUE_SLOTS` per station, nearest first."""
         p = self.problem
-        new = queue_places(p.grid, p.stations, p.spots, QUEUE_NEW, QUEUE_REACH, p.radius)
+        if self.queue_rule == "close":   # the busy stations' places first, then the problem's other spots where
+            homes = p.spots[:p.n_robots]  # they fit, then the other stations' places as near's
+            close = self._close_stations(p)
+            busy = {s: CLOSE_NEW if s in close else 0 for s in p.stations}
+            new = queue_places(p.grid, p.stations, homes, busy, QUEUE_REACH, p.radius, keep=p.spots[p.n_robots:],
+                               two_lanes=CLOSE_TWO_LANES, prune_one=True)
+            self.spots = homes + new.pop(KEPT, [])
+            first = [q for qs in new.values() for q in qs]
+            rest = queue_places(p.grid, p.stations, self.spots + first, {s: 0 if busy[s] else QUEUE_NEW for s in busy},
+                                QUEUE_REACH, p.radius, two_lanes=CLOSE_TWO_LANES, prune_one=True)
+            new = {s: new[s] + rest[s] for s in new}
+        else:
+            new = queue_places(p.grid, p.stations, p.spots, QUEUE_NEW, QUEUE_REACH, p.radius)
         self.spots += [q for qs in new.values() for q in qs]
         dist = np.vstack(list(self._spot_distances(drive).values()))     # (stations, spots)
         names = list(p.stations)
@@ -355,7 +406,7 @@ class _DeliveryRules:
         if not self.claims:
             self._need(r, goal, kind, station, t)
             return
-        if self.queue_rule == "near":
+        if self.queue_rule in PLACE_RULES:
             self._to_station_near(r, station, kind, t)
             return
         free = self.queues.free_for(station, r.idx)
@@ -499,7 +550,7 @@ class _DeliveryRules:
             self.queues.release(r.on_station)
             r.on_station = None
         r.progress_t = t
-        if self.queue_rule == "near":
+        if self.queue_rule in PLACE_RULES:
             self._move_up(t)
 
     def arrived(self, r: _SimRobot, t: float) -> None:
@@ -517,14 +568,14 @@ class _DeliveryRules:
             station = r.station
             assert station is not None
             holder = self.queues.holder.get(station)
-            if holder is None or (self.queue_rule == "near" and holder == r.idx):   # near: handed over en route
+            if holder is None or (self.queue_rule in PLACE_RULES and holder == r.idx):   # handed over en route
                 if r.idx in self.queues.waiting[station]:
                     self.queues.waiting[station].remove(r.idx)
                 self.queues.claim(station, r.idx)
                 self._need(r, self.problem.stations[station], r.station_kind, station, t)
             else:
                 self._queue(r, station, r.station_kind, t)
-            if self.queue_rule == "near":
+            if self.queue_rule in PLACE_RULES:
                 self._move_up(t)
         elif r.target_kind == "evac":
             self.next_target(r, t)
@@ -561,7 +612,7 @@ class _DeliveryRules:
                 self.parking.owner[r.booked_spot], r.booked_spot = None, None
             self._need(r, self.problem.stations[r.station], r.station_kind, r.station, t)
             out.append(r)
-        if handed and self.queue_rule == "near":
+        if handed and self.queue_rule in PLACE_RULES:
             self._move_up(t)
         return out
 
