@@ -606,7 +606,7 @@ class _DeliveryRules:
         for i in handed:
             r = self.robots[i]
             assert r.station is not None
-            if r.phase == "drive" and self.queue_rule == "near":   # moving up: on to the station on arrival
+            if r.phase == "drive" and self.queue_rule in PLACE_RULES:   # moving up: on to the station on arrival
                 continue
             if r.phase == "need" and r.booked_spot is not None:   # its leg to a waiting place never began
                 self.parking.owner[r.booked_spot], r.booked_spot = None, None
