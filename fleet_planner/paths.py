@@ -268,7 +268,7 @@ class PathFinder:
             return _NO_CELLS
         cells = np.array(list(blocked_cells), dtype=float).reshape(-1, 2)
         if not len(cells):
-            return np.zeros((0, 2), dtype=np.int64)
+            return _NO_CELLS
         if not np.all(cells == np.round(cells)):
             raise ValueError("blocked_cells: cells must be integer (col, row) pairs")
         cells = cells.astype(np.int64)

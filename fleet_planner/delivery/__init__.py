@@ -91,8 +91,9 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
     times as late). ``wall_cap_s``: stop after this much wall-clock time (stop "wall").
     ``record``: keep the behaviour fleet's positions at every step. ``planner_options``: keyword
     options of the central method's planner (:func:`~fleet_planner.planners.get_planner`). ``queue``: the
-    central methods' queue rule, ``spots`` (robots wait for a station on parking spots near it) or ``near``
-    (on queue places a few metres from it, moving up; ours, :mod:`.stations`); the behaviour fleet has its own.
+    central methods' queue rule, ``spots`` (robots wait for a station on parking spots near it), ``near``
+    (on queue places a few metres from it, moving up; ours, :mod:`.stations`) or ``close`` (near's, with the
+    busy loading stations' places placed first; ours); the behaviour fleet has its own.
     """
     if method not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(METHODS)} (got {method!r})")

@@ -188,7 +188,7 @@ class _StationQueues:
         self.holder[station] = idx
 
     def join(self, station: str, idx: int) -> None:
-        if idx not in self.waiting[station]:   # (queue="near": a robot moving up is in the queue already)
+        if idx not in self.waiting[station]:   # (place rules: a robot moving up is in the queue already)
             self.waiting[station].append(idx)
 
     def has_queue(self, station: str) -> bool:
@@ -263,7 +263,9 @@ class _DeliveryRules:
             raise ValueError(f"queue: must be one of {', '.join(QUEUE_RULES)} (got {queue!r})")
         if queue != "spots" and not claims:
             raise ValueError(f"queue: {queue!r} is a rule of the central methods (claims=True)")
-        if queue == "close" and not self._close_stations(problem):
+        #: queue="close": the busy loading stations that get their places first (:meth:`_close_stations`)
+        self.close_stations = self._close_stations(problem) if queue == "close" else set()
+        if queue == "close" and not self.close_stations:
             queue = "spots"   # no loading station to queue at: session 25's rule, as it was
         self.queue_rule = queue
         #: behaviour fleet: at most ``admit`` robots bound for a station at a time (None: no limit)
@@ -271,12 +273,12 @@ class _DeliveryRules:
         self.solo_time = _SoloTimes(problem)
         self.robots = [_SimRobot(i, rid, problem.spots[i], spot=i, solo_at=problem.spots[i])
                        for i, rid in enumerate(problem.robot_ids())]
-        #: where robots may stand for long: the problem's parking spots, then (``queue="near"``) new queue places
+        #: where robots may stand for long: the problem's parking spots, then (``queue`` near, close) new queue places
         self.spots: list[Point] = list(problem.spots)
         drive = None
         if claims or self.admission is not None:
             drive = driving_distances(problem.grid, self.solo_time.finder.free, list(problem.stations.values()))
-        #: queue="near": each station's queue places (spot indices, nearest first) and the station of each place
+        #: queue near, close: each station's queue places (spot indices, nearest first) and the station of each place
         self.slots: dict[str, list[int]] = {}
         self.slot_of: dict[int, str] = {}
         if queue in PLACE_RULES:
@@ -322,14 +324,13 @@ class _DeliveryRules:
         return {s for s, n in loads.items() if n and n >= CLOSE_BUSY * top}
 
     def _place_slots(self, drive: np.ndarray) -> None:
-        """queue="near": new queue places (appended to :attr:`spots`), then each place - a new one or a
+        """queue near, close: new queue places (appended to :attr:`spots`), then each place - a new one or a
         parking spot that is not a home - within :data:`QUEUE_REACH` goes to its nearest station, at most
         :data:`QUEUE_SLOTS` per station, nearest first."""
         p = self.problem
         if self.queue_rule == "close":   # the busy stations' places first, then the problem's other spots where
             homes = p.spots[:p.n_robots]  # they fit, then the other stations' places as near's
-            close = self._close_stations(p)
-            busy = {s: CLOSE_NEW if s in close else 0 for s in p.stations}
+            busy = {s: CLOSE_NEW if s in self.close_stations else 0 for s in p.stations}
             new = queue_places(p.grid, p.stations, homes, busy, QUEUE_REACH, p.radius, keep=p.spots[p.n_robots:],
                                two_lanes=CLOSE_TWO_LANES, prune_one=True)
             self.spots = homes + new.pop(KEPT, [])
@@ -466,7 +467,7 @@ class _DeliveryRules:
             self._decide_later(r, station, kind, t)
 
     def _move_up(self, t: float) -> None:
-        """queue="near": robots standing in a queue, in its order, each move to the nearest free place of
+        """queue near, close: robots standing in a queue, in its order, each move to the nearest free place of
         their station closer to it than where they stand (a freed place goes to the first robot behind)."""
         for station, waiting in self.queues.waiting.items():
             slots = self.slots.get(station)
