@@ -94,8 +94,10 @@ HOLD_CELLS = 4
 #: in a later re-scheduling, only when it still waits more than :data:`DETOUR_AGAIN_S`. Measured on
 #: the tries themselves (100 robots, warehouse-10-20-10-2-2 and 20-40-10-2-2, seeds 0-2, 378 tries):
 #: tries of robots waiting 2-3 s in all saved 17 s of the 4550 s that detours saved; second tries of
-#: robots waiting under 10 s: 40 tries, 6 kept, 17 s saved; while each try costs a path search, the
-#: robot's collision pieces and its schedule (about 1 ms).
+#: robots waiting under 5 s: 27 tries, 4 kept, 8 s saved (under 10 s: 40, 6, 17 s, and SoC/free of
+#: 10-20-10-2-2 seed 0 went 1.026 -> 1.033 with that bound); each try costs a path search, the robot's
+#: collision pieces and its schedule (about 1 ms). Plans (seed 0): 10-20-10-2-2 188 -> 171 path
+#: searches, SoC/free 1.0253 -> 1.0260; 20-40-10-2-2 118 -> 116, 1.0091 -> 1.0092.
 DETOUR_MIN_S = 3.0
 DETOUR_AGAIN_S = 5.0
 #: ... in legs (:meth:`MDPlanner.plan_incremental`): one robot plans at a time, every try is cheap
