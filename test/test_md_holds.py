@@ -166,6 +166,29 @@ def test_route_choice_takes_the_detour_when_waiting_costs_more():
     assert routed.arrival_time == pytest.approx(16.0)   # 16 m at 1 m/s, no wait
     assert plans["md-routes"].info["detours"] >= 1
     assert np.any(routed.waypoints[:, 1] < 1.0)         # it took the northern corridor
+    # a robot that waits no longer than ``detour_min`` in all tries no detour: j waits about 22 s
+    patient = get_planner("md-routes", order="given", detour_min=30.0).plan(grid, robots)
+    assert check_plan(grid, robots, patient) == []
+    assert patient.by_id()["j"].arrival_time > 20.0 and patient.info["detours"] == 0
+
+
+def test_route_choice_thresholds_of_plans_and_legs():
+    """One-shot plans try a detour from DETOUR_MIN_S of waits and a further one from DETOUR_AGAIN_S;
+    legs (one robot at a time, cheap tries) from DETOUR_MIN_LEG_S; a detour_min given is used by both."""
+    from fleet_planner.planners import md
+
+    grid = GridMap.from_rows(["....."])
+    robots = [RobotSpec("a", 0.4, 1.0, (0.5, 0.5), (4.5, 0.5))]
+    plan_s = md._Session(get_planner("md"), grid, robots, [0], fixed=0)
+    leg_s = md._Session(get_planner("md"), grid, robots, [0], fixed=0, incremental=True)
+    assert (plan_s.detour_min, plan_s.detour_again) == (md.DETOUR_MIN_S, md.DETOUR_AGAIN_S)
+    assert leg_s.detour_min == leg_s.detour_again == md.DETOUR_MIN_LEG_S
+    assert md.DETOUR_MIN_LEG_S < md.DETOUR_MIN_S < md.DETOUR_AGAIN_S
+    given = get_planner("md", detour_min=1.0)
+    assert md._Session(given, grid, robots, [0], fixed=0).detour_min == 1.0
+    assert md._Session(given, grid, robots, [0], fixed=0, incremental=True).detour_again == 1.0
+    with pytest.raises(ValueError, match="detour_min"):
+        get_planner("md", detour_min=-1.0)
 
 
 # ---------------------------------------------------------------------------------------------
