@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from fleet_planner.delivery import delivery_problem, simulate
+from fleet_planner.delivery import central, delivery_problem, simulate, stations
 from fleet_planner.delivery.layout import ROBOT_RADIUS, SPOT_MARGIN, _shut_in, driving_distances, queue_places
+from fleet_planner.delivery.result import RunLimits
 from fleet_planner.delivery.stations import QUEUE_REACH, QUEUE_SLOTS, _DeliveryRules
 from fleet_planner.grid import GridMap
 from fleet_planner.paths import PathFinder
@@ -78,7 +79,9 @@ def _start(rules, r, t):
 
 
 @pytest.mark.parametrize("queue", ["near", "close", "spots"])
-def test_queue_is_first_come_first_served_and_moves_up(busy, queue):
+def test_queue_is_first_come_first_served_and_moves_up(busy, queue, monkeypatch):
+    # the control of JOIN_ON_BOOKING (session 27's order: a robot joins the queue when it reaches its place)
+    monkeypatch.setattr(stations, "JOIN_ON_BOOKING", False)
     rules = _DeliveryRules(busy, claims=True, queue=queue)
     robots = rules.robots
     for r in robots:
@@ -89,6 +92,7 @@ def test_queue_is_first_come_first_served_and_moves_up(busy, queue):
         return _spots_control(rules)
     slots = rules.slots["chute_1"]
     assert [r.booked_spot for r in robots[1:]] == slots[:5]   # the others: its places, nearest first
+    assert rules.queues.waiting["chute_1"] == []              # not in the queue before they get there
     for r in robots:
         _start(rules, r, 0.0)
     for idx in (3, 1, 2, 5, 4):                               # they arrive in this order
@@ -113,6 +117,33 @@ def test_queue_is_first_come_first_served_and_moves_up(busy, queue):
     assert [r.idx for r in rules.take_handed_over(33.0)] == [1]   # next in order of arrival
     _start(rules, robots[1], 33.0)
     assert robots[2].phase == "need" and robots[2].booked_spot == slots[0]
+
+
+@pytest.mark.parametrize("queue", ["near", "close"])
+def test_a_robot_joins_the_queue_when_it_books_its_place(busy, queue):
+    # session 28 (JOIN_ON_BOOKING): at 50 robots on the default warehouse the robots with no place free queued
+    # on their homes 20-37 m off at once, ahead of those still driving to the places 1 m from the chute, and the
+    # chute idled while the first of them drove in; now the queue is in the order the robots asked for the station
+    rules = _DeliveryRules(busy, claims=True, queue=queue)
+    robots = rules.robots
+    for r in robots:
+        rules.next_target(r, 0.0)
+    slots = rules.slots["chute_1"]
+    assert [r.booked_spot for r in robots[1:]] == slots[:5]
+    assert rules.queues.waiting["chute_1"] == [1, 2, 3, 4, 5]   # in the queue before they get there
+    for r in robots:
+        _start(rules, r, 0.0)
+    for idx in (3, 1, 2, 5, 4):                               # they arrive in another order
+        rules.arrived(robots[idx], 10.0 + idx)
+        assert robots[idx].phase == "queued"
+    assert rules.queues.waiting["chute_1"] == [1, 2, 3, 4, 5]   # (the control above: [3, 1, 2, 5, 4])
+    rules.arrived(robots[0], 20.0)
+    rules.docked(robots[0], 25.0)
+    _start(rules, robots[0], 25.0)
+    assert [r.idx for r in rules.take_handed_over(25.0)] == [1]   # the first to ask, on the nearest place
+    _start(rules, robots[1], 25.0)                            # it leaves slot 0: robot 2 (slot 1) moves up
+    assert robots[2].phase == "need" and robots[2].booked_spot == slots[0]
+    assert all(robots[i].phase == "queued" for i in (3, 4, 5))
 
 
 def _spots_control(rules) -> None:
@@ -162,3 +193,54 @@ def test_a_run_with_queue_places_is_valid(busy, method):
 def test_bad_queue_rule_is_named():
     with pytest.raises(ValueError, match="queue"):
         simulate(None, "md", queue="far")   # type: ignore[arg-type]
+
+
+def _turns(busy, method: str) -> tuple:
+    """A run of the busy chute with queue places; every turn to a station handed over en route: (robot, where,
+    when, the place it was driving to, the station)."""
+    run = central._CentralRun(busy, method, RunLimits(3600.0, 600.0, 120.0, 2.0, 600.0), None, None, queue="near")
+    turns, en_route = [], []
+    to_station_now, take_en_route = run.rules.to_station_now, run.rules.take_en_route
+
+    def logged(r, at, t):
+        turns.append((r.idx, at, t, tuple(run.rules.spots[r.spot]), busy.stations[r.station]))
+        to_station_now(r, at, t)
+
+    def handed():
+        out, t = take_en_route(), now[0]
+        en_route.extend((r.idx, run.driving[r.idx].position(t), t, tuple(run.rules.spots[r.spot])) for r in out)
+        return out
+
+    now, wake = [0.0], run._wake
+
+    def timed(r, t):
+        now[0] = t
+        wake(r, t)
+
+    run.rules.to_station_now, run.rules.take_en_route, run._wake = logged, handed, timed
+    return run.run(), turns, en_route   # (a drop's storing site has its places too)
+
+
+@pytest.mark.parametrize("method", ["prior", "md"])
+def test_a_robot_handed_its_station_on_the_way_to_its_place_turns_to_it(busy, method, monkeypatch):
+    # session 28 (TURN_EN_ROUTE): a robot the freed station is handed to while it drives to its queue place
+    # leaves that leg where it is for a leg to the station, instead of driving to the place first
+    result, turns, _ = _turns(busy, method)
+    assert result.finished and result.completed == 12
+    assert result.collisions == 0 and result.violations == []    # the cut trajectories too (independent checker)
+    assert _min_gap(result.trajectories, busy.radius) >= -1e-6
+    assert turns and result.extra["turned"] == len(turns)
+    for idx, at, t, place, station in turns:
+        wp = result.trajectories[idx].waypoints
+        assert math.dist(result.trajectories[idx].position(t), at) < 1e-6 and math.dist(at, place) > 1e-6
+        after = wp[wp[:, 2] >= t]
+        stop = next(k for k in range(len(after)) if math.dist(after[k, :2], station) < 1e-6)
+        assert all(math.dist(w[:2], place) > 1e-6 for w in after[:stop])   # on to the station, not the place
+    # control: without the rule nobody turns; each robot handed the chute on its way drives to its place first
+    monkeypatch.setattr(central, "TURN_EN_ROUTE", False)
+    result, turns, en_route = _turns(busy, method)
+    assert turns == [] and result.extra["turned"] == 0 and result.collisions == 0
+    assert en_route
+    for idx, at, t, place in en_route:
+        wp = result.trajectories[idx].waypoints
+        assert math.dist(at, place) > 1e-6 and any(math.dist(w[:2], place) < 1e-6 for w in wp[wp[:, 2] >= t])

@@ -21,6 +21,9 @@ from .stations import EVACUATE_S, _DeliveryRules, _SimRobot
 #: a robot whose leg could not be planned tries again at the latest this many ``retry_s`` later
 #: (sooner once another robot got a new leg)
 RETRY_LATEST = 15
+#: queue near, close (ours): a robot handed its station while it drives to a queue place turns to the station
+#: at once, its leg cut where it is (:meth:`_CentralRun._turn_to_station`); False: it drives on to the place first
+TURN_EN_ROUTE = True
 
 
 class _CentralRun:
@@ -46,6 +49,7 @@ class _CentralRun:
         self.failed_at = [0.0] * n
         self.leg_delay_s = 0.0      # over all legs: arrival later than driving straight off at top speed
         self.last_activity = 0.0    # when some robot last arrived, docked or set off
+        self.turned = 0             # legs cut to turn to a station handed over en route (TURN_EN_ROUTE)
 
     def run(self) -> DeliveryResult:
         for r in self.robots:
@@ -99,6 +103,9 @@ class _CentralRun:
         for q in rules.take_handed_over(t):
             if self._start_leg(q, t):
                 self.last_activity = t
+        for q in rules.take_en_route():
+            if TURN_EN_ROUTE and self._turn_to_station(q, t):
+                self.last_activity = t
 
     def _as_fixed(self, q: _SimRobot, now: float) -> TimedPath:
         """q's trajectory as the planner must keep clear of it: once q has arrived, standing there
@@ -116,6 +123,38 @@ class _CentralRun:
             except PlanningError:
                 self.tally.failed_plans += 1
                 return None
+
+    def _turn_to_station(self, q: _SimRobot, now: float) -> bool:
+        """q was handed its station while driving to a queue place (queue near, close): its leg is cut at
+        ``now`` and a leg from there to the station planned, when that arrives sooner than going on to the
+        place first (it would then drive from the place at best at top speed); else it drives on.
+        Any leg planned around the others' trajectories keeps clear of them, so cutting q's is safe."""
+        tp = self.driving[q.idx]
+        if tp.arrival_time <= now + 1e-6:
+            return False
+        assert q.station is not None and q.target is not None
+        station = self.problem.stations[q.station]
+        at = tp.position(now)
+        others = [self._as_fixed(o, now) for o in self.robots if o is not q]
+        spec = RobotSpec(q.id, self.problem.radius, self.problem.max_speed, at, station)
+        with self.tally.deciding():
+            try:
+                leg = self.planner.plan_incremental(self.problem.grid, [spec], others, now)[0]
+            except PlanningError:
+                self.tally.failed_plans += 1
+                return False
+        if leg.arrival_time >= tp.arrival_time + math.dist(q.target, station) / self.problem.max_speed:
+            return False
+        wp = self.legs[q.idx][-1]
+        self.legs[q.idx][-1] = np.vstack([wp[wp[:, 2] < now], [*at, now]])
+        self.tally.legs += 1
+        self.turned += 1
+        self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
+        self.driving[q.idx] = leg
+        self.legs[q.idx].append(leg.waypoints)
+        self.rules.to_station_now(q, at, now)
+        q.wake = max(now, leg.arrival_time)
+        return True
 
     def _start_leg(self, r: _SimRobot, now: float) -> bool:
         """Plan r's leg to its target (or to a parking spot, to clear a station others queue for)
@@ -162,7 +201,7 @@ class _CentralRun:
             deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock", "drive")),
             wall_s=tally.wall_s(), violations=violations, trajectories=paths,
             extra={"mean_leg_delay_s": round(self.leg_delay_s / per_leg, 2), "hold_legs": rules.hold_legs,
-                   "mean_phase_s": rules.mean_phase_s(t)})
+                   "turned": self.turned, "mean_phase_s": rules.mean_phase_s(t)})
 
 
 def simulate_central(problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None = None,

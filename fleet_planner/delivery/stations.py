@@ -93,6 +93,9 @@ CLOSE_BUSY = 0.5
 #: queue="close": a new place never cuts a passage two robots wide (:class:`~.layout._TwoLanes`; False: only no
 #: cut passage, as near's places - the control of the tests)
 CLOSE_TWO_LANES = True
+#: queue near, close: a robot joins its station's queue when it books the place it drives to wait on (False: on
+#: arrival there)
+JOIN_ON_BOOKING = True
 #: the queue rules of the central methods: on parking spots near the station (the default, session 25's
 #: rule), or on queue places near it with moving up (ours, see the module text): ``near`` among the problem's
 #: parking spots, ``close`` in the room next to the station the parking spots would take
@@ -304,6 +307,8 @@ class _DeliveryRules:
         self.ctime: float | None = None     # when the last delivery was done
         self.phase_s: dict[str, float] = {}  # robot-seconds spent in each phase
         self.hold_legs = 0
+        #: queue near, close: robots handed their station while driving to a place (see :meth:`take_en_route`)
+        self.en_route: list[_SimRobot] = []
 
     def _spot_distances(self, drive: np.ndarray) -> dict[str, np.ndarray]:
         """Station -> driving distance to each spot of :attr:`spots` (``drive``: from each station to each cell)."""
@@ -435,6 +440,8 @@ class _DeliveryRules:
         r.booked_spot, r.station_kind = spot, kind
         self._need(r, self.spots[spot], "hold", station, t)
         self.hold_legs += 1
+        if self.queue_rule in PLACE_RULES and JOIN_ON_BOOKING:
+            self.queues.join(station, r.idx)   # in the queue from now on, not from its arrival
 
     def _decide_later(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         """Nowhere to wait for ``station`` yet: r decides again :data:`RETARGET_S` later."""
@@ -534,9 +541,11 @@ class _DeliveryRules:
         decision is undone; it decides again on the spot)."""
         if r.booked_spot is not None:
             self.parking.owner[r.booked_spot] = None
-        if (r.target_kind in ("pick", "drop") and r.station is not None and r.station != r.on_station
+        if (r.target_kind in ("pick", "drop", "hold") and r.station is not None and r.station != r.on_station
                 and self.queues.holder.get(r.station) == r.idx):
             self.queues.release(r.station)
+        elif r.target_kind == "hold" and r.station is not None and r.idx in self.queues.waiting[r.station]:
+            self.queues.waiting[r.station].remove(r.idx)
         self.parking.owner[spot], r.booked_spot = r.idx, spot
         r.target, r.target_kind, r.station = self.spots[spot], "evac", None
 
@@ -608,6 +617,7 @@ class _DeliveryRules:
             r = self.robots[i]
             assert r.station is not None
             if r.phase == "drive" and self.queue_rule in PLACE_RULES:   # moving up: on to the station on arrival
+                self.en_route.append(r)   # (unless the central run turns it to the station at once: to_station_now)
                 continue
             if r.phase == "need" and r.booked_spot is not None:   # its leg to a waiting place never began
                 self.parking.owner[r.booked_spot], r.booked_spot = None, None
@@ -616,6 +626,25 @@ class _DeliveryRules:
         if handed and self.queue_rule in PLACE_RULES:
             self._move_up(t)
         return out
+
+    def take_en_route(self) -> list[_SimRobot]:
+        """queue near, close: the robots :meth:`take_handed_over` handed their station while they drive to a
+        place (they go on to the station once there, unless turned to it at once: :meth:`to_station_now`)."""
+        out, self.en_route = [r for r in self.en_route if r.phase == "drive" and r.target_kind == "hold"], []
+        return out
+
+    def to_station_now(self, r: _SimRobot, at: Point, t: float) -> None:
+        """r, handed its station while driving to a place, leaves its leg at ``at`` (time t) for a leg to the
+        station: its place is free again (the robots behind move up)."""
+        assert r.station is not None and self.queues.holder.get(r.station) == r.idx
+        if r.spot is not None and self.parking.owner[r.spot] == r.idx:
+            self.parking.owner[r.spot] = None
+        r.spot = None
+        if r.idx in self.queues.waiting[r.station]:
+            self.queues.waiting[r.station].remove(r.idx)
+        r.pos, r.target, r.target_kind = at, self.problem.stations[r.station], r.station_kind
+        r.progress_t = t
+        self._move_up(t)
 
     # -- measures -------------------------------------------------------------------------------
     def busy(self, r: _SimRobot) -> bool:
