@@ -244,3 +244,56 @@ def test_a_robot_handed_its_station_on_the_way_to_its_place_turns_to_it(busy, me
     for idx, at, t, place in en_route:
         wp = result.trajectories[idx].waypoints
         assert math.dist(at, place) > 1e-6 and any(math.dist(w[:2], place) < 1e-6 for w in wp[wp[:, 2] >= t])
+
+
+def _handovers(busy, method: str) -> tuple:
+    """A run of the busy chute with queue places; every station handed over to a queued robot: (station, when
+    the robot's leg to it is planned, when the robot leaving it ended its docking)."""
+    run = central._CentralRun(busy, method, RunLimits(3600.0, 600.0, 120.0, 2.0, 600.0), None, None, queue="near")
+    rules, log, ends = run.rules, [], {}
+    docked, take = rules.docked, rules.take_handed_over
+
+    def logged_docked(r, t):
+        ends[r.station] = t
+        docked(r, t)
+
+    def logged_take(t):
+        out = take(t)
+        log.extend((q.station, t, ends.get(q.station, -math.inf)) for q in out)
+        return out
+
+    rules.docked, rules.take_handed_over = logged_docked, logged_take
+    return run.run(), log
+
+
+def _stays(tp, where) -> list[float]:
+    """How long each stay of a driven trajectory on ``where`` lasted (s)."""
+    wp, out, since, prev = tp.waypoints, [], None, 0.0
+    for w in wp:
+        on = math.dist(w[:2], where) < 1e-6
+        if on and since is None:
+            since = w[2]
+        elif not on and since is not None:
+            out.append(prev - since)
+            since = None
+        prev = w[2]
+    return out
+
+
+@pytest.mark.parametrize("method", ["prior", "md"])
+def test_a_station_others_queue_for_is_handed_over_before_docking_ends(busy, method, monkeypatch):
+    # session 28 (HAND_OVER_EARLY_S): the robot docking at a station others queue for gets its next leg (leaving
+    # when its docking ends) that much sooner, so the first robot in the queue is on its way sooner
+    result, log = _handovers(busy, method)
+    assert result.finished and result.collisions == 0 and result.violations == []
+    assert _min_gap(result.trajectories, busy.radius) >= -1e-6
+    ahead = [end - t for _, t, end in log]
+    early = [a for a in ahead if a > 1e-9]
+    assert len(early) >= 2 and early == pytest.approx([central.HAND_OVER_EARLY_S] * len(early))
+    chute = busy.stations["chute_1"]
+    stays = [s for tp in result.trajectories for s in _stays(tp, chute)]
+    assert len(stays) >= 6 and min(stays) >= busy.dock_s - 1e-6   # every robot still docks its full time
+    # control: handed over when the docking ends
+    monkeypatch.setattr(central, "HAND_OVER_EARLY_S", 0.0)
+    result, log = _handovers(busy, method)
+    assert result.collisions == 0 and log and all(end - t <= 1e-9 for _, t, end in log)

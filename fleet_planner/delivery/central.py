@@ -16,7 +16,7 @@ from ..model import PlanningError, Point, RobotSpec, TimedPath
 from ..planners import get_planner
 from .problem import DeliveryProblem
 from .result import DeliveryResult, RunLimits, RunTally, SimProgress, check_driven, distance_driven, mean_velocity
-from .stations import EVACUATE_S, _DeliveryRules, _SimRobot
+from .stations import EVACUATE_S, PLACE_RULES, _DeliveryRules, _SimRobot
 
 #: a robot whose leg could not be planned tries again at the latest this many ``retry_s`` later
 #: (sooner once another robot got a new leg)
@@ -24,6 +24,10 @@ RETRY_LATEST = 15
 #: queue near, close (ours): a robot handed its station while it drives to a queue place turns to the station
 #: at once, its leg cut where it is (:meth:`_CentralRun._turn_to_station`); False: it drives on to the place first
 TURN_EN_ROUTE = True
+#: queue near, close (ours): a robot docking at a station others queue for has its next leg planned (leaving
+#: when its docking ends) this many seconds before its docking ends, so the station is handed over and the next
+#: robot's leg planned that much sooner (0: when its docking ends)
+HAND_OVER_EARLY_S = 3.0
 
 
 class _CentralRun:
@@ -49,6 +53,8 @@ class _CentralRun:
         self.failed_at = [0.0] * n
         self.leg_delay_s = 0.0      # over all legs: arrival later than driving straight off at top speed
         self.last_activity = 0.0    # when some robot last arrived, docked or set off
+        #: per robot: when its docking ends (HAND_OVER_EARLY_S: its event comes sooner)
+        self.dock_end = [0.0] * n
         self.turned = 0             # legs cut to turn to a station handed over en route (TURN_EN_ROUTE)
 
     def run(self) -> DeliveryResult:
@@ -90,11 +96,20 @@ class _CentralRun:
         if r.phase == "drive":
             rules.arrived(r, t)
             self.last_activity = t
+            if r.phase == "dock" and HAND_OVER_EARLY_S > 0 and rules.queue_rule in PLACE_RULES:
+                self.dock_end[r.idx] = r.wake
+                r.wake = max(t, r.wake - HAND_OVER_EARLY_S)   # its next leg is planned this much sooner
         elif r.phase == "dock":
-            rules.docked(r, t)
+            end = max(t, self.dock_end[r.idx])
+            if end > t and not (r.on_station is not None and rules.queues.has_queue(r.on_station)):
+                r.wake = end                                  # nobody to hand the station to: dock to the end
+                return
+            rules.docked(r, end)
             self.last_activity = t
             if self.progress:
-                self.progress(rules.completed, len(self.problem.deliveries), t)
+                self.progress(rules.completed, len(self.problem.deliveries), end)
+            if end > t and r.phase == "need" and self._start_leg(r, end, t):
+                self.last_activity = t
         elif r.phase == "wait":
             rules.retarget(r, t)
         if r.phase == "need" and r.wake <= t:
@@ -156,15 +171,17 @@ class _CentralRun:
         q.wake = max(now, leg.arrival_time)
         return True
 
-    def _start_leg(self, r: _SimRobot, now: float) -> bool:
+    def _start_leg(self, r: _SimRobot, now: float, at: float | None = None) -> bool:
         """Plan r's leg to its target (or to a parking spot, to clear a station others queue for)
-        and set off; on its target already, it arrives at once. False: no leg yet, try again."""
+        and set off; on its target already, it arrives at once. False: no leg yet, try again.
+        ``at``: the time it is now, when the leg is planned ahead to leave no sooner than ``now``
+        (:data:`HAND_OVER_EARLY_S`)."""
         rules = self.rules
         assert r.target is not None
         if math.dist(r.pos, r.target) < 1e-9:
             rules.arrived(r, now)
             return True
-        others = [self._as_fixed(q, now) for q in self.robots if q is not r]
+        others = [self._as_fixed(q, now if at is None else at) for q in self.robots if q is not r]
         leg = self._plan_leg(r, r.target, others, now)
         if rules.others_queue_here(r) and (leg is None or leg.start_time > now + EVACUATE_S):
             spot = rules.spot_near_here(r)
