@@ -132,8 +132,10 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--queue", default="spots",
                    help="comma-separated queue rules of the central methods, each run in turn: spots (wait for a "
                         "station on parking spots near it, session 25's rule), near (on queue places a few metres "
-                        "from it, moving up; ours) or close (near's, with the busy stations' places in the room next "
-                        "to them, placed before the other parking spots; ours) (default: %(default)s)")
+                        "from it, moving up; ours), close (near's, with the busy stations' places in the room next "
+                        "to them, placed before the other parking spots; ours) or auto (close where every busy "
+                        "loading station gets enough places, else spots; ours; the queue column names the rule "
+                        "chosen) (default: %(default)s)")
     p.add_argument("--backstop", type=float, default=math.inf,
                    help="md's leg budgets are CPU seconds; they also stop after this many times their seconds of wall "
                         "time (the planners' default 10: a starved run then plans less, and its CTime depends on the "
@@ -339,7 +341,7 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
     row.cpu_s = time.process_time() - cpu0
     row.backstops = budget.Budget.backstops - backstops0
     row.budgets_out = budget.Budget.spent - out0
-    row.queue = queue
+    row.queue = queue if queue != "auto" else f"auto:{res.extra.get('queue', '?')}"   # (the rule it chose)
     return row
 
 

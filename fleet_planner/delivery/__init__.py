@@ -92,8 +92,9 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
     ``record``: keep the behaviour fleet's positions at every step. ``planner_options``: keyword
     options of the central method's planner (:func:`~fleet_planner.planners.get_planner`). ``queue``: the
     central methods' queue rule, ``spots`` (robots wait for a station on parking spots near it), ``near``
-    (on queue places a few metres from it, moving up; ours, :mod:`.stations`) or ``close`` (near's, with the
-    busy loading stations' places placed first; ours); the behaviour fleet has its own.
+    (on queue places a few metres from it, moving up; ours, :mod:`.stations`), ``close`` (near's, with the
+    busy loading stations' places placed first; ours) or ``auto`` (close where every busy loading station gets
+    enough places, else spots; ours); the behaviour fleet has its own.
     """
     if method not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(METHODS)} (got {method!r})")

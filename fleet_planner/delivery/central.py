@@ -28,6 +28,8 @@ TURN_EN_ROUTE = True
 #: when its docking ends) this many seconds before its docking ends, so the station is handed over and the next
 #: robot's leg planned that much sooner (0: when its docking ends)
 HAND_OVER_EARLY_S = 3.0
+#: ... under these queue rules
+EARLY_RULES = PLACE_RULES
 
 
 class _CentralRun:
@@ -96,7 +98,7 @@ class _CentralRun:
         if r.phase == "drive":
             rules.arrived(r, t)
             self.last_activity = t
-            if r.phase == "dock" and HAND_OVER_EARLY_S > 0 and rules.queue_rule in PLACE_RULES:
+            if r.phase == "dock" and HAND_OVER_EARLY_S > 0 and rules.queue_rule in EARLY_RULES:
                 self.dock_end[r.idx] = r.wake
                 r.wake = max(t, r.wake - HAND_OVER_EARLY_S)   # its next leg is planned this much sooner
         elif r.phase == "dock":
@@ -218,7 +220,7 @@ class _CentralRun:
             deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock", "drive")),
             wall_s=tally.wall_s(), violations=violations, trajectories=paths,
             extra={"mean_leg_delay_s": round(self.leg_delay_s / per_leg, 2), "hold_legs": rules.hold_legs,
-                   "turned": self.turned, "mean_phase_s": rules.mean_phase_s(t)})
+                   "turned": self.turned, "queue": rules.queue_rule, "mean_phase_s": rules.mean_phase_s(t)})
 
 
 def simulate_central(problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None = None,

@@ -42,6 +42,17 @@ aisle the traffic needs both ways. A problem without such a station (stations sp
 loaded and unloaded at) is run with the spots rule: there places beside the stations made CTime worse (md 1156 ->
 1190 s, PRIOR 1213 -> 1424 on warehouse-10-20-10-2-1 at 20 robots).
 
+Three rules of both place rules (ours, session 28; each a switch, for the tests' controls): a robot joins its
+station's queue when it books the place it drives to, not when it gets there (:data:`JOIN_ON_BOOKING`: at 50 robots
+the robots that found no place free queued on their homes 20-37 m off at once, ahead of the robots driving to the
+places 1 m from the chute, and the chute idled 25-60 s while the first of them drove in); a robot handed its
+station while it drives to a place turns to the station where it is (:data:`~.central.TURN_EN_ROUTE`,
+:meth:`_DeliveryRules.to_station_now`); a robot docking at a station others queue for gets its next leg (leaving
+when its docking ends) :data:`~.central.HAND_OVER_EARLY_S` before its docking ends, so the station is handed
+over and the next robot's leg planned that much sooner. ``queue="auto"`` (ours) runs the close rule where every
+busy loading station gets at least :data:`AUTO_PLACES` places, else the spots rule: on the default warehouse at
+100 robots the homes fill the room by the chutes, close finds 0-3 places per chute and was worse than spots.
+
 Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
 (Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
 certain distance" and wait, first come first served (the fleet's docking arbiter); with 200 robots
@@ -99,7 +110,11 @@ JOIN_ON_BOOKING = True
 #: the queue rules of the central methods: on parking spots near the station (the default, session 25's
 #: rule), or on queue places near it with moving up (ours, see the module text): ``near`` among the problem's
 #: parking spots, ``close`` in the room next to the station the parking spots would take
-QUEUE_RULES = ("spots", "near", "close")
+QUEUE_RULES = ("spots", "near", "close", "auto")
+#: queue="auto" (ours): the close rule when each of its busy loading stations gets at least this many places, else
+#: the spots rule (the default warehouse at 100 robots: its homes fill the room by the chutes, close finds 0-3 places
+#: per chute and was worse than spots, md 1634 -> 1954 s)
+AUTO_PLACES = 2
 #: the rules with queue places and moving up
 PLACE_RULES = ("near", "close")
 #: behaviour fleet with admission (ours): waiting places are parking spots at least this far (m,
@@ -267,9 +282,13 @@ class _DeliveryRules:
         if queue != "spots" and not claims:
             raise ValueError(f"queue: {queue!r} is a rule of the central methods (claims=True)")
         #: queue="close": the busy loading stations that get their places first (:meth:`_close_stations`)
-        self.close_stations = self._close_stations(problem) if queue == "close" else set()
-        if queue == "close" and not self.close_stations:
+        self.close_stations = self._close_stations(problem) if queue in ("close", "auto") else set()
+        asked = queue
+        if queue in ("close", "auto") and not self.close_stations:
             queue = "spots"   # no loading station to queue at: session 25's rule, as it was
+        elif queue == "auto":
+            queue = "close"   # unless its places are too few (below)
+        #: the queue rule run (``auto``: the one chosen)
         self.queue_rule = queue
         #: behaviour fleet: at most ``admit`` robots bound for a station at a time (None: no limit)
         self.admission = None if claims or admit is None else _StationAdmission(list(problem.stations), admit)
@@ -287,6 +306,9 @@ class _DeliveryRules:
         if queue in PLACE_RULES:
             assert drive is not None
             self._place_slots(drive)
+            if asked == "auto" and min(len(self.slots.get(st, [])) for st in self.close_stations) < AUTO_PLACES:
+                self.queue_rule, self.spots, self.slots, self.slot_of = "spots", list(problem.spots), {}, {}
+                self.close_stations = set()
         self.parking = _ParkingSpots(self.spots, problem.n_robots)
         #: the spots any robot may take (not a station's queue place)
         self.general = np.array([i not in self.slot_of for i in range(len(self.spots))], dtype=bool)
