@@ -16,7 +16,7 @@ from ..model import PlanningError, Point, RobotSpec, TimedPath
 from ..planners import get_planner
 from .problem import DeliveryProblem
 from .result import DeliveryResult, RunLimits, RunTally, SimProgress, check_driven, distance_driven, mean_velocity
-from .stations import EVACUATE_S, PLACE_RULES, _DeliveryRules, _SimRobot
+from .stations import DEFAULT_QUEUE, EVACUATE_S, PLACE_RULES, _DeliveryRules, _SimRobot
 
 #: a robot whose leg could not be planned tries again at the latest this many ``retry_s`` later
 #: (sooner once another robot got a new leg)
@@ -36,7 +36,7 @@ class _CentralRun:
     """One run of a central method: the trajectories being driven, the legs driven, the retries."""
 
     def __init__(self, problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None,
-                 progress: SimProgress | None, queue: str = "spots"):
+                 progress: SimProgress | None, queue: str = DEFAULT_QUEUE):
         self.tally = RunTally()
         self.problem = problem
         self.method = method
@@ -224,7 +224,7 @@ class _CentralRun:
 
 
 def simulate_central(problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None = None,
-                     progress: SimProgress | None = None, queue: str = "spots") -> DeliveryResult:
+                     progress: SimProgress | None = None, queue: str = DEFAULT_QUEUE) -> DeliveryResult:
     """Run the deliveries with a central method (a planner name of the registry: md, md-box, prior);
     ``queue``: the queue rule (:data:`~fleet_planner.delivery.stations.QUEUE_RULES`)."""
     return _CentralRun(problem, method, limits, planner_options, progress, queue).run()

@@ -115,6 +115,8 @@ QUEUE_RULES = ("spots", "near", "close", "auto")
 #: the spots rule (the default warehouse at 100 robots: its homes fill the room by the chutes, close finds 0-3 places
 #: per chute and was worse than spots, md 1634 -> 1954 s)
 AUTO_PLACES = 2
+#: the central methods' queue rule unless one is asked for (session 28; before: spots)
+DEFAULT_QUEUE = "auto"
 #: the rules with queue places and moving up
 PLACE_RULES = ("near", "close")
 #: behaviour fleet with admission (ours): waiting places are parking spots at least this far (m,
