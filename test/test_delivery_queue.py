@@ -297,3 +297,24 @@ def test_a_station_others_queue_for_is_handed_over_before_docking_ends(busy, met
     monkeypatch.setattr(central, "HAND_OVER_EARLY_S", 0.0)
     result, log = _handovers(busy, method)
     assert result.collisions == 0 and log and all(end - t <= 1e-9 for _, t, end in log)
+
+
+@pytest.mark.parametrize("queue", ["spots", "close"])
+def test_a_robot_with_no_delivery_left_parks_on_the_closest_free_spot(busy, queue, monkeypatch):
+    # session 28 (PARK_NEAREST): the robots done with their deliveries drove home across the warehouse while the
+    # others made the last ones; now each parks on the closest free parking spot (its home too, when closest)
+    rules = _DeliveryRules(busy, claims=True, queue=queue)
+    r = rules.robots[0]
+    rules.left(r, 0.0)                                         # it left its home (free again)
+    home = rules.spots[0]
+    r.pos = max(busy.stations.values(), key=lambda p: math.dist(p, home))   # at the station farthest from it
+    rules.next_delivery = len(busy.deliveries)                 # nothing left to hand out
+    rules.next_target(r, 10.0)
+    free = [i for i in range(len(rules.spots)) if rules.general[i] and (rules.parking.owner[i] in (None, 0))]
+    nearest = min(free, key=lambda i: (math.dist(rules.spots[i], r.pos), i))
+    assert r.target_kind == "park" and r.booked_spot == nearest != 0
+    assert math.dist(rules.spots[nearest], r.pos) < math.dist(home, r.pos)
+    monkeypatch.setattr(stations, "PARK_NEAREST", False)       # control: home, when free
+    rules.parking.owner[nearest], r.booked_spot = None, None
+    rules.next_target(r, 10.0)
+    assert r.target_kind == "park" and r.booked_spot == 0 and r.target == home

@@ -115,6 +115,9 @@ QUEUE_RULES = ("spots", "near", "close", "auto")
 #: the spots rule (the default warehouse at 100 robots: its homes fill the room by the chutes, close finds 0-3 places
 #: per chute and was worse than spots, md 1634 -> 1954 s)
 AUTO_PLACES = 2
+#: central methods: a robot with no delivery left parks on the closest free parking spot (ours, session 28; False:
+#: on its home when free, else the closest free spot, as the behaviour fleet)
+PARK_NEAREST = True
 #: the central methods' queue rule unless one is asked for (session 28; before: spots)
 DEFAULT_QUEUE = "auto"
 #: the rules with queue places and moving up
@@ -410,8 +413,9 @@ class _DeliveryRules:
             self._drive_solo(r, self.problem.stations[r.delivery.drop])
             self._to_station(r, r.delivery.pick, "pick", t)
         else:
-            # home, else the closest free spot (near a station, it would stand in others' way)
-            spot = r.idx if self.parking.owner[r.idx] is None else \
+            # home, else the closest free spot (near a station, it would stand in others' way); central methods
+            # (PARK_NEAREST): the closest free spot
+            spot = r.idx if self.parking.owner[r.idx] is None and not (PARK_NEAREST and self.claims) else \
                 self.parking.nearest_free(np.hypot(*(self.parking.xy - np.asarray(r.pos)).T), self.general)
             if spot is None:                  # every spot taken or promised: stay (nothing left to do)
                 self.enter(r, "done", t)
