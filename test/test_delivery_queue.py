@@ -299,10 +299,10 @@ def test_a_station_others_queue_for_is_handed_over_before_docking_ends(busy, met
     assert result.collisions == 0 and log and all(end - t <= 1e-9 for _, t, end in log)
 
 
-@pytest.mark.parametrize("queue", ["spots", "close"])
+@pytest.mark.parametrize("queue", ["near", "close", "spots"])
 def test_a_robot_with_no_delivery_left_parks_on_the_closest_free_spot(busy, queue, monkeypatch):
-    # session 28 (PARK_NEAREST): the robots done with their deliveries drove home across the warehouse while the
-    # others made the last ones; now each parks on the closest free parking spot (its home too, when closest)
+    # session 28 (PARK_NEAREST, the place rules): the robots done with their deliveries drove home across the
+    # warehouse while the others made the last ones; now each parks on the closest free parking spot
     rules = _DeliveryRules(busy, claims=True, queue=queue)
     r = rules.robots[0]
     rules.left(r, 0.0)                                         # it left its home (free again)
@@ -310,9 +310,12 @@ def test_a_robot_with_no_delivery_left_parks_on_the_closest_free_spot(busy, queu
     r.pos = max(busy.stations.values(), key=lambda p: math.dist(p, home))   # at the station farthest from it
     rules.next_delivery = len(busy.deliveries)                 # nothing left to hand out
     rules.next_target(r, 10.0)
+    if queue == "spots":   # control: the spots rule parks at home (its robots queue on the spots near stations)
+        assert r.target_kind == "park" and r.booked_spot == 0 and r.target == home
+        return
     free = [i for i in range(len(rules.spots)) if rules.general[i] and (rules.parking.owner[i] in (None, 0))]
     nearest = min(free, key=lambda i: (math.dist(rules.spots[i], r.pos), i))
-    assert r.target_kind == "park" and r.booked_spot == nearest != 0
+    assert r.target_kind == "park" and r.booked_spot == nearest != 0 and nearest not in rules.slot_of
     assert math.dist(rules.spots[nearest], r.pos) < math.dist(home, r.pos)
     monkeypatch.setattr(stations, "PARK_NEAREST", False)       # control: home, when free
     rules.parking.owner[nearest], r.booked_spot = None, None
