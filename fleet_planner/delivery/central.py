@@ -144,26 +144,31 @@ class _CentralRun:
     def _turn_to_station(self, q: _SimRobot, now: float) -> bool:
         """q was handed its station while driving to a queue place (queue near, close): its leg is cut at
         ``now`` and a leg from there to the station planned, when that arrives sooner than going on to the
-        place first (it would then drive from the place at best at top speed); else it drives on.
+        place first (it would then drive from the place at best at top speed); else it drives on. A leg not
+        begun yet (planned ahead while q docks) is replaced by a leg from its start, leaving no sooner.
         Any leg planned around the others' trajectories keeps clear of them, so cutting q's is safe."""
         tp = self.driving[q.idx]
         if tp.arrival_time <= now + 1e-6:
             return False
         assert q.station is not None and q.target is not None
         station = self.problem.stations[q.station]
-        at = tp.position(now)
+        # a leg planned ahead (HAND_OVER_EARLY_S: it docks until the leg begins) is planned again from its start
+        begun = tp.waypoints[0, 2] <= now
+        at, t0 = (tp.position(now), now) if begun else ((float(tp.waypoints[0, 0]), float(tp.waypoints[0, 1])),
+                                                        float(tp.waypoints[0, 2]))
         others = [self._as_fixed(o, now) for o in self.robots if o is not q]
         spec = RobotSpec(q.id, self.problem.radius, self.problem.max_speed, at, station)
         with self.tally.deciding():
             try:
-                leg = self.planner.plan_incremental(self.problem.grid, [spec], others, now)[0]
+                leg = self.planner.plan_incremental(self.problem.grid, [spec], others, t0)[0]
             except PlanningError:
                 self.tally.failed_plans += 1
                 return False
         if leg.arrival_time >= tp.arrival_time + math.dist(q.target, station) / self.problem.max_speed:
             return False
-        wp = self.legs[q.idx][-1]
-        self.legs[q.idx][-1] = np.vstack([wp[wp[:, 2] < now], [*at, now]])
+        wp = self.legs[q.idx].pop()
+        if begun:
+            self.legs[q.idx].append(np.vstack([wp[wp[:, 2] < now], [*at, now]]))
         self.tally.legs += 1
         self.turned += 1
         self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
