@@ -42,14 +42,15 @@ aisle the traffic needs both ways. A problem without such a station (stations sp
 loaded and unloaded at) is run with the spots rule: there places beside the stations made CTime worse (md 1156 ->
 1190 s, PRIOR 1213 -> 1424 on warehouse-10-20-10-2-1 at 20 robots).
 
-Three rules of both place rules (ours, session 28; each a switch, for the tests' controls): a robot joins its
+Four rules of both place rules (ours, session 28; each a switch, for the tests' controls): a robot joins its
 station's queue when it books the place it drives to, not when it gets there (:data:`JOIN_ON_BOOKING`: at 50 robots
 the robots that found no place free queued on their homes 20-37 m off at once, ahead of the robots driving to the
 places 1 m from the chute, and the chute idled 25-60 s while the first of them drove in); a robot handed its
 station while it drives to a place turns to the station where it is (:data:`~.central.TURN_EN_ROUTE`,
 :meth:`_DeliveryRules.to_station_now`); a robot docking at a station others queue for gets its next leg (leaving
 when its docking ends) :data:`~.central.HAND_OVER_EARLY_S` before its docking ends, so the station is handed
-over and the next robot's leg planned that much sooner. ``queue="auto"`` (ours) runs the close rule where every
+over and the next robot's leg planned that much sooner; a robot with no delivery left parks on the closest free
+parking spot, not its home (:data:`PARK_NEAREST`). ``queue="auto"`` (ours) runs the close rule where every
 busy loading station gets at least :data:`AUTO_PLACES` places, else the spots rule: on the default warehouse at
 100 robots the homes fill the room by the chutes, close finds 0-3 places per chute and was worse than spots.
 
