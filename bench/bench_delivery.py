@@ -41,6 +41,7 @@ sys.path.insert(0, str(REPO))
 
 from fleet_planner import budget  # noqa: E402
 from fleet_planner.delivery import (  # noqa: E402
+    DEFAULT_QUEUE,
     METHODS,
     QUEUE_RULES,
     DeliveryProblem,
@@ -86,7 +87,7 @@ class Row:
     cpu_s: float = 0.0          # CPU seconds of the run (this process)
     backstops: int = 0          # central: leg budgets that ran out on their wall-clock backstop (load-dependent)
     budgets_out: int = 0        # central: planning budgets that ran out (CPU or backstop)
-    queue: str = "spots"        # central methods: the queue rule (QUEUE_RULES)
+    queue: str = DEFAULT_QUEUE  # central methods: the queue rule (QUEUE_RULES)
 
 
 def planner_options(p: argparse.ArgumentParser, items: list[str]) -> dict:
@@ -129,11 +130,13 @@ def _args(argv=None) -> argparse.Namespace:
                    help="paper 002's comparison (its Tables I-III): ARMO, PRIOR, BBMRCA and md on "
                         f"{PAPER002['maps']} at N={PAPER002['sizes']}, printed in the paper's layout "
                         "(options given win; --plot defaults to out/paper002.png)")
-    p.add_argument("--queue", default="spots",
+    p.add_argument("--queue", default=DEFAULT_QUEUE,
                    help="comma-separated queue rules of the central methods, each run in turn: spots (wait for a "
                         "station on parking spots near it, session 25's rule), near (on queue places a few metres "
-                        "from it, moving up; ours) or close (near's, with the busy stations' places in the room next "
-                        "to them, placed before the other parking spots; ours) (default: %(default)s)")
+                        "from it, moving up; ours), close (near's, with the busy stations' places in the room next "
+                        "to them, placed before the other parking spots; ours) or auto (close where every busy "
+                        "loading station gets enough places, else spots; ours; the queue column names the rule "
+                        "chosen) (default: %(default)s)")
     p.add_argument("--backstop", type=float, default=math.inf,
                    help="md's leg budgets are CPU seconds; they also stop after this many times their seconds of wall "
                         "time (the planners' default 10: a starved run then plans less, and its CTime depends on the "
@@ -304,9 +307,10 @@ def plot(rows: list[Row], path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
-def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace, bar, queue: str = "spots") -> Row:
+def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace, bar,
+        queue: str = DEFAULT_QUEUE) -> Row:
     """One simulation, its progress on the bar and a loud line if it went wrong."""
-    label = f"{m} N={problem.n_robots} {method}" + ("" if queue == "spots" else f" queue={queue}")
+    label = f"{m} N={problem.n_robots} {method}" + ("" if queue == DEFAULT_QUEUE else f" queue={queue}")
     bar.set_postfix_str(label)
     shown = [0.0]
 
@@ -339,7 +343,7 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
     row.cpu_s = time.process_time() - cpu0
     row.backstops = budget.Budget.backstops - backstops0
     row.budgets_out = budget.Budget.spent - out0
-    row.queue = queue
+    row.queue = queue if queue != "auto" else f"auto:{res.extra.get('queue', '?')}"   # (the rule it chose)
     return row
 
 

@@ -47,8 +47,8 @@ def main(argv=None) -> int:
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="a planner option of the method (e.g. early_clear=true), repeatable")
     p.add_argument("--dump", type=Path, help="also write every leg's record to this JSON file")
-    p.add_argument("--queue", default="spots",
-                   help="the queue rule: spots (default), near or close (bench_delivery --queue)")
+    p.add_argument("--queue", default="auto",
+                   help="the queue rule: auto (default), spots, near or close (bench_delivery --queue)")
     args = p.parse_args(argv)
     bargs = bench_delivery._args(["--maps-dir", str(args.maps_dir), "--seed", str(args.seed),
                                   "--deliveries-per-robot", str(args.per_robot)])

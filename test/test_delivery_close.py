@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from fleet_planner.delivery import simulate
+from fleet_planner.delivery import simulate, stations, warehouse_problem
 from fleet_planner.delivery.layout import (
     ROBOT_RADIUS,
     SPOT_MARGIN,
@@ -22,6 +22,7 @@ from fleet_planner.delivery.problem import Delivery, DeliveryProblem
 from fleet_planner.delivery.stations import CLOSE_NEW, QUEUE_REACH, _DeliveryRules
 from fleet_planner.grid import GridMap
 from fleet_planner.paths import PathFinder
+from fleet_planner.warehouse import load_warehouse
 
 #: a chute row as in the default warehouse: the north wall with pillars and recesses 1 m deep between them, a
 #: band 3 m wide in front of them, a rack wall with one opening 3 m wide, and a hall south of it
@@ -143,3 +144,19 @@ def test_close_without_a_loading_station_is_the_spots_rule(chute):
     rules = _DeliveryRules(both_ways, claims=True, queue="close")
     assert rules.queue_rule == "spots" and rules.slots == {} and rules.spots == list(chute.spots)
     assert _DeliveryRules(chute, claims=True, queue="close").queue_rule == "close"   # control: A only loads
+
+
+def test_auto_is_close_where_the_busy_stations_get_places_and_spots_where_not(chute, monkeypatch):
+    # session 28 (queue="auto"): the default warehouse at 100 robots, its homes filling the room by the chutes, got
+    # 0-3 close places per chute and ran worse with them than with parking spots (md 1634 -> 1954 s); at 50 robots
+    # 4-6 places each and close was far better (795 -> 524 s)
+    wh = load_warehouse()
+    rules = {n: _DeliveryRules(warehouse_problem(wh, n, 3 * n, 0), claims=True, queue="auto") for n in (50, 100)}
+    assert rules[50].queue_rule == "close" and min(len(rules[50].slots[s]) for s in rules[50].close_stations) >= 4
+    assert rules[100].queue_rule == "spots" and rules[100].slots == {} and rules[100].close_stations == set()
+    close = _DeliveryRules(warehouse_problem(wh, 100, 300, 0), claims=True, queue="close")
+    assert min(len(close.slots.get(s, [])) for s in close.close_stations) < stations.AUTO_PLACES   # (why)
+    assert _DeliveryRules(chute, claims=True, queue="auto").queue_rule == "close"
+    monkeypatch.setattr(stations, "AUTO_PLACES", CLOSE_NEW + 1)    # control: more places than close ever makes
+    rules = _DeliveryRules(chute, claims=True, queue="auto")
+    assert rules.queue_rule == "spots" and rules.spots == list(chute.spots)

@@ -9,12 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from fleet_planner.delivery import delivery_problem, simulate
+from fleet_planner.delivery import central, delivery_problem, simulate, stations, warehouse_problem
 from fleet_planner.delivery.layout import ROBOT_RADIUS, SPOT_MARGIN, _shut_in, driving_distances, queue_places
+from fleet_planner.delivery.result import RunLimits
 from fleet_planner.delivery.stations import QUEUE_REACH, QUEUE_SLOTS, _DeliveryRules
 from fleet_planner.grid import GridMap
 from fleet_planner.paths import PathFinder
-from fleet_planner.warehouse import generate_warehouse
+from fleet_planner.warehouse import generate_warehouse, load_warehouse
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +79,9 @@ def _start(rules, r, t):
 
 
 @pytest.mark.parametrize("queue", ["near", "close", "spots"])
-def test_queue_is_first_come_first_served_and_moves_up(busy, queue):
+def test_queue_is_first_come_first_served_and_moves_up(busy, queue, monkeypatch):
+    # the control of JOIN_ON_BOOKING (session 27's order: a robot joins the queue when it reaches its place)
+    monkeypatch.setattr(stations, "JOIN_ON_BOOKING", False)
     rules = _DeliveryRules(busy, claims=True, queue=queue)
     robots = rules.robots
     for r in robots:
@@ -89,6 +92,7 @@ def test_queue_is_first_come_first_served_and_moves_up(busy, queue):
         return _spots_control(rules)
     slots = rules.slots["chute_1"]
     assert [r.booked_spot for r in robots[1:]] == slots[:5]   # the others: its places, nearest first
+    assert rules.queues.waiting["chute_1"] == []              # not in the queue before they get there
     for r in robots:
         _start(rules, r, 0.0)
     for idx in (3, 1, 2, 5, 4):                               # they arrive in this order
@@ -113,6 +117,33 @@ def test_queue_is_first_come_first_served_and_moves_up(busy, queue):
     assert [r.idx for r in rules.take_handed_over(33.0)] == [1]   # next in order of arrival
     _start(rules, robots[1], 33.0)
     assert robots[2].phase == "need" and robots[2].booked_spot == slots[0]
+
+
+@pytest.mark.parametrize("queue", ["near", "close"])
+def test_a_robot_joins_the_queue_when_it_books_its_place(busy, queue):
+    # session 28 (JOIN_ON_BOOKING): at 50 robots on the default warehouse the robots with no place free queued
+    # on their homes 20-37 m off at once, ahead of those still driving to the places 1 m from the chute, and the
+    # chute idled while the first of them drove in; now the queue is in the order the robots asked for the station
+    rules = _DeliveryRules(busy, claims=True, queue=queue)
+    robots = rules.robots
+    for r in robots:
+        rules.next_target(r, 0.0)
+    slots = rules.slots["chute_1"]
+    assert [r.booked_spot for r in robots[1:]] == slots[:5]
+    assert rules.queues.waiting["chute_1"] == [1, 2, 3, 4, 5]   # in the queue before they get there
+    for r in robots:
+        _start(rules, r, 0.0)
+    for idx in (3, 1, 2, 5, 4):                               # they arrive in another order
+        rules.arrived(robots[idx], 10.0 + idx)
+        assert robots[idx].phase == "queued"
+    assert rules.queues.waiting["chute_1"] == [1, 2, 3, 4, 5]   # (the control above: [3, 1, 2, 5, 4])
+    rules.arrived(robots[0], 20.0)
+    rules.docked(robots[0], 25.0)
+    _start(rules, robots[0], 25.0)
+    assert [r.idx for r in rules.take_handed_over(25.0)] == [1]   # the first to ask, on the nearest place
+    _start(rules, robots[1], 25.0)                            # it leaves slot 0: robot 2 (slot 1) moves up
+    assert robots[2].phase == "need" and robots[2].booked_spot == slots[0]
+    assert all(robots[i].phase == "queued" for i in (3, 4, 5))
 
 
 def _spots_control(rules) -> None:
@@ -162,3 +193,154 @@ def test_a_run_with_queue_places_is_valid(busy, method):
 def test_bad_queue_rule_is_named():
     with pytest.raises(ValueError, match="queue"):
         simulate(None, "md", queue="far")   # type: ignore[arg-type]
+
+
+def _turns(busy, method: str) -> tuple:
+    """A run of the busy chute with queue places; every turn to a station handed over en route: (robot, where,
+    when, the place it was driving to, the station)."""
+    run = central._CentralRun(busy, method, RunLimits(3600.0, 600.0, 120.0, 2.0, 600.0), None, None, queue="near")
+    turns, en_route = [], []
+    to_station_now, take_en_route = run.rules.to_station_now, run.rules.take_en_route
+
+    def logged(r, at, t):
+        turns.append((r.idx, at, t, tuple(run.rules.spots[r.spot]), busy.stations[r.station]))
+        to_station_now(r, at, t)
+
+    def handed():
+        out, t = take_en_route(), now[0]
+        en_route.extend((r.idx, run.driving[r.idx].position(t), t, tuple(run.rules.spots[r.spot])) for r in out)
+        return out
+
+    now, wake = [0.0], run._wake
+
+    def timed(r, t):
+        now[0] = t
+        wake(r, t)
+
+    run.rules.to_station_now, run.rules.take_en_route, run._wake = logged, handed, timed
+    return run.run(), turns, en_route   # (a drop's storing site has its places too)
+
+
+@pytest.mark.parametrize("method", ["prior", "md"])
+def test_a_robot_handed_its_station_on_the_way_to_its_place_turns_to_it(busy, method, monkeypatch):
+    # session 28 (TURN_EN_ROUTE): a robot the freed station is handed to while it drives to its queue place
+    # leaves that leg where it is for a leg to the station, instead of driving to the place first
+    result, turns, _ = _turns(busy, method)
+    assert result.finished and result.completed == 12
+    assert result.collisions == 0 and result.violations == []    # the cut trajectories too (independent checker)
+    assert _min_gap(result.trajectories, busy.radius) >= -1e-6
+    assert turns and result.extra["turned"] == len(turns)
+    for idx, at, t, place, station in turns:
+        wp = result.trajectories[idx].waypoints
+        assert math.dist(result.trajectories[idx].position(t), at) < 1e-6 and math.dist(at, place) > 1e-6
+        after = wp[wp[:, 2] >= t]
+        stop = next(k for k in range(len(after)) if math.dist(after[k, :2], station) < 1e-6)
+        assert all(math.dist(w[:2], place) > 1e-6 for w in after[:stop])   # on to the station, not the place
+    # control: without the rule nobody turns; each robot handed the chute on its way drives to its place first
+    monkeypatch.setattr(central, "TURN_EN_ROUTE", False)
+    result, turns, en_route = _turns(busy, method)
+    assert turns == [] and result.extra["turned"] == 0 and result.collisions == 0
+    assert en_route
+    for idx, at, t, place in en_route:
+        wp = result.trajectories[idx].waypoints
+        assert math.dist(at, place) > 1e-6 and any(math.dist(w[:2], place) < 1e-6 for w in wp[wp[:, 2] >= t])
+
+
+def _handovers(busy, method: str) -> tuple:
+    """A run of the busy chute with queue places; every station handed over to a queued robot: (station, when
+    the robot's leg to it is planned, when the robot leaving it ended its docking)."""
+    run = central._CentralRun(busy, method, RunLimits(3600.0, 600.0, 120.0, 2.0, 600.0), None, None, queue="near")
+    rules, log, ends = run.rules, [], {}
+    docked, take = rules.docked, rules.take_handed_over
+
+    def logged_docked(r, t):
+        ends[r.station] = t
+        docked(r, t)
+
+    def logged_take(t):
+        out = take(t)
+        log.extend((q.station, t, ends.get(q.station, -math.inf)) for q in out)
+        return out
+
+    rules.docked, rules.take_handed_over = logged_docked, logged_take
+    return run.run(), log
+
+
+def _stays(tp, where) -> list[float]:
+    """How long each stay of a driven trajectory on ``where`` lasted (s)."""
+    wp, out, since, prev = tp.waypoints, [], None, 0.0
+    for w in wp:
+        on = math.dist(w[:2], where) < 1e-6
+        if on and since is None:
+            since = w[2]
+        elif not on and since is not None:
+            out.append(prev - since)
+            since = None
+        prev = w[2]
+    return out
+
+
+@pytest.mark.parametrize("method", ["prior", "md"])
+def test_a_station_others_queue_for_is_handed_over_before_docking_ends(busy, method, monkeypatch):
+    # session 28 (HAND_OVER_EARLY_S): the robot docking at a station others queue for gets its next leg (leaving
+    # when its docking ends) that much sooner, so the first robot in the queue is on its way sooner
+    result, log = _handovers(busy, method)
+    assert result.finished and result.collisions == 0 and result.violations == []
+    assert _min_gap(result.trajectories, busy.radius) >= -1e-6
+    ahead = [end - t for _, t, end in log]
+    early = [a for a in ahead if a > 1e-9]
+    assert len(early) >= 2 and early == pytest.approx([central.HAND_OVER_EARLY_S] * len(early))
+    stays = [s for tp in result.trajectories for p in busy.stations.values() for s in _stays(tp, p) if s > 1e-9]
+    assert len(stays) >= 24 and min(stays) >= busy.dock_s - 1e-6   # every robot still docks its full time
+    # (24 dockings: a pick and a drop per delivery; a stay of 0 s is a robot passing over a station's pose)
+    # control: handed over when the docking ends
+    monkeypatch.setattr(central, "HAND_OVER_EARLY_S", 0.0)
+    result, log = _handovers(busy, method)
+    assert result.collisions == 0 and log and all(end - t <= 1e-9 for _, t, end in log)
+
+
+@pytest.mark.parametrize("queue", ["near", "close", "spots"])
+def test_a_robot_with_no_delivery_left_parks_on_the_closest_free_spot(busy, queue, monkeypatch):
+    # session 28 (PARK_NEAREST, the place rules): the robots done with their deliveries drove home across the
+    # warehouse while the others made the last ones; now each parks on the closest free parking spot
+    rules = _DeliveryRules(busy, claims=True, queue=queue)
+    r = rules.robots[0]
+    rules.left(r, 0.0)                                         # it left its home (free again)
+    home = rules.spots[0]
+    r.pos = max(busy.stations.values(), key=lambda p: math.dist(p, home))   # at the station farthest from it
+    rules.next_delivery = len(busy.deliveries)                 # nothing left to hand out
+    rules.next_target(r, 10.0)
+    if queue == "spots":   # control: the spots rule parks at home (its robots queue on the spots near stations)
+        assert r.target_kind == "park" and r.booked_spot == 0 and r.target == home
+        return
+    free = [i for i in range(len(rules.spots)) if rules.general[i] and (rules.parking.owner[i] in (None, 0))]
+    nearest = min(free, key=lambda i: (math.dist(rules.spots[i], r.pos), i))
+    assert r.target_kind == "park" and r.booked_spot == nearest != 0 and nearest not in rules.slot_of
+    assert math.dist(rules.spots[nearest], r.pos) < math.dist(home, r.pos)
+    monkeypatch.setattr(stations, "PARK_NEAREST", False)       # control: home, when free
+    rules.parking.owner[nearest], r.booked_spot = None, None
+    rules.next_target(r, 10.0)
+    assert r.target_kind == "park" and r.booked_spot == 0 and r.target == home
+
+
+def test_every_robot_docks_its_full_time_on_the_default_warehouse():
+    # a robot planned ahead (HAND_OVER_EARLY_S) and then handed the station of its next leg before that leg began
+    # was turned from its station at once, leaving it 0.3-3 s before its docking ended (3 of 120 dockings here with
+    # prior before the fix); now the leg is planned again from its start, leaving no sooner
+    problem = warehouse_problem(load_warehouse(), 20, 60, 0)
+    run = central._CentralRun(problem, "prior", RunLimits(3600.0, 600.0, 120.0, 2.0, 600.0), None, None)
+    docks, arrived = [], run.rules.arrived
+
+    def logged(r, t):
+        if r.target_kind in ("pick", "drop"):
+            docks.append((r.idx, problem.stations[r.station], t))
+        arrived(r, t)
+
+    run.rules.arrived = logged
+    result = run.run()
+    assert result.finished and result.collisions == 0 and len(docks) == 120
+    assert result.extra["queue"] == "close" and result.extra["turned"] > 0   # (the rules that act here)
+    for idx, station, t in docks:
+        tp = result.trajectories[idx]
+        stay = [t + problem.dock_s * k / 20 for k in range(21)]
+        assert all(math.dist(tp.position(s), station) < 1e-6 for s in stay), (tp.robot_id, station, t)

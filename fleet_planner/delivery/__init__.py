@@ -47,7 +47,7 @@ from .central import simulate_central
 from .layout import ROBOT_RADIUS, choose_spots, driving_distances, spread_stations
 from .problem import DOCK_S, TOP_SPEED, Delivery, DeliveryProblem, delivery_problem, warehouse_problem
 from .result import DeliveryResult, RunLimits, SimProgress
-from .stations import QUEUE_RULES
+from .stations import DEFAULT_QUEUE, QUEUE_RULES
 
 #: every registered planner (central: ``plan_incremental`` per leg), the behaviour fleet, and ARMO
 #: (the behaviour fleet driving along ARMO's road map of directed lanes, :func:`armo_problem`)
@@ -80,7 +80,7 @@ def lanes_problem(problem: DeliveryProblem, lanes) -> DeliveryProblem:
 def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: float = 4 * 3600.0,
              stall_s: float = 600.0, no_progress_s: float = 120.0, retry_s: float = 2.0,
              wall_cap_s: float = math.inf, record: bool = False, planner_options: dict | None = None,
-             progress: SimProgress | None = None, queue: str = "spots") -> DeliveryResult:
+             progress: SimProgress | None = None, queue: str = DEFAULT_QUEUE) -> DeliveryResult:
     """Run the deliveries of ``problem`` with ``method`` (one of :data:`METHODS`).
 
     ``dt``: step of the behaviour simulation (the central methods are event-driven and exact).
@@ -92,8 +92,9 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
     ``record``: keep the behaviour fleet's positions at every step. ``planner_options``: keyword
     options of the central method's planner (:func:`~fleet_planner.planners.get_planner`). ``queue``: the
     central methods' queue rule, ``spots`` (robots wait for a station on parking spots near it), ``near``
-    (on queue places a few metres from it, moving up; ours, :mod:`.stations`) or ``close`` (near's, with the
-    busy loading stations' places placed first; ours); the behaviour fleet has its own.
+    (on queue places a few metres from it, moving up; ours, :mod:`.stations`), ``close`` (near's, with the
+    busy loading stations' places placed first; ours) or ``auto`` (close where every busy loading station gets
+    enough places, else spots; ours; the default since session 28); the behaviour fleet has its own.
     """
     if method not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(METHODS)} (got {method!r})")
@@ -120,7 +121,7 @@ def simulate(problem: DeliveryProblem, method: str, *, dt: float = 0.1, cap_s: f
     return simulate_central(problem, method, limits, planner_options, progress, queue)
 
 
-__all__ = ["DOCK_S", "METHODS", "QUEUE_RULES", "armo_problem", "lanes_problem",
+__all__ = ["DEFAULT_QUEUE", "DOCK_S", "METHODS", "QUEUE_RULES", "armo_problem", "lanes_problem",
            "ROBOT_RADIUS", "TOP_SPEED", "Delivery", "DeliveryProblem", "DeliveryResult",
            "RunLimits", "SimProgress", "choose_spots", "delivery_problem", "driving_distances", "simulate",
            "spread_stations", "warehouse_problem"]

@@ -16,18 +16,27 @@ from ..model import PlanningError, Point, RobotSpec, TimedPath
 from ..planners import get_planner
 from .problem import DeliveryProblem
 from .result import DeliveryResult, RunLimits, RunTally, SimProgress, check_driven, distance_driven, mean_velocity
-from .stations import EVACUATE_S, _DeliveryRules, _SimRobot
+from .stations import DEFAULT_QUEUE, EVACUATE_S, PLACE_RULES, _DeliveryRules, _SimRobot
 
 #: a robot whose leg could not be planned tries again at the latest this many ``retry_s`` later
 #: (sooner once another robot got a new leg)
 RETRY_LATEST = 15
+#: queue near, close (ours): a robot handed its station while it drives to a queue place turns to the station
+#: at once, its leg cut where it is (:meth:`_CentralRun._turn_to_station`); False: it drives on to the place first
+TURN_EN_ROUTE = True
+#: queue near, close (ours): a robot docking at a station others queue for has its next leg planned (leaving
+#: when its docking ends) this many seconds before its docking ends, so the station is handed over and the next
+#: robot's leg planned that much sooner (0: when its docking ends)
+HAND_OVER_EARLY_S = 3.0
+#: ... under these queue rules
+EARLY_RULES = PLACE_RULES
 
 
 class _CentralRun:
     """One run of a central method: the trajectories being driven, the legs driven, the retries."""
 
     def __init__(self, problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None,
-                 progress: SimProgress | None, queue: str = "spots"):
+                 progress: SimProgress | None, queue: str = DEFAULT_QUEUE):
         self.tally = RunTally()
         self.problem = problem
         self.method = method
@@ -46,6 +55,9 @@ class _CentralRun:
         self.failed_at = [0.0] * n
         self.leg_delay_s = 0.0      # over all legs: arrival later than driving straight off at top speed
         self.last_activity = 0.0    # when some robot last arrived, docked or set off
+        #: per robot: when its docking ends (HAND_OVER_EARLY_S: its event comes sooner)
+        self.dock_end = [0.0] * n
+        self.turned = 0             # legs cut to turn to a station handed over en route (TURN_EN_ROUTE)
 
     def run(self) -> DeliveryResult:
         for r in self.robots:
@@ -86,11 +98,20 @@ class _CentralRun:
         if r.phase == "drive":
             rules.arrived(r, t)
             self.last_activity = t
+            if r.phase == "dock" and HAND_OVER_EARLY_S > 0 and rules.queue_rule in EARLY_RULES:
+                self.dock_end[r.idx] = r.wake
+                r.wake = max(t, r.wake - HAND_OVER_EARLY_S)   # its next leg is planned this much sooner
         elif r.phase == "dock":
-            rules.docked(r, t)
+            end = max(t, self.dock_end[r.idx])
+            if end > t and not (r.on_station is not None and rules.queues.has_queue(r.on_station)):
+                r.wake = end                                  # nobody to hand the station to: dock to the end
+                return
+            rules.docked(r, end)
             self.last_activity = t
             if self.progress:
-                self.progress(rules.completed, len(self.problem.deliveries), t)
+                self.progress(rules.completed, len(self.problem.deliveries), end)
+            if end > t and r.phase == "need" and self._start_leg(r, end, t):
+                self.last_activity = t
         elif r.phase == "wait":
             rules.retarget(r, t)
         if r.phase == "need" and r.wake <= t:
@@ -98,6 +119,9 @@ class _CentralRun:
                 self.last_activity = t
         for q in rules.take_handed_over(t):
             if self._start_leg(q, t):
+                self.last_activity = t
+        for q in rules.take_en_route():
+            if TURN_EN_ROUTE and self._turn_to_station(q, t):
                 self.last_activity = t
 
     def _as_fixed(self, q: _SimRobot, now: float) -> TimedPath:
@@ -117,15 +141,54 @@ class _CentralRun:
                 self.tally.failed_plans += 1
                 return None
 
-    def _start_leg(self, r: _SimRobot, now: float) -> bool:
+    def _turn_to_station(self, q: _SimRobot, now: float) -> bool:
+        """q was handed its station while driving to a queue place (queue near, close): its leg is cut at
+        ``now`` and a leg from there to the station planned, when that arrives sooner than going on to the
+        place first (it would then drive from the place at best at top speed); else it drives on. A leg not
+        begun yet (planned ahead while q docks) is replaced by a leg from its start, leaving no sooner.
+        Any leg planned around the others' trajectories keeps clear of them, so cutting q's is safe."""
+        tp = self.driving[q.idx]
+        if tp.arrival_time <= now + 1e-6:
+            return False
+        assert q.station is not None and q.target is not None
+        station = self.problem.stations[q.station]
+        # a leg planned ahead (HAND_OVER_EARLY_S: it docks until the leg begins) is planned again from its start
+        begun = tp.waypoints[0, 2] <= now
+        at, t0 = (tp.position(now), now) if begun else ((float(tp.waypoints[0, 0]), float(tp.waypoints[0, 1])),
+                                                        float(tp.waypoints[0, 2]))
+        others = [self._as_fixed(o, now) for o in self.robots if o is not q]
+        spec = RobotSpec(q.id, self.problem.radius, self.problem.max_speed, at, station)
+        with self.tally.deciding():
+            try:
+                leg = self.planner.plan_incremental(self.problem.grid, [spec], others, t0)[0]
+            except PlanningError:
+                self.tally.failed_plans += 1
+                return False
+        if leg.arrival_time >= tp.arrival_time + math.dist(q.target, station) / self.problem.max_speed:
+            return False
+        wp = self.legs[q.idx].pop()
+        if begun:
+            self.legs[q.idx].append(np.vstack([wp[wp[:, 2] < now], [*at, now]]))
+        self.tally.legs += 1
+        self.turned += 1
+        self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
+        self.driving[q.idx] = leg
+        self.legs[q.idx].append(leg.waypoints)
+        self.rules.to_station_now(q, at, now)
+        q.wake = max(now, leg.arrival_time)
+        return True
+
+    def _start_leg(self, r: _SimRobot, now: float, at: float | None = None) -> bool:
         """Plan r's leg to its target (or to a parking spot, to clear a station others queue for)
-        and set off; on its target already, it arrives at once. False: no leg yet, try again."""
+        and set off; on its target already, it arrives at once. False: no leg yet, try again.
+        ``at``: the time it is now, when the leg is planned ahead to leave no sooner than ``now``
+        (:data:`HAND_OVER_EARLY_S`)."""
         rules = self.rules
         assert r.target is not None
         if math.dist(r.pos, r.target) < 1e-9:
             rules.arrived(r, now)
             return True
-        others = [self._as_fixed(q, now) for q in self.robots if q is not r]
+        others = [self._as_fixed(q, now if at is None else at) for q in self.robots if q is not r]
         leg = self._plan_leg(r, r.target, others, now)
         if rules.others_queue_here(r) and (leg is None or leg.start_time > now + EVACUATE_S):
             spot = rules.spot_near_here(r)
@@ -162,11 +225,11 @@ class _CentralRun:
             deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock", "drive")),
             wall_s=tally.wall_s(), violations=violations, trajectories=paths,
             extra={"mean_leg_delay_s": round(self.leg_delay_s / per_leg, 2), "hold_legs": rules.hold_legs,
-                   "mean_phase_s": rules.mean_phase_s(t)})
+                   "turned": self.turned, "queue": rules.queue_rule, "mean_phase_s": rules.mean_phase_s(t)})
 
 
 def simulate_central(problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None = None,
-                     progress: SimProgress | None = None, queue: str = "spots") -> DeliveryResult:
+                     progress: SimProgress | None = None, queue: str = DEFAULT_QUEUE) -> DeliveryResult:
     """Run the deliveries with a central method (a planner name of the registry: md, md-box, prior);
     ``queue``: the queue rule (:data:`~fleet_planner.delivery.stations.QUEUE_RULES`)."""
     return _CentralRun(problem, method, limits, planner_options, progress, queue).run()

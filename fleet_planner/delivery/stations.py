@@ -42,6 +42,18 @@ aisle the traffic needs both ways. A problem without such a station (stations sp
 loaded and unloaded at) is run with the spots rule: there places beside the stations made CTime worse (md 1156 ->
 1190 s, PRIOR 1213 -> 1424 on warehouse-10-20-10-2-1 at 20 robots).
 
+Four rules of both place rules (ours, session 28; each a switch, for the tests' controls): a robot joins its
+station's queue when it books the place it drives to, not when it gets there (:data:`JOIN_ON_BOOKING`: at 50 robots
+the robots that found no place free queued on their homes 20-37 m off at once, ahead of the robots driving to the
+places 1 m from the chute, and the chute idled 25-60 s while the first of them drove in); a robot handed its
+station while it drives to a place turns to the station where it is (:data:`~.central.TURN_EN_ROUTE`,
+:meth:`_DeliveryRules.to_station_now`); a robot docking at a station others queue for gets its next leg (leaving
+when its docking ends) :data:`~.central.HAND_OVER_EARLY_S` before its docking ends, so the station is handed
+over and the next robot's leg planned that much sooner; a robot with no delivery left parks on the closest free
+parking spot, not its home (:data:`PARK_NEAREST`). ``queue="auto"`` (ours) runs the close rule where every
+busy loading station gets at least :data:`AUTO_PLACES` places, else the spots rule: on the default warehouse at
+100 robots the homes fill the room by the chutes, close finds 0-3 places per chute and was worse than spots.
+
 Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
 (Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
 certain distance" and wait, first come first served (the fleet's docking arbiter); with 200 robots
@@ -93,10 +105,23 @@ CLOSE_BUSY = 0.5
 #: queue="close": a new place never cuts a passage two robots wide (:class:`~.layout._TwoLanes`; False: only no
 #: cut passage, as near's places - the control of the tests)
 CLOSE_TWO_LANES = True
+#: queue near, close: a robot joins its station's queue when it books the place it drives to wait on (False: on
+#: arrival there)
+JOIN_ON_BOOKING = True
 #: the queue rules of the central methods: on parking spots near the station (the default, session 25's
 #: rule), or on queue places near it with moving up (ours, see the module text): ``near`` among the problem's
 #: parking spots, ``close`` in the room next to the station the parking spots would take
-QUEUE_RULES = ("spots", "near", "close")
+QUEUE_RULES = ("spots", "near", "close", "auto")
+#: queue="auto" (ours): the close rule when each of its busy loading stations gets at least this many places, else
+#: the spots rule (the default warehouse at 100 robots: its homes fill the room by the chutes, close finds 0-3 places
+#: per chute and was worse than spots, md 1634 -> 1954 s)
+AUTO_PLACES = 2
+#: queue near, close: a robot with no delivery left parks on the closest free parking spot, not a queue place (ours,
+#: session 28; False: on its home when free, else the closest free spot, as under the spots rule, where the robots
+#: queue on parking spots near the stations and the closest spots made every row 0-3% slower)
+PARK_NEAREST = True
+#: the central methods' queue rule unless one is asked for (session 28; before: spots)
+DEFAULT_QUEUE = "auto"
 #: the rules with queue places and moving up
 PLACE_RULES = ("near", "close")
 #: behaviour fleet with admission (ours): waiting places are parking spots at least this far (m,
@@ -264,9 +289,13 @@ class _DeliveryRules:
         if queue != "spots" and not claims:
             raise ValueError(f"queue: {queue!r} is a rule of the central methods (claims=True)")
         #: queue="close": the busy loading stations that get their places first (:meth:`_close_stations`)
-        self.close_stations = self._close_stations(problem) if queue == "close" else set()
-        if queue == "close" and not self.close_stations:
+        self.close_stations = self._close_stations(problem) if queue in ("close", "auto") else set()
+        asked = queue
+        if queue in ("close", "auto") and not self.close_stations:
             queue = "spots"   # no loading station to queue at: session 25's rule, as it was
+        elif queue == "auto":
+            queue = "close"   # unless its places are too few (below)
+        #: the queue rule run (``auto``: the one chosen)
         self.queue_rule = queue
         #: behaviour fleet: at most ``admit`` robots bound for a station at a time (None: no limit)
         self.admission = None if claims or admit is None else _StationAdmission(list(problem.stations), admit)
@@ -284,6 +313,9 @@ class _DeliveryRules:
         if queue in PLACE_RULES:
             assert drive is not None
             self._place_slots(drive)
+            if asked == "auto" and min(len(self.slots.get(st, [])) for st in self.close_stations) < AUTO_PLACES:
+                self.queue_rule, self.spots, self.slots, self.slot_of = "spots", list(problem.spots), {}, {}
+                self.close_stations = set()
         self.parking = _ParkingSpots(self.spots, problem.n_robots)
         #: the spots any robot may take (not a station's queue place)
         self.general = np.array([i not in self.slot_of for i in range(len(self.spots))], dtype=bool)
@@ -304,6 +336,8 @@ class _DeliveryRules:
         self.ctime: float | None = None     # when the last delivery was done
         self.phase_s: dict[str, float] = {}  # robot-seconds spent in each phase
         self.hold_legs = 0
+        #: queue near, close: robots handed their station while driving to a place (see :meth:`take_en_route`)
+        self.en_route: list[_SimRobot] = []
 
     def _spot_distances(self, drive: np.ndarray) -> dict[str, np.ndarray]:
         """Station -> driving distance to each spot of :attr:`spots` (``drive``: from each station to each cell)."""
@@ -381,8 +415,10 @@ class _DeliveryRules:
             self._drive_solo(r, self.problem.stations[r.delivery.drop])
             self._to_station(r, r.delivery.pick, "pick", t)
         else:
-            # home, else the closest free spot (near a station, it would stand in others' way)
-            spot = r.idx if self.parking.owner[r.idx] is None else \
+            # home, else the closest free spot (near a station, it would stand in others' way); queue near, close
+            # (PARK_NEAREST): the closest free spot
+            nearest = PARK_NEAREST and self.queue_rule in PLACE_RULES
+            spot = r.idx if self.parking.owner[r.idx] is None and not nearest else \
                 self.parking.nearest_free(np.hypot(*(self.parking.xy - np.asarray(r.pos)).T), self.general)
             if spot is None:                  # every spot taken or promised: stay (nothing left to do)
                 self.enter(r, "done", t)
@@ -435,6 +471,8 @@ class _DeliveryRules:
         r.booked_spot, r.station_kind = spot, kind
         self._need(r, self.spots[spot], "hold", station, t)
         self.hold_legs += 1
+        if self.queue_rule in PLACE_RULES and JOIN_ON_BOOKING:
+            self.queues.join(station, r.idx)   # in the queue from now on, not from its arrival
 
     def _decide_later(self, r: _SimRobot, station: str, kind: str, t: float) -> None:
         """Nowhere to wait for ``station`` yet: r decides again :data:`RETARGET_S` later."""
@@ -534,9 +572,11 @@ class _DeliveryRules:
         decision is undone; it decides again on the spot)."""
         if r.booked_spot is not None:
             self.parking.owner[r.booked_spot] = None
-        if (r.target_kind in ("pick", "drop") and r.station is not None and r.station != r.on_station
+        if (r.target_kind in ("pick", "drop", "hold") and r.station is not None and r.station != r.on_station
                 and self.queues.holder.get(r.station) == r.idx):
             self.queues.release(r.station)
+        elif r.target_kind == "hold" and r.station is not None and r.idx in self.queues.waiting[r.station]:
+            self.queues.waiting[r.station].remove(r.idx)
         self.parking.owner[spot], r.booked_spot = r.idx, spot
         r.target, r.target_kind, r.station = self.spots[spot], "evac", None
 
@@ -608,6 +648,7 @@ class _DeliveryRules:
             r = self.robots[i]
             assert r.station is not None
             if r.phase == "drive" and self.queue_rule in PLACE_RULES:   # moving up: on to the station on arrival
+                self.en_route.append(r)   # (unless the central run turns it to the station at once: to_station_now)
                 continue
             if r.phase == "need" and r.booked_spot is not None:   # its leg to a waiting place never began
                 self.parking.owner[r.booked_spot], r.booked_spot = None, None
@@ -616,6 +657,25 @@ class _DeliveryRules:
         if handed and self.queue_rule in PLACE_RULES:
             self._move_up(t)
         return out
+
+    def take_en_route(self) -> list[_SimRobot]:
+        """queue near, close: the robots :meth:`take_handed_over` handed their station while they drive to a
+        place (they go on to the station once there, unless turned to it at once: :meth:`to_station_now`)."""
+        out, self.en_route = [r for r in self.en_route if r.phase == "drive" and r.target_kind == "hold"], []
+        return out
+
+    def to_station_now(self, r: _SimRobot, at: Point, t: float) -> None:
+        """r, handed its station while driving to a place, leaves its leg at ``at`` (time t) for a leg to the
+        station: its place is free again (the robots behind move up)."""
+        assert r.station is not None and self.queues.holder.get(r.station) == r.idx
+        if r.spot is not None and self.parking.owner[r.spot] == r.idx:
+            self.parking.owner[r.spot] = None
+        r.spot = None
+        if r.idx in self.queues.waiting[r.station]:
+            self.queues.waiting[r.station].remove(r.idx)
+        r.pos, r.target, r.target_kind = at, self.problem.stations[r.station], r.station_kind
+        r.progress_t = t
+        self._move_up(t)
 
     # -- measures -------------------------------------------------------------------------------
     def busy(self, r: _SimRobot) -> bool:
