@@ -633,10 +633,9 @@ class _Session:
                           else planner.hold_step)
         #: route choice: a robot tries a detour when it waits more than this (s) in all, a further
         #: one (after a detour that paid) when it still waits more than ``detour_again``
-        self.detour_min = planner.detour_min
-        if self.detour_min is None:
-            self.detour_min = DETOUR_MIN_LEG_S if incremental else DETOUR_MIN_S
-        self.detour_again = self.detour_min if incremental else max(self.detour_min, DETOUR_AGAIN_S)
+        self.detour_min: float = (planner.detour_min if planner.detour_min is not None
+                                  else DETOUR_MIN_LEG_S if incremental else DETOUR_MIN_S)
+        self.detour_again: float = self.detour_min if incremental else max(self.detour_min, DETOUR_AGAIN_S)
         #: per robot its path and the times (from its departure) at which it passes the vertices
         self.paths: list[np.ndarray | None] = [p for p, _ in fixed_paths] + [None] * (len(robots) - fixed)
         self.times: list[np.ndarray | None] = [t for _, t in fixed_paths] + [None] * (len(robots) - fixed)
