@@ -132,8 +132,11 @@ class _CentralRun:
             tp = self.driving[q.idx] = TimedPath(q.id, self.problem.radius, np.array([[*tp.waypoints[-1, :2], now]]))
         return tp
 
-    def _plan_leg(self, r: _SimRobot, goal: Point, others: list[TimedPath], now: float) -> TimedPath | None:
-        spec = RobotSpec(r.id, self.problem.radius, self.problem.max_speed, r.pos, goal)
+    def _plan_leg(self, r: _SimRobot, goal: Point, others: list[TimedPath], now: float,
+                  start: Point | None = None) -> TimedPath | None:
+        """r's leg from ``start`` (default: where it stands) to ``goal`` leaving no sooner than ``now``,
+        around ``others``; None (counted as a failed plan) when the planner finds none."""
+        spec = RobotSpec(r.id, self.problem.radius, self.problem.max_speed, r.pos if start is None else start, goal)
         with self.tally.deciding():
             try:
                 return self.planner.plan_incremental(self.problem.grid, [spec], others, now)[0]
@@ -157,26 +160,25 @@ class _CentralRun:
         at, t0 = (tp.position(now), now) if begun else ((float(tp.waypoints[0, 0]), float(tp.waypoints[0, 1])),
                                                         float(tp.waypoints[0, 2]))
         others = [self._as_fixed(o, now) for o in self.robots if o is not q]
-        spec = RobotSpec(q.id, self.problem.radius, self.problem.max_speed, at, station)
-        with self.tally.deciding():
-            try:
-                leg = self.planner.plan_incremental(self.problem.grid, [spec], others, t0)[0]
-            except PlanningError:
-                self.tally.failed_plans += 1
-                return False
-        if leg.arrival_time >= tp.arrival_time + math.dist(q.target, station) / self.problem.max_speed:
+        leg = self._plan_leg(q, station, others, t0, start=at)
+        if leg is None or leg.arrival_time >= tp.arrival_time + math.dist(q.target, station) / self.problem.max_speed:
             return False
         wp = self.legs[q.idx].pop()
         if begun:
             self.legs[q.idx].append(np.vstack([wp[wp[:, 2] < now], [*at, now]]))
-        self.tally.legs += 1
         self.turned += 1
-        self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
-        self.driving[q.idx] = leg
-        self.legs[q.idx].append(leg.waypoints)
+        self._take_leg(q, leg, now)
         self.rules.to_station_now(q, at, now)
-        q.wake = max(now, leg.arrival_time)
         return True
+
+    def _take_leg(self, r: _SimRobot, leg: TimedPath, now: float) -> None:
+        """r drives ``leg`` (planned at ``now``): counted, kept as what the others' legs are planned around,
+        appended to what r drove; r's next event is its arrival."""
+        self.tally.legs += 1
+        self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
+        self.driving[r.idx] = leg
+        self.legs[r.idx].append(leg.waypoints)
+        r.wake = max(now, leg.arrival_time)
 
     def _start_leg(self, r: _SimRobot, now: float, at: float | None = None) -> bool:
         """Plan r's leg to its target (or to a parking spot, to clear a station others queue for)
@@ -201,13 +203,9 @@ class _CentralRun:
             self.legs_at_failure[r.idx], self.failed_at[r.idx] = self.tally.legs, now
             r.wake = now + RETRY_LATEST * self.limits.retry_s
             return False
-        self.tally.legs += 1
-        self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
-        self.driving[r.idx] = leg
-        self.legs[r.idx].append(leg.waypoints)
+        self._take_leg(r, leg, now)
         rules.left(r, now)
         rules.enter(r, "drive", now)
-        r.wake = max(now, leg.arrival_time)
         return True
 
     def _result(self, t: float, stop: str) -> DeliveryResult:

@@ -216,6 +216,11 @@ class _StationQueues:
         if idx not in self.waiting[station]:   # (place rules: a robot moving up is in the queue already)
             self.waiting[station].append(idx)
 
+    def leave(self, station: str, idx: int) -> None:
+        """Robot ``idx`` is no longer in ``station``'s queue (if it was)."""
+        if idx in self.waiting[station]:
+            self.waiting[station].remove(idx)
+
     def has_queue(self, station: str) -> bool:
         return bool(self.waiting[station])
 
@@ -575,8 +580,8 @@ class _DeliveryRules:
         if (r.target_kind in ("pick", "drop", "hold") and r.station is not None and r.station != r.on_station
                 and self.queues.holder.get(r.station) == r.idx):
             self.queues.release(r.station)
-        elif r.target_kind == "hold" and r.station is not None and r.idx in self.queues.waiting[r.station]:
-            self.queues.waiting[r.station].remove(r.idx)
+        elif r.target_kind == "hold" and r.station is not None:
+            self.queues.leave(r.station, r.idx)
         self.parking.owner[spot], r.booked_spot = r.idx, spot
         r.target, r.target_kind, r.station = self.spots[spot], "evac", None
 
@@ -610,8 +615,7 @@ class _DeliveryRules:
             assert station is not None
             holder = self.queues.holder.get(station)
             if holder is None or (self.queue_rule in PLACE_RULES and holder == r.idx):   # handed over en route
-                if r.idx in self.queues.waiting[station]:
-                    self.queues.waiting[station].remove(r.idx)
+                self.queues.leave(station, r.idx)
                 self.queues.claim(station, r.idx)
                 self._need(r, self.problem.stations[station], r.station_kind, station, t)
             else:
@@ -671,8 +675,7 @@ class _DeliveryRules:
         if r.spot is not None and self.parking.owner[r.spot] == r.idx:
             self.parking.owner[r.spot] = None
         r.spot = None
-        if r.idx in self.queues.waiting[r.station]:
-            self.queues.waiting[r.station].remove(r.idx)
+        self.queues.leave(r.station, r.idx)
         r.pos, r.target, r.target_kind = at, self.problem.stations[r.station], r.station_kind
         r.progress_t = t
         self._move_up(t)
