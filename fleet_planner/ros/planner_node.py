@@ -275,7 +275,10 @@ class PlannerNode(Node):
         """Also lets go of the job store (its lock: another planner may open it then), noting in it the task
         events acknowledged by now (no wait: the next planner on the store announces the rest again)."""
         if getattr(self, "_unconfirmed", None):
-            self._confirm_announced()
+            try:
+                self._confirm_announced()
+            except Exception:   # (rclpy shut down first: the next planner announces them again)
+                pass
         super().destroy_node()
         fleet = getattr(self, "fleet", None)
         if fleet is not None and fleet.store is not None:
