@@ -201,6 +201,53 @@ def test_changes_committed_but_not_announced_when_the_planner_died_are_announced
     assert third.fm.step(9999.0).events == [] and JobStore(path).unannounced() == []
 
 
+def test_a_replay_waiting_for_the_first_step_is_not_noted_announced_by_what_went_out_before_it(tmp_path):
+    """A restarted planner answers tasks before its first step (it waits for its subscribers): noting
+    that answer announced must not mark the replay still waiting as announced too (the outbox is one
+    mark: a planner killed again before its first step would lose the replay for good)."""
+    path = tmp_path / "jobs.db"
+    FleetManager(WH, FAST, store=JobStore(path)).submit(TASKS[0], 1.0)   # committed, never announced
+    fm = FleetManager(WH, FAST, store=JobStore(path))
+    assert fm.replaying
+    assert [e.event for e in fm.submit(TASKS[1], 2.0)] == ["accepted"]
+    fm.announced()   # J1's answer went out (the planner node, before its first step)
+    assert ("J0", "accepted") in [(job, t.event) for job, t in JobStore(path).unannounced()]
+    again = FleetManager(WH, FAST, store=JobStore(path))   # killed before that first step
+    assert [(e.task_id, e.event, e.stamp) for e in again.step(3.0).events] == [("J0", "accepted", 1.0),
+                                                                               ("J1", "accepted", 2.0)]
+    again.announced()
+    assert JobStore(path).unannounced() == [] and not again.replaying
+
+
+def test_the_events_of_a_step_that_raised_go_out_with_the_next_step_never_noted_announced_before(tmp_path):
+    """A step that raised after committing a change (its events never returned to the publisher): they
+    go out with the next step, and what is noted announced in between stops before that change."""
+    path = tmp_path / "jobs.db"
+    fm = FleetManager(WH, FAST, DispatchParams(), PARKING, store=JobStore(path))
+    fm.on_status(status("r1", "cargo", 2.25, 10.75), 0.0)
+    fm.step(0.0)
+    fm.submit(TASKS[0], 0.5)
+    fm.announced()
+    housekeeping = fm._housekeeping
+
+    def fails(now, d):
+        raise RuntimeError("a bug after the allocation")
+
+    fm._housekeeping = fails
+    with pytest.raises(RuntimeError):
+        fm.step(1.0)
+    assert [t.event for t in JobStore(path).history("J0")] == ["accepted", "assigned"]   # committed
+    assert fm.replaying
+    fm.submit(TASKS[1], 1.2)
+    fm.announced()   # J1's answer went out: J0's assignment did not
+    assert [(job, t.event) for job, t in JobStore(path).unannounced()] == [("J0", "assigned"), ("J1", "accepted")]
+    fm._housekeeping = housekeeping
+    events = fm.step(1.5).events
+    assert [(e.task_id, e.event, e.robot_id, e.stamp) for e in events][:1] == [("J0", "assigned", "r1", 1.0)]
+    fm.announced()
+    assert JobStore(path).unannounced() == []
+
+
 def test_a_store_from_before_the_outbox_counts_its_history_as_announced(tmp_path):
     path = tmp_path / "jobs.db"
     store = JobStore(path)

@@ -5,6 +5,7 @@ import subprocess
 from dataclasses import replace
 
 import pytest
+import rclpy
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
@@ -170,6 +171,56 @@ def test_a_restarted_planner_node_with_the_same_job_store_keeps_its_open_jobs(ro
         [again] = second.fleet.submit(tasks[0], 1.0)
         assert again.event == "accepted" and (again.reason or "").startswith(RESENT) and len(second.fleet.jobs) == 3
     finally:
+        second.destroy_node()
+
+
+def test_task_events_not_yet_acknowledged_by_a_subscriber_are_announced_again_by_the_next_planner(
+        ros_context, tmp_path, monkeypatch):
+    """Published is not delivered: a sample a subscriber missed (its queue full for a moment) is sent
+    again by the middleware only while the planner lives. The planner notes its task events announced
+    in the job store once every matched subscriber acknowledged them (or EVENTS_REPAIR_S after); one
+    killed before that (dropped here, kill -9 in spirit) has the next planner on the store announce
+    them again, with their stamps (CI: a SIGKILL right after a pick lost its "picked" for good)."""
+    from rclpy.duration import Duration
+
+    from fleet_planner.fleet import JobStore
+    from fleet_planner.ros import planner_node
+    from fleet_planner.ros.planner_node import PlannerNode
+
+    path = tmp_path / "jobs.db"
+    store = [Parameter("job_store", value=str(path))]
+    tasks = [Task(id=f"A{k}", pick=WH.stations_of("chute")[0].name, place=WH.stations_of("storage")[k].name)
+             for k in range(3)]
+    first = PlannerNode("planner_acks_a", context=ros_context, warehouse=WH, kinds=KINDS, parameter_overrides=store)
+    first._delivered = lambda: False   # a subscriber has not acknowledged them (yet, or ever: it missed them)
+    try:
+        first._on_task(String(data=tasks[0].to_json()))
+        first._on_timer()   # (a step later: still not acknowledged)
+    finally:
+        first.destroy_node()
+    stamp = JobStore(path).history("A0")[0].stamp
+    assert [(job, t.event) for job, t in JobStore(path).unannounced()] == [("A0", "accepted")]
+    second = PlannerNode("planner_acks_b", context=ros_context, warehouse=WH, kinds=KINDS, parameter_overrides=store)
+    listener = rclpy.create_node("acks_listener", context=ros_context)
+    heard = []
+    listener.create_subscription(String, topics.TASK_EVENTS, heard.append, topics.TASK_EVENTS_QOS)
+    try:
+        replay = second.fleet.step(second._now()).events   # (its first step, as the timer would take it)
+        assert [(e.task_id, e.event, e.stamp) for e in replay] == [("A0", "accepted", stamp)]
+        second._publish_events(replay)
+        second._on_task(String(data=tasks[1].to_json()))
+        # the middleware's acknowledgements (every ~3 s with Fast DDS): then the outbox moves on
+        assert second._events.wait_for_all_acked(Duration(seconds=WAIT))
+        second._confirm_announced()
+        assert JobStore(path).unannounced() == []
+        second._delivered = lambda: False   # never acknowledged: noted EVENTS_REPAIR_S after they went out
+        second._on_task(String(data=tasks[2].to_json()))
+        assert [job for job, _ in JobStore(path).unannounced()] == ["A2"]
+        monkeypatch.setattr(planner_node, "EVENTS_REPAIR_S", 0.0)
+        second._confirm_announced()
+        assert JobStore(path).unannounced() == []
+    finally:
+        listener.destroy_node()
         second.destroy_node()
 
 

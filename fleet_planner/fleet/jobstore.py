@@ -11,11 +11,14 @@ returned: an event seen on the wire is in the store. Tables:
   state (queued | active | done | failed), the robot on it, whether its goods were picked;
 * ``transitions`` - one row per change: the job, the event (accepted, assigned, picked, placed,
   done, failed, requeued, reloaded), state, robot, picked, stamp and reason;
-* ``outbox`` - one row: the number of the last transition whose task events went out (the
-  publisher says so, :meth:`JobStore.mark_announced`). A change committed and not yet announced
-  when the planner died (killed in the middle of a step: committed, not yet published) is announced
-  by the next planner on the file (:meth:`JobStore.unannounced`): events are at least once across a
-  restart, never lost; a replay repeats the original's stamp, so a subscriber can tell it.
+* ``outbox`` - one row: the number of the last transition whose task events reached their
+  subscribers (the publisher says so, :meth:`JobStore.mark_announced`: the planner node once every
+  matched subscriber acknowledged them, not when it handed them to the middleware). A change
+  committed and not yet announced when the planner died (killed in the middle of a step: committed,
+  not yet published; or published, and lost with the planner before the middleware's reliability
+  repaired a lost sample) is announced by the next planner on the file (:meth:`JobStore.unannounced`):
+  events are at least once across a restart, never lost; a replay repeats the original's stamp, so a
+  subscriber can tell it.
 """
 from __future__ import annotations
 
@@ -265,6 +268,10 @@ class JobStore:
         rows = self._db.execute("SELECT event, state, robot, picked, stamp, reason FROM transitions "
                                 "WHERE job = ? ORDER BY n", (job_id,)).fetchall()
         return [Transition(e, s, r, bool(p), float(t), why) for e, s, r, p, t, why in rows]
+
+    def announced_upto(self) -> int:
+        """The number of the last transition marked announced (:meth:`mark_announced`)."""
+        return int(self._db.execute("SELECT announced FROM outbox WHERE id = 0").fetchone()[0])
 
     def unannounced(self) -> list[tuple[str, Transition]]:
         """The transitions committed after the last one marked announced, in order, with their job's id."""

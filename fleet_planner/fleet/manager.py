@@ -196,9 +196,13 @@ class FleetManager:
         self._started: float | None = None  # the first step (robots re-adopt their jobs from then on)
         self._deaf = False   # no robot heard for half the offline timeout (noted once: _find_immobile)
         self._seq = 0
-        #: events committed before a restart and not announced then (JobStore.unannounced): the first step's
+        #: events committed and not handed out yet: before a restart and not announced then
+        #: (JobStore.unannounced), or of a step that raised; the next step's
         self._replay: list[TaskEvent] = []
         self._committed_n = self._announced_n = 0   # the store's last transition committed / announced
+        #: the store's first transition whose events wait in ``_replay`` (None: none wait): the outbox
+        #: never moves past it before they went out (:attr:`handed_out`)
+        self._held_from: int | None = None
         self.halted = False  # the e-stop is engaged: nobody gets a new leg (fleet.operator)
         #: the precedence links of every robot's leg (central coordination; fleet/gate.py)
         self.gates = GateBook() if gated and self.strategy.sends_gates else None
@@ -247,6 +251,8 @@ class FleetManager:
             else:
                 self._committed_n = store.update(task.id, "reloaded", "queued", None, False, 0.0)
                 self._notes.append(f"job {task.id}: reloaded and queued")
+        if self._replay:   # (every transition after the outbox's mark is replayed, or not announced at all)
+            self._held_from = store.announced_upto() + 1
 
     @property
     def coordination(self) -> str:
@@ -571,26 +577,45 @@ class FleetManager:
         """Decide what changes now: offline robots, finished picks and places, late robots, legs to
         (re)plan, jobs to assign, robots to send charging or parking."""
         d = Decisions(notes=self._notes, events=self._replay)
-        self._notes, self._replay = [], []
+        held, first = self._held_from, self._committed_n + 1
+        self._notes, self._replay, self._held_from = [], [], None
         self._occ, self._free_spots, self._reserved_at, self._reserved_arr = None, {}, None, None
         self._step_deadline = time.monotonic() + self.step_budget_s
         try:
             self._decide(now, d)
+        except BaseException:   # its changes are committed, their events never returned: the next step's
+            self._replay, self._held_from = d.events, first if held is None else held
+            raise
         finally:
             self._occ, self._free_spots, self._reserved_at, self._reserved_arr = None, {}, None, None
         if d.legs:
             self._plan_id += 1
         return d
 
-    def announced(self) -> None:
-        """The events handed out so far (by :meth:`submit`, :meth:`step`, the operator) went out: the
-        publisher calls it after publishing them. A planner killed before that (in the middle of a step:
-        its changes committed, their events not yet published) has the next one on the store announce
-        them in its first step (at least once, the original stamps; ``JobStore.unannounced``).
-        sqlite3.Error if the store cannot take it (they are announced again after a restart then)."""
-        if self.store is not None and self._committed_n > self._announced_n:
-            self.store.mark_announced(self._committed_n)
-            self._announced_n = self._committed_n
+    @property
+    def handed_out(self) -> int:
+        """The number of the store's last transition whose events were handed out (by :meth:`submit`,
+        :meth:`step`, the operator) with those of every transition before it; 0 without a store. What a
+        publisher passes to :meth:`announced` once what it published by then reached its subscribers."""
+        return self._committed_n if self._held_from is None else min(self._committed_n, self._held_from - 1)
+
+    @property
+    def replaying(self) -> bool:
+        """The next step announces events committed before (a restart's replay, or a step that raised)."""
+        return bool(self._replay)
+
+    def announced(self, upto: int | None = None) -> None:
+        """The events of the store's transitions up to ``upto`` (default, and at most: :attr:`handed_out`)
+        reached their subscribers: the publisher calls it once they did (the planner node: once every
+        matched subscriber acknowledged them). A planner killed before that (in the middle of a step:
+        its changes committed, their events not yet published; or published and not yet delivered)
+        has the next one on the store announce them in its first step (at least once, the original
+        stamps; ``JobStore.unannounced``). sqlite3.Error if the store cannot take it (they are
+        announced again after a restart then)."""
+        upto = self.handed_out if upto is None else min(upto, self.handed_out)
+        if self.store is not None and upto > self._announced_n:
+            self.store.mark_announced(upto)
+            self._announced_n = upto
 
     def note_pace(self, rate: float, step_s: float) -> None:
         """The caller's clock runs ``rate`` times faster than the wall, and its last step took ``step_s``

@@ -15,12 +15,14 @@ from __future__ import annotations
 import sqlite3
 import time
 import traceback
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import fields, replace
 from typing import Any
 
 from nav_msgs.msg import OccupancyGrid, Path
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -75,6 +77,15 @@ MARKERS_SHARE = 0.05
 EVENTS_SETTLE_S = 1.0
 #: ... but no longer than this many wall seconds after it started
 EVENTS_SETTLE_MAX_S = 10.0
+#: task events handed to the middleware are noted in the job store as announced (its outbox, see
+#: fleet/jobstore.py) once every matched subscriber acknowledged them - published is not delivered: a
+#: sample a subscriber missed (its queue full for a moment) is sent again by the reliability protocol
+#: only while the planner lives, and a planner killed before that repair took it with it - or, when
+#: events flow faster than acknowledgements come (Fast DDS: about every 3 s), once they were out this
+#: many wall seconds with the planner running (time for several rounds of repair): what a restart
+#: announces again stays that short
+EVENTS_REPAIR_S = 10.0
+_NO_WAIT = Duration(seconds=0)
 
 #: parameters that shape planned legs and cannot change while the node runs
 _FIXED = ("speed_factor", "safety_margin")
@@ -225,7 +236,10 @@ class PlannerNode(Node):
         self.operator = PlannerOperator(self, self.fleet, self._publish, Keys(trust_file=operator_file or trust))
         create_draining_subscription(self, String, topics.OBSTACLES, self._on_obstacle, topics.OBSTACLES_QOS)
         # (wall time it started, matched subscribers of its events, when that count last changed)
-        self._settling = (time.monotonic(), -1, time.monotonic()) if self.fleet.jobs else None
+        self._settling = (time.monotonic(), -1, time.monotonic()) if self.fleet.jobs or self.fleet.replaying else None
+        #: (wall time, FleetManager.handed_out) after each publication of task events not yet noted as announced
+        self._unconfirmed: deque[tuple[float, int]] = deque()
+        self._sent_n = 0   # the last handed_out in it
         self._timer = self.create_timer(period, self._on_timer)
         # each robot hears only its neighbours (fleet_planner/fleet/neighbours.py) and the robots its
         # execution gate watches (fleet_planner/fleet/gate.py)
@@ -258,7 +272,13 @@ class PlannerNode(Node):
             self.get_logger().error(f"heard record not sent: {exc!r}", throttle_duration_sec=5.0)
 
     def destroy_node(self) -> None:
-        """Also lets go of the job store (its lock: another planner may open it then)."""
+        """Also lets go of the job store (its lock: another planner may open it then), noting in it the task
+        events acknowledged by now (no wait: the next planner on the store announces the rest again)."""
+        if getattr(self, "_unconfirmed", None):
+            try:
+                self._confirm_announced()
+            except Exception:   # (rclpy shut down first: the next planner announces them again)
+                pass
         super().destroy_node()
         fleet = getattr(self, "fleet", None)
         if fleet is not None and fleet.store is not None:
@@ -406,6 +426,7 @@ class PlannerNode(Node):
 
     def _on_timer(self) -> None:
         self._take_statuses()
+        self._confirm_announced()
         if not self._heard():
             return
         now = self._now()
@@ -467,8 +488,33 @@ class PlannerNode(Node):
     def _publish_events(self, events: list[TaskEvent]) -> None:
         for ev in events:
             self._events.publish(record_to_string(self.keys.sign(ev, self._events.topic_name)))
-        try:  # out: a planner killed from now on does not announce them again (FleetManager.announced)
-            self.fleet.announced()
+        n = self.fleet.handed_out
+        if n > self._sent_n:   # (a change committed: its events just went to the middleware)
+            self._sent_n = n
+            self._unconfirmed.append((time.monotonic(), n))
+        self._confirm_announced()
+
+    def _delivered(self) -> bool:
+        """Every task event published so far was acknowledged by every matched subscriber (no wait)."""
+        return self._events.wait_for_all_acked(_NO_WAIT)
+
+    def _confirm_announced(self) -> None:
+        """Note in the job store the task events that reached their subscribers (EVENTS_REPAIR_S): a
+        planner killed from then on does not announce them again (FleetManager.announced)."""
+        if not self._unconfirmed:
+            return
+        upto = 0
+        if self._delivered():
+            upto = self._unconfirmed[-1][1]
+            self._unconfirmed.clear()
+        else:
+            old = time.monotonic() - EVENTS_REPAIR_S
+            while self._unconfirmed and self._unconfirmed[0][0] <= old:
+                upto = self._unconfirmed.popleft()[1]
+        if not upto:
+            return
+        try:
+            self.fleet.announced(upto)
         except sqlite3.Error as exc:
             self.get_logger().error(f"job store: cannot note the task events as announced ({exc}); "
                                     "a restart announces them again", throttle_duration_sec=5.0)
