@@ -20,11 +20,22 @@ over robots) and CTime / bound, average velocity over robots (m/s), planning tim
 (exact, must be 0), robots left deadlocked (no progress for 120 s at the end), why the run stopped
 and its wall time. Exit status 1 when any run had a collision (or an invalid trajectory).
 
+One seed is one problem, and a run hands its deliveries out in its own order: one row's CTime (and its
+bound, which depends on who drove what) moves by some 10% from seed to seed and with any small rule
+change. ``--seeds 0-4`` (or ``0,2,5``; instead of ``--seed``) runs every row once per seed (the same
+problem for every method within a seed; a seed column in the table and the CSV) and adds a summary per
+map, N and method: mean and min-max of CTime and of CTime / bound (each run over its own bound), mean
+avg. v, totals of deliveries done, collisions, deadlocks and unfinished runs; and per map and N where md
+and PRIOR both ran, on how many seeds md finished sooner and the mean of md's CTime / PRIOR's. With
+several seeds ``--paper002`` prints the means per row and ``--plot`` draws the mean CTime with min-max
+bars; ``--from-csv`` summarises the seeds of the rows it reads (CSVs without a seed column: seed 0).
+
     .venv/bin/python bench/bench_delivery.py [--quick] [--maps warehouse,large,warehouse-10-20-10-2-1]
-        [--sizes 20,40,50,100] [--methods md,prior,behavior] [--deliveries-per-robot 3] [--seed 0]
+        [--sizes 20,40,50,100] [--methods md,prior,behavior] [--deliveries-per-robot 3] [--seed 0 | --seeds 0-4]
         [--csv out/bench_delivery.csv] [--plot out/bench_delivery.png] [--lanes config/lanes_warehouse.yaml]
     .venv/bin/python bench/bench_delivery.py --paper002     # paper 002's Tables I-III: ARMO, PRIOR, BBMRCA, md
     .venv/bin/python bench/bench_delivery.py --paper002 --from-csv out/rows/*.csv   # one table of several runs
+    .venv/bin/python bench/bench_delivery.py --maps warehouse --sizes 20,50 --methods md,prior --seeds 0-4
 """
 from __future__ import annotations
 
