@@ -514,18 +514,22 @@ def _plot_means(rows: list[Row], maps: list[str], axes) -> None:
     rules = {}
     for s in sums:
         rules.setdefault(s.method, set()).add(_rule_of(s))
+    lines = list(dict.fromkeys((s.method, _rule_of(s)) for s in sums))
     for ax, m in zip(axes, maps):
-        for method, rule in dict.fromkeys((s.method, _rule_of(s)) for s in sums):
+        shift = 0.012 * max(s.n for s in sums if s.map == m)   # the lines' bars side by side
+        for k, (method, rule) in enumerate(lines):
             mine = sorted((s for s in sums if s.map == m and s.method == method and _rule_of(s) == rule),
                           key=lambda s: s.n)
             if not mine:
                 continue
             label = method if len(rules[method]) == 1 else f"{method} {rule}"
-            bars = ax.errorbar([s.n for s in mine], [s.ctime_mean for s in mine], capsize=4, fmt="o-", label=label,
+            x = [s.n + (k - (len(lines) - 1) / 2) * shift for s in mine]
+            bars = ax.errorbar(x, [s.ctime_mean for s in mine], capsize=4, fmt="o-", label=label,
                                yerr=[[s.ctime_mean - s.ctime_min for s in mine],
                                      [s.ctime_max - s.ctime_mean for s in mine]])
-            bad = [s for s in mine if s.unfinished]
-            ax.plot([s.n for s in bad], [s.ctime_mean for s in bad], "x", ms=12, mew=2, color=bars.lines[0].get_color())
+            bad = [(xi, s) for xi, s in zip(x, mine) if s.unfinished]
+            ax.plot([xi for xi, _ in bad], [s.ctime_mean for _, s in bad], "x", ms=12, mew=2,
+                    color=bars.lines[0].get_color())
         bound: dict[int, list[float]] = {}
         for r in rows:
             if r.map == m and r.method == "md":
@@ -536,8 +540,8 @@ def _plot_means(rows: list[Row], maps: list[str], axes) -> None:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     seeds = sorted({r.seed for r in rows})
-    axes[0].figure.suptitle(f"completion time of all deliveries: mean over seeds {_seed_text(seeds)}, bars min-max "
-                            "(x: some run unfinished, stop time)")
+    axes[0].figure.suptitle(f"completion time of all deliveries: mean over seeds {_seed_text(seeds)}\n"
+                            "bars min-max (x: some run unfinished, stop time)", fontsize=10)
     axes[0].figure.tight_layout()
 
 
