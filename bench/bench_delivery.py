@@ -20,11 +20,22 @@ over robots) and CTime / bound, average velocity over robots (m/s), planning tim
 (exact, must be 0), robots left deadlocked (no progress for 120 s at the end), why the run stopped
 and its wall time. Exit status 1 when any run had a collision (or an invalid trajectory).
 
+One seed is one problem, and a run hands its deliveries out in its own order: one row's CTime (and its
+bound, which depends on who drove what) moves by some 10% from seed to seed and with any small rule
+change. ``--seeds 0-4`` (or ``0,2,5``; instead of ``--seed``) runs every row once per seed (the same
+problem for every method within a seed; a seed column in the table and the CSV) and adds a summary per
+map, N and method: mean and min-max of CTime and of CTime / bound (each run over its own bound), mean
+avg. v, totals of deliveries done, collisions, deadlocks and unfinished runs; and per map and N where md
+and PRIOR both ran, on how many seeds md finished sooner and the mean of md's CTime / PRIOR's. With
+several seeds ``--paper002`` prints the means per row and ``--plot`` draws the mean CTime with min-max
+bars; ``--from-csv`` summarises the seeds of the rows it reads (CSVs without a seed column: seed 0).
+
     .venv/bin/python bench/bench_delivery.py [--quick] [--maps warehouse,large,warehouse-10-20-10-2-1]
-        [--sizes 20,40,50,100] [--methods md,prior,behavior] [--deliveries-per-robot 3] [--seed 0]
+        [--sizes 20,40,50,100] [--methods md,prior,behavior] [--deliveries-per-robot 3] [--seed 0 | --seeds 0-4]
         [--csv out/bench_delivery.csv] [--plot out/bench_delivery.png] [--lanes config/lanes_warehouse.yaml]
     .venv/bin/python bench/bench_delivery.py --paper002     # paper 002's Tables I-III: ARMO, PRIOR, BBMRCA, md
     .venv/bin/python bench/bench_delivery.py --paper002 --from-csv out/rows/*.csv   # one table of several runs
+    .venv/bin/python bench/bench_delivery.py --maps warehouse --sizes 20,50 --methods md,prior --seeds 0-4
 """
 from __future__ import annotations
 
@@ -88,6 +99,23 @@ class Row:
     backstops: int = 0          # central: leg budgets that ran out on their wall-clock backstop (load-dependent)
     budgets_out: int = 0        # central: planning budgets that ran out (CPU or backstop)
     queue: str = DEFAULT_QUEUE  # central methods: the queue rule (QUEUE_RULES)
+    seed: int = 0               # the problem's seed (CSVs written before it had one: 0)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """The seeds of ``--seeds``: comma-separated integers >= 0 and ranges ``A-B`` (both included), e.g.
+    ``0-4`` or ``0,2,5``, in the order given, each once (ValueError on anything else)."""
+    seeds: list[int] = []
+    for item in text.split(","):
+        item = item.strip()
+        first, dash, last = item.partition("-")
+        if not first.strip().isdigit() or (dash and not last.strip().isdigit()):
+            raise ValueError(f"expected comma-separated seeds >= 0 or ranges A-B, got {text!r}")
+        a, b = int(first), int(last) if dash else int(first)
+        if b < a:
+            raise ValueError(f"range {item!r} runs backwards")
+        seeds += [k for k in range(a, b + 1) if k not in seeds]
+    return seeds
 
 
 def planner_options(p: argparse.ArgumentParser, items: list[str]) -> dict:
@@ -123,7 +151,12 @@ def _args(argv=None) -> argparse.Namespace:
     p.add_argument("--dt", type=float, default=0.1, help="behavior time step, s (default: %(default)s)")
     p.add_argument("--cap", type=float, default=4 * 3600.0, help="simulated-time cap per run, s (default: 4 h)")
     p.add_argument("--wall-cap", type=float, default=900.0, help="wall-clock cap per run, s (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="deliveries, homes, stations (default: %(default)s)")
+    seeds = p.add_mutually_exclusive_group()
+    seeds.add_argument("--seed", type=int, default=0, help="deliveries, homes, stations (default: %(default)s)")
+    seeds.add_argument("--seeds", default=None, metavar="SEEDS",
+                       help="run every row once per seed (e.g. 0-4 or 0,2,5; each seed its own problem, the same "
+                            "for every method) and add a summary over the seeds: mean and min-max of CTime and of "
+                            "CTime / bound per map, N and method, and md against PRIOR seed by seed")
     p.add_argument("--csv", type=Path, help="also write the table as CSV")
     p.add_argument("--plot", type=Path, help="also draw CTime per method and N to this PNG")
     p.add_argument("--paper002", action="store_true",
@@ -147,6 +180,13 @@ def _args(argv=None) -> argparse.Namespace:
                    help="run nothing: the table (and --csv, --plot) of the rows in these CSVs (written by --csv, "
                         "e.g. by several processes), ordered by --maps, N and --methods")
     args = p.parse_args(argv)
+    if args.seeds is None:
+        args.seeds = [args.seed]
+    else:
+        try:
+            args.seeds = parse_seeds(args.seeds)
+        except ValueError as exc:
+            p.error(f"--seeds: {exc}")
     if args.paper002:
         args.maps = args.maps or PAPER002["maps"]
         for name in ("sizes", "methods"):
@@ -190,18 +230,20 @@ def _args(argv=None) -> argparse.Namespace:
     return args
 
 
-def make_problem(name: str, n: int, args: argparse.Namespace) -> DeliveryProblem:
+def make_problem(name: str, n: int, args: argparse.Namespace, seed: int | None = None) -> DeliveryProblem:
+    """The problem of map ``name`` with ``n`` robots for ``seed`` (default: ``args.seed``)."""
     deliveries = n * args.per_robot
+    seed = args.seed if seed is None else seed
     common = {"dock_s": args.dock}
     if name == "warehouse":
-        return warehouse_problem(load_warehouse(), n, deliveries, args.seed, **common)
+        return warehouse_problem(load_warehouse(), n, deliveries, seed, **common)
     if name in ("large", "large2x"):
         blocks_x = 5 if name == "large" else 10
-        return warehouse_problem(generate_warehouse(blocks_x, 10, 24, 2, 3, 0.5, name), n, deliveries, args.seed,
+        return warehouse_problem(generate_warehouse(blocks_x, 10, 24, 2, 3, 0.5, name), n, deliveries, seed,
                                  **common)
     grid = GridMap.from_movingai(args.maps_dir / f"{name}.map")
-    stations = spread_stations(grid, args.stations, args.seed)
-    return delivery_problem(grid, stations, n, deliveries, args.seed, name=name, **common)
+    stations = spread_stations(grid, args.stations, seed)
+    return delivery_problem(grid, stations, n, deliveries, seed, name=name, **common)
 
 
 def to_row(name: str, res: DeliveryResult) -> Row:
@@ -210,15 +252,23 @@ def to_row(name: str, res: DeliveryResult) -> Row:
                res.wall_s, res.failed_plans, res.min_gap, len(res.violations))
 
 
+def several_seeds(rows: list[Row]) -> bool:
+    return len({r.seed for r in rows}) > 1
+
+
 def table(rows: list[Row]) -> str:
+    """One line per run (with a seed column when the rows have several seeds)."""
     w = max([3] + [len(r.map) for r in rows])
-    head = (f"{'map':<{w}} {'N':>4} {'method':<8} {'#Del':>5} {'done':>5} {'CTime':>9} {'bound':>7} "
+    seeds = several_seeds(rows)
+    head = (f"{'map':<{w}} {'N':>4} " + (f"{'seed':>4} " if seeds else "") +
+            f"{'method':<8} {'#Del':>5} {'done':>5} {'CTime':>9} {'bound':>7} "
             f"{'ratio':>6} {'avg v':>6} {'plan ms':>12} {'coll':>4} {'dead':>4} {'stop':<5} {'wall s':>7} "
             f"{'CPU s':>7} {'out':>4} {'bk':>3} queue")
     lines = [head, "-" * len(head)]
     for r in rows:
         mark = " " if r.stop == "done" else "!"
-        lines.append(f"{r.map:<{w}} {r.n:>4} {r.method:<8} {r.deliveries:>5} {r.completed:>5} {r.ctime:>8.0f}{mark} "
+        lines.append(f"{r.map:<{w}} {r.n:>4} " + (f"{r.seed:>4} " if seeds else "") +
+                     f"{r.method:<8} {r.deliveries:>5} {r.completed:>5} {r.ctime:>8.0f}{mark} "
                      f"{r.lower_bound:>7.0f} {r.ctime / r.lower_bound:>6.2f} {r.avg_velocity:>6.3f} "
                      f"{r.decision_ms:>7.2f}/{r.decision_unit:<4} {r.collisions:>4} {r.deadlocks:>4} {r.stop:<5} "
                      f"{r.wall_s:>7.1f} {r.cpu_s:>7.1f} {r.budgets_out:>4} {r.backstops:>3} {r.queue}")
@@ -233,9 +283,125 @@ def table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
+def _rule(r: Row) -> str:
+    """The queue rule the run was asked for (``auto``, not the rule auto chose)."""
+    return r.queue.partition(":")[0]
+
+
+@dataclass
+class Summary:
+    """One (map, N, method, queue rule) over its seeds."""
+    map: str
+    n: int
+    method: str
+    queue: str              # the rule asked for; auto: with the rules it chose over the seeds (e.g. auto:close/spots)
+    seeds: list[int]
+    deliveries: int         # per run
+    ctime_mean: float
+    ctime_min: float
+    ctime_max: float
+    ratio_mean: float       # CTime / bound, the mean of the runs' ratios (each run over its own bound)
+    ratio_min: float
+    ratio_max: float
+    v_mean: float
+    completed: int          # totals over the seeds
+    collisions: int
+    deadlocks: int
+    unfinished: int         # runs that stopped unfinished (their CTime is the stop time)
+    precompute_mean: float
+
+
+def summarise(rows: list[Row]) -> list[Summary]:
+    """Per (map, N, method, queue rule) of the rows, in the order they first come: mean and min-max of CTime
+    and of CTime / bound, mean avg. v, and totals of deliveries done, collisions, deadlocks and unfinished runs."""
+    groups: dict[tuple, list[Row]] = {}
+    for r in rows:
+        groups.setdefault((r.map, r.n, r.method, _rule(r)), []).append(r)
+    out = []
+    for (m, n, method, rule), rs in groups.items():
+        ctimes = [r.ctime for r in rs]
+        ratios = [r.ctime / r.lower_bound for r in rs]
+        chosen = sorted({r.queue.partition(":")[2] for r in rs} - {""})
+        out.append(Summary(
+            m, n, method, rule + (":" + "/".join(chosen) if chosen else ""), [r.seed for r in rs],
+            rs[0].deliveries, sum(ctimes) / len(rs), min(ctimes), max(ctimes), sum(ratios) / len(rs), min(ratios),
+            max(ratios), sum(r.avg_velocity for r in rs) / len(rs), sum(r.completed for r in rs),
+            sum(r.collisions for r in rs), sum(r.deadlocks for r in rs), sum(r.stop != "done" for r in rs),
+            sum(r.precompute_s for r in rs) / len(rs)))
+    return out
+
+
+@dataclass
+class Paired:
+    """md against PRIOR on one (map, N, queue rule), seed by seed (the same problem within a seed)."""
+    map: str
+    n: int
+    queue: str
+    seeds: list[int]        # the seeds both ran
+    md_sooner: int          # seeds where md's CTime < PRIOR's
+    ties: int
+    ratios: list[float]     # md's CTime / PRIOR's, per seed
+
+    @property
+    def ratio_mean(self) -> float:
+        return sum(self.ratios) / len(self.ratios)
+
+
+def paired(rows: list[Row]) -> list[Paired]:
+    """md against PRIOR per (map, N, queue rule) where both ran on at least one common seed."""
+    by: dict[tuple, dict[str, dict[int, Row]]] = {}
+    for r in rows:
+        if r.method in ("md", "prior"):
+            by.setdefault((r.map, r.n, _rule(r)), {}).setdefault(r.method, {})[r.seed] = r
+    out = []
+    for (m, n, rule), runs in by.items():
+        md, prior = runs.get("md", {}), runs.get("prior", {})
+        seeds = [s for s in md if s in prior]
+        if seeds:
+            out.append(Paired(m, n, rule, seeds, sum(md[s].ctime < prior[s].ctime for s in seeds),
+                              sum(md[s].ctime == prior[s].ctime for s in seeds),
+                              [md[s].ctime / prior[s].ctime for s in seeds]))
+    return out
+
+
+def summary_table(rows: list[Row]) -> str:
+    """Per map, N and method over the seeds of the rows; then md against PRIOR seed by seed."""
+    sums = summarise(rows)
+    w = max([3] + [len(s.map) for s in sums])
+    head = (f"{'map':<{w}} {'N':>4} {'method':<8} {'seeds':>5} {'CTime':>8} {'min-max':>11} {'ratio':>6} "
+            f"{'min-max':>11} {'avg v':>6} {'done':>11} {'coll':>4} {'dead':>4} {'unf':>3} queue")
+    lines = [head, "-" * len(head)]
+    for s in sums:
+        mark = " " if not s.unfinished else "!"
+        lines.append(f"{s.map:<{w}} {s.n:>4} {s.method:<8} {len(s.seeds):>5} {s.ctime_mean:>7.0f}{mark} "
+                     f"{f'{s.ctime_min:.0f}-{s.ctime_max:.0f}':>11} {s.ratio_mean:>6.2f} "
+                     f"{f'{s.ratio_min:.2f}-{s.ratio_max:.2f}':>11} {s.v_mean:>6.3f} "
+                     f"{f'{s.completed}/{s.deliveries * len(s.seeds)}':>11} {s.collisions:>4} {s.deadlocks:>4} "
+                     f"{s.unfinished:>3} {s.queue}")
+    pairs = paired(rows)
+    if pairs:
+        lines.append("")
+    for c in pairs:
+        ties = f" ({c.ties} tied)" if c.ties else ""
+        lines.append(f"{c.map} N={c.n}" + ("" if c.queue == DEFAULT_QUEUE else f" queue={c.queue}") +
+                     f": md sooner than PRIOR on {c.md_sooner} of {len(c.seeds)} seeds{ties}; md/PRIOR CTime "
+                     f"mean {c.ratio_mean:.3f} (min-max {min(c.ratios):.3f}-{max(c.ratios):.3f})")
+    lines.append("")
+    lines.append("Over the seeds: CTime mean (with '!' when any run stopped unfinished: then its stop time counts) "
+                 "and min-max; ratio: the mean of the runs' CTime / bound (each run over its own bound) and "
+                 "min-max; avg v: mean; done (of #Del x seeds), coll, dead, unf (unfinished runs): totals.")
+    if pairs:
+        lines.append("md against PRIOR on the same problem (seed by seed): the seeds where md's CTime is below "
+                     "PRIOR's, and the mean of md's CTime / PRIOR's.")
+    return "\n".join(lines)
+
+
 def paper_table(rows: list[Row]) -> str:
     """The rows in the layout of paper 002's Tables I-III: per map, #R, M, #Del., avg. v, CTime
-    (and, ours, how many were done, collisions, robots deadlocked, ARMO's pre-computation)."""
+    (and, ours, how many were done, collisions, robots deadlocked, ARMO's pre-computation). Rows of several
+    seeds: one line per map, N and method with the means of avg. v and CTime over the seeds."""
+    if several_seeds(rows):
+        return _paper_table_means(rows)
     out = []
     for m in dict.fromkeys(r.map for r in rows):
         out.append(f"{m}")
@@ -252,6 +418,36 @@ def paper_table(rows: list[Row]) -> str:
     out.append("CTime with '!': unfinished (the stop time). pre s: wall time of ARMO's road map program "
                "(loaded machine). ARMO = robots planning along ARMO's road map, kept apart by the behaviours.")
     return "\n".join(out)
+
+
+def _paper_table_means(rows: list[Row]) -> str:
+    sums = summarise(rows)
+    seeds = sorted({r.seed for r in rows})
+    out = []
+    for m in dict.fromkeys(s.map for s in sums):
+        out.append(f"{m}")
+        out.append(f"{'#R':>4}  {'M':<7} {'#Del.':>6} {'avg. v (m/s)':>13} {'CTime (s)':>10}   "
+                   f"{'done':>5} {'coll':>4} {'dead':>4} {'pre s':>6} {'seeds':>5}")
+        for n in sorted({s.n for s in sums if s.map == m}):
+            for k, s in enumerate(s for s in sums if s.map == m and s.n == n):
+                ctime = f"{s.ctime_mean:.0f}" + ("" if not s.unfinished else "!")
+                pre = f"{s.precompute_mean:.0f}" if s.method == "armo" else ""
+                out.append(f"{n if k == 0 else '':>4}  {PAPER_NAMES.get(s.method, s.method):<7} {s.deliveries:>6} "
+                           f"{s.v_mean:>13.2f} {ctime:>10}   {s.completed:>5} {s.collisions:>4} "
+                           f"{s.deadlocks:>4} {pre:>6} {len(s.seeds):>5}")
+        out.append("")
+    out.append(f"avg. v and CTime: means over the seeds {_seed_text(seeds)} ({len(seeds)} problems, the same for every "
+               "method within a seed); done, coll, dead: totals over the seeds (#Del. per seed); pre s: mean. "
+               "CTime with '!': some run unfinished (its stop time counted). ARMO = robots planning along ARMO's "
+               "road map, kept apart by the behaviours.")
+    return "\n".join(out)
+
+
+def _seed_text(seeds: list[int]) -> str:
+    """``0-4`` for consecutive seeds, else ``0,2,5``."""
+    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[-1] + 1)):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
 
 
 def write_csv(rows: list[Row], path: Path) -> None:
@@ -271,11 +467,11 @@ def read_csv(path: Path) -> list[Row]:
 
 
 def ordered(rows: list[Row], maps: list[str], methods: list[str]) -> list[Row]:
-    """The rows by map (in the order of ``maps``, then others as they come), N and method (likewise)."""
+    """The rows by map (in the order of ``maps``, then others as they come), N, seed and method (likewise)."""
     def rank(order: list[str], key: str) -> int:
         return order.index(key) if key in order else len(order)
 
-    return sorted(rows, key=lambda r: (rank(maps, r.map), r.n, rank(methods, r.method)))
+    return sorted(rows, key=lambda r: (rank(maps, r.map), r.n, r.seed, rank(methods, r.method)))
 
 
 def plot(rows: list[Row], path: Path) -> None:
@@ -286,6 +482,11 @@ def plot(rows: list[Row], path: Path) -> None:
 
     maps = list(dict.fromkeys(r.map for r in rows))
     fig, axes = plt.subplots(1, len(maps), figsize=(5 * len(maps), 4.2), squeeze=False)
+    if several_seeds(rows):
+        _plot_means(rows, maps, axes[0])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=120)
+        return
     for ax, m in zip(axes[0], maps):
         for method in dict.fromkeys(r.method for r in rows):
             mine = sorted((r for r in rows if r.map == m and r.method == method), key=lambda r: r.n)
@@ -307,10 +508,54 @@ def plot(rows: list[Row], path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+def _plot_means(rows: list[Row], maps: list[str], axes) -> None:
+    """Mean CTime over the seeds per method and N, with min-max bars (x: some run unfinished)."""
+    sums = summarise(rows)
+    rules = {}
+    for s in sums:
+        rules.setdefault(s.method, set()).add(_rule_of(s))
+    lines = list(dict.fromkeys((s.method, _rule_of(s)) for s in sums))
+    for ax, m in zip(axes, maps):
+        shift = 0.012 * max(s.n for s in sums if s.map == m)   # the lines' bars side by side
+        for k, (method, rule) in enumerate(lines):
+            mine = sorted((s for s in sums if s.map == m and s.method == method and _rule_of(s) == rule),
+                          key=lambda s: s.n)
+            if not mine:
+                continue
+            label = method if len(rules[method]) == 1 else f"{method} {rule}"
+            x = [s.n + (k - (len(lines) - 1) / 2) * shift for s in mine]
+            bars = ax.errorbar(x, [s.ctime_mean for s in mine], capsize=4, fmt="o-", label=label,
+                               yerr=[[s.ctime_mean - s.ctime_min for s in mine],
+                                     [s.ctime_max - s.ctime_mean for s in mine]])
+            bad = [(xi, s) for xi, s in zip(x, mine) if s.unfinished]
+            ax.plot([xi for xi, _ in bad], [s.ctime_mean for _, s in bad], "x", ms=12, mew=2,
+                    color=bars.lines[0].get_color())
+        bound: dict[int, list[float]] = {}
+        for r in rows:
+            if r.map == m and r.method == "md":
+                bound.setdefault(r.n, []).append(r.lower_bound)
+        ns = sorted(bound)
+        ax.plot(ns, [sum(bound[n]) / len(bound[n]) for n in ns], "_:", ms=14, color="grey", label="bound (md, mean)")
+        ax.set(title=m, xlabel="robots", ylabel="CTime (s)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    seeds = sorted({r.seed for r in rows})
+    axes[0].figure.suptitle(f"completion time of all deliveries: mean over seeds {_seed_text(seeds)}\n"
+                            "bars min-max (x: some run unfinished, stop time)", fontsize=10)
+    axes[0].figure.tight_layout()
+
+
+def _rule_of(s: Summary) -> str:
+    return s.queue.partition(":")[0]
+
+
 def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace, bar,
-        queue: str = DEFAULT_QUEUE) -> Row:
+        queue: str = DEFAULT_QUEUE, seed: int | None = None) -> Row:
     """One simulation, its progress on the bar and a loud line if it went wrong."""
-    label = f"{m} N={problem.n_robots} {method}" + ("" if queue == DEFAULT_QUEUE else f" queue={queue}")
+    seed = args.seed if seed is None else seed
+    several = len(getattr(args, "seeds", ())) > 1
+    label = (f"{m} N={problem.n_robots} {method}" + ("" if queue == DEFAULT_QUEUE else f" queue={queue}")
+             + (f" seed={seed}" if several else ""))
     bar.set_postfix_str(label)
     shown = [0.0]
 
@@ -332,7 +577,8 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
     res = simulate(problem, method, dt=args.dt, cap_s=args.cap, wall_cap_s=args.wall_cap, progress=progress,
                    queue=queue)
     if res.collisions or res.violations:
-        bar.write(f"!!! FAIL: {label} seed={args.seed}: {res.collisions} overlapping pair(s), min gap "
+        where = label + ("" if several else f" seed={seed}")   # (several seeds: the label has it)
+        bar.write(f"!!! FAIL: {where}: {res.collisions} overlapping pair(s), min gap "
                   f"{res.min_gap:.4f} m; {'; '.join(res.violations[:3])}", file=sys.stderr)
     elif res.stop != "done":
         bar.write(f"{label}: unfinished ({res.stop}) after {res.ctime:.0f} s simulated: "
@@ -344,6 +590,7 @@ def run(problem: DeliveryProblem, m: str, method: str, args: argparse.Namespace,
     row.backstops = budget.Budget.backstops - backstops0
     row.budgets_out = budget.Budget.spent - out0
     row.queue = queue if queue != "auto" else f"auto:{res.extra.get('queue', '?')}"   # (the rule it chose)
+    row.seed = seed
     return row
 
 
@@ -367,25 +614,27 @@ def _run(args: argparse.Namespace) -> int:
     rows: list[Row] = []
     runs = [(method, q) for method in args.methods for q in (args.queue if method not in ("behavior", "armo")
                                                              else ["spots"])]
-    with tqdm(total=len(args.maps) * len(args.sizes) * len(runs), unit="run", file=sys.stderr) as bar:
+    total = len(args.maps) * len(args.sizes) * len(args.seeds) * len(runs)
+    with tqdm(total=total, unit="run", file=sys.stderr) as bar:
         for m in args.maps:
             for n in args.sizes:
-                try:
-                    problem = make_problem(m, n, args)   # the same problem for every method
-                    if args.lanes is not None:
-                        from fleet_planner.delivery import lanes_problem
-                        from fleet_planner.roadmap import load_lanes
+                for seed in args.seeds:
+                    try:
+                        problem = make_problem(m, n, args, seed)   # the same problem for every method
+                        if args.lanes is not None:
+                            from fleet_planner.delivery import lanes_problem
+                            from fleet_planner.roadmap import load_lanes
 
-                        problem = lanes_problem(problem, load_lanes(args.lanes, problem.grid, problem.radius))
-                except ValueError as exc:
-                    bar.write(f"{m} N={n}: skipped: {exc}", file=sys.stderr)
-                    bar.update(len(runs))
-                    continue
-                for method, queue in runs:
-                    rows.append(run(problem, m, method, args, bar, queue))
-                    bar.update()
-                    if args.csv:   # as it goes: a long run stopped early keeps what it measured
-                        write_csv(rows, args.csv)
+                            problem = lanes_problem(problem, load_lanes(args.lanes, problem.grid, problem.radius))
+                    except ValueError as exc:
+                        bar.write(f"{m} N={n} seed={seed}: skipped: {exc}", file=sys.stderr)
+                        bar.update(len(runs))
+                        continue
+                    for method, queue in runs:
+                        rows.append(run(problem, m, method, args, bar, queue, seed))
+                        bar.update()
+                        if args.csv:   # as it goes: a long run stopped early keeps what it measured
+                            write_csv(rows, args.csv)
     return report(rows, args)
 
 
@@ -395,6 +644,9 @@ def report(rows: list[Row], args: argparse.Namespace) -> int:
         print("bench_delivery: nothing ran", file=sys.stderr)
         return 1
     print(table(rows))
+    if several_seeds(rows):
+        print()
+        print(summary_table(rows))
     if args.paper002:
         print()
         print(paper_table(rows))
@@ -404,8 +656,8 @@ def report(rows: list[Row], args: argparse.Namespace) -> int:
         plot(rows, args.plot)
     bad = [r for r in rows if r.collisions or r.violations]
     if bad:
-        print(f"\n!!! {len(bad)} RUN(S) WITH COLLISIONS OR INVALID TRAJECTORIES (seed {args.seed}): "
-              + ", ".join(f"{r.map} N={r.n} {r.method}" for r in bad), file=sys.stderr)
+        print(f"\n!!! {len(bad)} RUN(S) WITH COLLISIONS OR INVALID TRAJECTORIES: "
+              + ", ".join(f"{r.map} N={r.n} {r.method} seed={r.seed}" for r in bad), file=sys.stderr)
         return 1
     return 0
 
