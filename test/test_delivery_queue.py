@@ -344,3 +344,32 @@ def test_every_robot_docks_its_full_time_on_the_default_warehouse():
         tp = result.trajectories[idx]
         stay = [t + problem.dock_s * k / 20 for k in range(21)]
         assert all(math.dist(tp.position(s), station) < 1e-6 for s in stay), (tp.robot_id, station, t)
+
+
+def test_diag_delivery_runs_through_turns_to_a_station(tmp_path, monkeypatch, capsys):
+    # bench/diag_delivery.py logs every planned leg; a turn to a station plans its leg from where the robot is
+    # (session 28: _plan_leg(start=)), which the script's logger did not take and the run died at the first turn
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import diag_delivery
+
+    turn, turned = central._CentralRun._turn_to_station, []
+
+    def counted(self, q, now):
+        ok = turn(self, q, now)
+        turned.append(ok)
+        return ok
+
+    monkeypatch.setattr(central._CentralRun, "_turn_to_station", counted)
+    dump = tmp_path / "legs.json"
+    assert diag_delivery.main(["--map", "warehouse", "--n", "20", "--deliveries-per-robot", "1",
+                               "--dump", str(dump)]) in (0, None)
+    assert any(turned)                       # the run went through turns
+    out = capsys.readouterr().out
+    assert " 0 collisions" in out
+    legs = json.loads(dump.read_text())
+    legs = legs["legs"] if isinstance(legs, dict) else legs
+    assert len(legs) >= 20 * 2 and all(rec["ok"] is not None for rec in legs)
