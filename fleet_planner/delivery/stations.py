@@ -52,8 +52,9 @@ when its docking ends) :data:`~.central.HAND_OVER_EARLY_S` before its docking en
 over and the next robot's leg planned that much sooner; a robot with no delivery left parks on the closest free
 parking spot, not its home (:data:`PARK_NEAREST`). Under the spots rule a freed station goes to the robot of its
 queue that stands nearest to it by driving, not to the first come (:data:`SERVE_NEAREST`, ours, session 29): that
-queue stands on parking spots anywhere, at 100 robots 20-40 m off, and first come first served called a robot in from
-afar while others waited close by (the place rules' queues stand in order, nearest first, and keep it).
+queue stands on parking spots anywhere, and first come first served called a robot in from afar while others
+waited close by (warehouse-10-20-10-2-1, 100 robots: 6 m at the median, up to 40 m, the nearest 2 m); the place
+rules' queues stand in order, nearest first, and keep first come first served.
 ``queue="auto"`` (ours) runs the close rule where every busy loading station gets at least :data:`AUTO_PLACES`
 places, else the spots rule: on the default warehouse at 100 robots the homes fill the room by the chutes, close
 finds 0-3 places per chute and was worse than spots.
@@ -128,8 +129,9 @@ PARK_NEAREST = True
 #: spots rule (ours, session 29): a freed station goes to the robot of its queue standing nearest to it (driving
 #: distance from its parking spot; ties: the first come), not to the first come (False: first come first served).
 #: On warehouse-10-20-10-2-1 at 100 robots its busiest stations' turnover was 14-19 s, most of it the first-come
-#: robot driving in from its spot (seed 0 CTime md 1855 -> 1499 s, PRIOR 1673 -> 1622; the default warehouse at 100
-#: robots md 1634 -> 1152, PRIOR 1640 -> 1121)
+#: robot driving in from its spot (6 m at the median, up to 40 m; the nearest queued robot: 2 m). CTime, mean of seeds
+#: 0-4, md / PRIOR: there 2143 / 2170 -> 1717 / 1837 s; the default warehouse at 100 robots 1827 / 1777 -> 1166 / 1164
+#: (docs/BENCHMARKS.md, session 29)
 SERVE_NEAREST = True
 #: the central methods' queue rule unless one is asked for (session 28; before: spots)
 DEFAULT_QUEUE = "auto"
