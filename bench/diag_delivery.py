@@ -63,18 +63,19 @@ def main(argv=None) -> int:
                               None, queue=args.queue)
     plan_leg = run._plan_leg
 
-    def logged_plan_leg(r, goal, others, now):
+    def logged_plan_leg(r, goal, others, now, start=None):
         t0 = time.process_time()
-        leg = plan_leg(r, goal, others, now)
+        leg = plan_leg(r, goal, others, now, start=start)
+        src = r.pos if start is None else start
         cpu = time.process_time() - t0
         rec = {"robot": r.idx, "t": now, "kind": r.target_kind, "cpu": cpu, "ok": leg is not None,
                "from_station": r.on_station is not None}
         if leg is not None:
-            path = finder.find(r.pos, goal)
+            path = finder.find(src, goal)
             short = polyline_length(path) if path is not None else leg.length
             rec.update(depart=leg.start_time - now, arrive=leg.arrival_time - now, length=leg.length, short=short)
             if other is not None:
-                spec = RobotSpec(r.id, problem.radius, problem.max_speed, r.pos, goal)
+                spec = RobotSpec(r.id, problem.radius, problem.max_speed, src, goal)
                 try:
                     alt = other.plan_incremental(problem.grid, [spec], others, now)[0]
                     rec["alt_arrive"] = alt.arrival_time - now

@@ -165,6 +165,37 @@ def _spots_control(rules) -> None:
     assert all(r.phase == "queued" for r in queued if r is not handed[0])   # nobody moves up
 
 
+@pytest.mark.parametrize("nearest", [True, False])
+def test_spots_hand_a_freed_station_to_the_queued_robot_nearest_to_it(busy, nearest, monkeypatch):
+    # session 29 (SERVE_NEAREST): under the spots rule the queue stands on parking spots anywhere; a freed station
+    # goes to the robot standing nearest to it by driving (control: first come first served)
+    monkeypatch.setattr(stations, "SERVE_NEAREST", nearest)
+    rules = _DeliveryRules(busy, claims=True, queue="spots")
+    robots = rules.robots
+    for r in robots:
+        rules.next_target(r, 0.0)
+    for r in robots:
+        if r.phase == "need":
+            _start(rules, r, 0.0)
+    drive = rules.spot_dist["chute_1"]
+    queue = list(rules.queues.waiting["chute_1"])             # those whose home is close queue on it at once
+    waiting = sorted((r for r in robots[1:] if r.phase == "drive"), key=lambda r: -drive[r.spot])
+    for k, r in enumerate(waiting):                           # the others arrive farthest first
+        rules.arrived(r, 10.0 + k)
+        assert r.phase == "queued"
+    queue += [r.idx for r in waiting]
+    assert rules.queues.waiting["chute_1"] == queue
+    near = min(queue, key=lambda i: (drive[robots[i].spot], queue.index(i)))
+    assert near != queue[0]                                   # (the case tells the two rules apart)
+    rules.arrived(robots[0], 20.0)
+    rules.docked(robots[0], 25.0)
+    _start(rules, robots[0], 25.0)                            # it leaves the chute
+    handed = rules.take_handed_over(25.0)
+    assert [r.idx for r in handed] == [near if nearest else queue[0]]
+    assert handed[0].target == busy.stations["chute_1"]
+    assert rules.queues.waiting["chute_1"] == [i for i in queue if i != handed[0].idx]
+
+
 def _min_gap(paths, radius: float) -> float:
     end = max(float(p.waypoints[-1, 2]) for p in paths)
     times = np.arange(0.0, end + 0.02, 0.02)
@@ -344,3 +375,32 @@ def test_every_robot_docks_its_full_time_on_the_default_warehouse():
         tp = result.trajectories[idx]
         stay = [t + problem.dock_s * k / 20 for k in range(21)]
         assert all(math.dist(tp.position(s), station) < 1e-6 for s in stay), (tp.robot_id, station, t)
+
+
+def test_diag_delivery_runs_through_turns_to_a_station(tmp_path, monkeypatch, capsys):
+    # bench/diag_delivery.py logs every planned leg; a turn to a station plans its leg from where the robot is
+    # (session 28: _plan_leg(start=)), which the script's logger did not take and the run died at the first turn
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import diag_delivery
+
+    turn, turned = central._CentralRun._turn_to_station, []
+
+    def counted(self, q, now):
+        ok = turn(self, q, now)
+        turned.append(ok)
+        return ok
+
+    monkeypatch.setattr(central._CentralRun, "_turn_to_station", counted)
+    dump = tmp_path / "legs.json"
+    assert diag_delivery.main(["--map", "warehouse", "--n", "20", "--deliveries-per-robot", "1",
+                               "--dump", str(dump)]) in (0, None)
+    assert any(turned)                       # the run went through turns
+    out = capsys.readouterr().out
+    assert " 0 collisions" in out
+    legs = json.loads(dump.read_text())
+    legs = legs["legs"] if isinstance(legs, dict) else legs
+    assert len(legs) >= 20 * 2 and all(rec["ok"] is not None for rec in legs)

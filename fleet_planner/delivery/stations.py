@@ -50,9 +50,14 @@ station while it drives to a place turns to the station where it is (:data:`~.ce
 :meth:`_DeliveryRules.to_station_now`); a robot docking at a station others queue for gets its next leg (leaving
 when its docking ends) :data:`~.central.HAND_OVER_EARLY_S` before its docking ends, so the station is handed
 over and the next robot's leg planned that much sooner; a robot with no delivery left parks on the closest free
-parking spot, not its home (:data:`PARK_NEAREST`). ``queue="auto"`` (ours) runs the close rule where every
-busy loading station gets at least :data:`AUTO_PLACES` places, else the spots rule: on the default warehouse at
-100 robots the homes fill the room by the chutes, close finds 0-3 places per chute and was worse than spots.
+parking spot, not its home (:data:`PARK_NEAREST`). Under the spots rule a freed station goes to the robot of its
+queue that stands nearest to it by driving, not to the first come (:data:`SERVE_NEAREST`, ours, session 29): that
+queue stands on parking spots anywhere, and first come first served called a robot in from afar while others
+waited close by (warehouse-10-20-10-2-1, 100 robots: 6 m at the median, up to 40 m, the nearest 2 m); the place
+rules' queues stand in order, nearest first, and keep first come first served.
+``queue="auto"`` (ours) runs the close rule where every busy loading station gets at least :data:`AUTO_PLACES`
+places, else the spots rule: on the default warehouse at 100 robots the homes fill the room by the chutes, close
+finds 0-3 places per chute and was worse than spots.
 
 Station admission of the behaviour fleet (``claims=False, admit=K``; ours, issue 13): paper 002
 (Sun, Kleiner & Nebel, IV.A) lets a robot that reaches a station where another docks stop "at a
@@ -68,6 +73,7 @@ as a parked robot does, an obstacle (IV.C.1).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,6 +126,13 @@ AUTO_PLACES = 2
 #: session 28; False: on its home when free, else the closest free spot, as under the spots rule, where the robots
 #: queue on parking spots near the stations and the closest spots made every row 0-3% slower)
 PARK_NEAREST = True
+#: spots rule (ours, session 29): a freed station goes to the robot of its queue standing nearest to it (driving
+#: distance from its parking spot; ties: the first come), not to the first come (False: first come first served).
+#: On warehouse-10-20-10-2-1 at 100 robots its busiest stations' turnover was 14-19 s, most of it the first-come
+#: robot driving in from its spot (6 m at the median, up to 40 m; the nearest queued robot: 2 m). CTime, mean of seeds
+#: 0-4, md / PRIOR: there 2143 / 2170 -> 1717 / 1837 s; the default warehouse at 100 robots 1827 / 1777 -> 1166 / 1164
+#: (docs/BENCHMARKS.md, session 29)
+SERVE_NEAREST = True
 #: the central methods' queue rule unless one is asked for (session 28; before: spots)
 DEFAULT_QUEUE = "auto"
 #: the rules with queue places and moving up
@@ -198,12 +211,15 @@ class _ParkingSpots:
 
 class _StationQueues:
     """Central methods: which robot holds each station (its claim) and who queues for it, first come
-    first served. A released station goes to the first robot in its queue at once."""
+    first served. A released station goes to the first robot in its queue at once, or with ``distance``
+    (station, robot -> how far it has to drive there; inf: not standing by yet) to the nearest one, ties to
+    the first come (:data:`SERVE_NEAREST`)."""
 
-    def __init__(self, stations: list[str]):
+    def __init__(self, stations: list[str], distance: Callable[[str, int], float] | None = None):
         self.holder: dict[str, int] = {}
         self.waiting: dict[str, list[int]] = {s: [] for s in stations}
         self.handed_over: list[int] = []   # robots a released station was just handed to
+        self.distance = distance
 
     def free_for(self, station: str, idx: int) -> bool:
         """Nobody but robot ``idx`` holds ``station``."""
@@ -229,7 +245,11 @@ class _StationQueues:
             return
         del self.holder[station]
         if self.waiting[station]:
-            idx = self.waiting[station].pop(0)
+            k = 0
+            if self.distance is not None:
+                d = [self.distance(station, i) for i in self.waiting[station]]
+                k = int(np.argmin(d)) if min(d) < math.inf else 0
+            idx = self.waiting[station].pop(k)
             self.holder[station] = idx
             self.handed_over.append(idx)
 
@@ -328,7 +348,8 @@ class _DeliveryRules:
         self.spot_dist: dict[str, np.ndarray] = {}
         if drive is not None:
             self.spot_dist = self._spot_distances(drive)
-        self.queues = _StationQueues(list(problem.stations))
+        nearest = SERVE_NEAREST and claims and self.queue_rule == "spots"
+        self.queues = _StationQueues(list(problem.stations), self._queue_distance if nearest else None)
         #: behaviour fleet with admission: the parking spots robots may wait on for their station
         self.waiting_place = np.zeros(len(problem.spots), dtype=bool)
         if self.admission is not None:
@@ -343,6 +364,12 @@ class _DeliveryRules:
         self.hold_legs = 0
         #: queue near, close: robots handed their station while driving to a place (see :meth:`take_en_route`)
         self.en_route: list[_SimRobot] = []
+
+    def _queue_distance(self, station: str, idx: int) -> float:
+        """How far robot ``idx``, queued for ``station``, drives there (from the parking spot it stands on;
+        inf when it does not stand on one)."""
+        r = self.robots[idx]
+        return float(self.spot_dist[station][r.spot]) if r.phase == "queued" and r.spot is not None else math.inf
 
     def _spot_distances(self, drive: np.ndarray) -> dict[str, np.ndarray]:
         """Station -> driving distance to each spot of :attr:`spots` (``drive``: from each station to each cell)."""
