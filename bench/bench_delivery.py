@@ -400,42 +400,26 @@ def paper_table(rows: list[Row]) -> str:
     """The rows in the layout of paper 002's Tables I-III: per map, #R, M, #Del., avg. v, CTime
     (and, ours, how many were done, collisions, robots deadlocked, ARMO's pre-computation). Rows of several
     seeds: one line per map, N and method with the means of avg. v and CTime over the seeds."""
-    if several_seeds(rows):
-        return _paper_table_means(rows)
-    out = []
-    for m in dict.fromkeys(r.map for r in rows):
-        out.append(f"{m}")
-        out.append(f"{'#R':>4}  {'M':<7} {'#Del.':>6} {'avg. v (m/s)':>13} {'CTime (s)':>10}   "
-                   f"{'done':>5} {'coll':>4} {'dead':>4} {'pre s':>6}")
-        for n in sorted({r.n for r in rows if r.map == m}):
-            for k, r in enumerate(r for r in rows if r.map == m and r.n == n):
-                ctime = f"{r.ctime:.0f}" + ("" if r.stop == "done" else "!")
-                pre = f"{r.precompute_s:.0f}" if r.method == "armo" else ""
-                out.append(f"{n if k == 0 else '':>4}  {PAPER_NAMES.get(r.method, r.method):<7} {r.deliveries:>6} "
-                           f"{r.avg_velocity:>13.2f} {ctime:>10}   {r.completed:>5} {r.collisions:>4} "
-                           f"{r.deadlocks:>4} {pre:>6}")
-        out.append("")
-    out.append("CTime with '!': unfinished (the stop time). pre s: wall time of ARMO's road map program "
-               "(loaded machine). ARMO = robots planning along ARMO's road map, kept apart by the behaviours.")
-    return "\n".join(out)
-
-
-def _paper_table_means(rows: list[Row]) -> str:
     sums = summarise(rows)
+    several = several_seeds(rows)
     seeds = sorted({r.seed for r in rows})
     out = []
     for m in dict.fromkeys(s.map for s in sums):
         out.append(f"{m}")
         out.append(f"{'#R':>4}  {'M':<7} {'#Del.':>6} {'avg. v (m/s)':>13} {'CTime (s)':>10}   "
-                   f"{'done':>5} {'coll':>4} {'dead':>4} {'pre s':>6} {'seeds':>5}")
+                   f"{'done':>5} {'coll':>4} {'dead':>4} {'pre s':>6}" + (f" {'seeds':>5}" if several else ""))
         for n in sorted({s.n for s in sums if s.map == m}):
             for k, s in enumerate(s for s in sums if s.map == m and s.n == n):
                 ctime = f"{s.ctime_mean:.0f}" + ("" if not s.unfinished else "!")
                 pre = f"{s.precompute_mean:.0f}" if s.method == "armo" else ""
                 out.append(f"{n if k == 0 else '':>4}  {PAPER_NAMES.get(s.method, s.method):<7} {s.deliveries:>6} "
                            f"{s.v_mean:>13.2f} {ctime:>10}   {s.completed:>5} {s.collisions:>4} "
-                           f"{s.deadlocks:>4} {pre:>6} {len(s.seeds):>5}")
+                           f"{s.deadlocks:>4} {pre:>6}" + (f" {len(s.seeds):>5}" if several else ""))
         out.append("")
+    if not several:
+        out.append("CTime with '!': unfinished (the stop time). pre s: wall time of ARMO's road map program "
+                   "(loaded machine). ARMO = robots planning along ARMO's road map, kept apart by the behaviours.")
+        return "\n".join(out)
     out.append(f"avg. v and CTime: means over the seeds {_seed_text(seeds)} ({len(seeds)} problems, the same for every "
                "method within a seed); done, coll, dead: totals over the seeds (#Del. per seed); pre s: mean. "
                "CTime with '!': some run unfinished (its stop time counted). ARMO = robots planning along ARMO's "
