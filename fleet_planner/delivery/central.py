@@ -103,7 +103,7 @@ class _CentralRun:
                 r.wake = max(t, r.wake - HAND_OVER_EARLY_S)   # its next leg is planned this much sooner
         elif r.phase == "dock":
             end = max(t, self.dock_end[r.idx])
-            if end > t and not (r.on_station is not None and rules.queues.has_queue(r.on_station)):
+            if end > t and not rules.others_queue_here(r):
                 r.wake = end                                  # nobody to hand the station to: dock to the end
                 return
             rules.docked(r, end)
