@@ -69,7 +69,8 @@ def main(argv=None) -> int:
         src = r.pos if start is None else start
         cpu = time.process_time() - t0
         rec = {"robot": r.idx, "t": now, "kind": r.target_kind, "cpu": cpu, "ok": leg is not None,
-               "from_station": r.on_station is not None}
+               "from_station": r.on_station is not None, "station": r.station, "on_station": r.on_station,
+               "src": [round(float(c), 2) for c in src], "goal": [round(float(c), 2) for c in goal]}
         if leg is not None:
             path = finder.find(src, goal)
             short = polyline_length(path) if path is not None else leg.length

@@ -50,6 +50,16 @@ _RESULT_CACHE_SIZE = 256   # find() answers remembered per PathFinder (same inpu
 _BIT = {d: 1 << k for k, d in enumerate(_DIRS)}
 
 
+def inflation_kernel(resolution: float, radius: float) -> np.ndarray:
+    """The cell offsets (a (2k+1) x (2k+1) boolean mask round the centre) whose box lies closer than
+    ``radius`` to a cell's centre: a cell is traversable for a disc of ``radius`` iff none of them is a wall
+    (:class:`PathFinder`). Two radii with equal kernels inflate every map of this resolution alike."""
+    k = int(math.ceil(radius / resolution + 0.5))
+    dc, dr = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1))
+    box_dist = resolution * np.hypot(np.maximum(np.abs(dc) - 0.5, 0), np.maximum(np.abs(dr) - 0.5, 0))
+    return box_dist < radius - _TOL
+
+
 class PathFinder:
     """Shortest-ish collision-free polylines for discs of one radius on one map.
 
@@ -72,10 +82,8 @@ class PathFinder:
         # (dc, dr) away is exactly res * hypot(max(|dc|-.5, 0), max(|dr|-.5, 0)), so dilating the
         # walls by the offsets closer than the radius gives the exact mask (no sampling error:
         # a 1-cell aisle, clearance res/2, admits radius res/2 but nothing larger).
-        k = int(math.ceil(self.radius / res + 0.5))
-        dc, dr = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1))
-        box_dist = res * np.hypot(np.maximum(np.abs(dc) - 0.5, 0), np.maximum(np.abs(dr) - 0.5, 0))
-        self._kernel = box_dist < self.radius - _TOL
+        self._kernel = inflation_kernel(res, self.radius)
+        k = self._kernel.shape[0] // 2
         kr, kc = np.nonzero(self._kernel)
         self._kernel_offsets = np.column_stack([kc - k, kr - k])  # (col, row) offsets
         # a road map of directed lanes carried by the map (fleet_planner.roadmap.with_lanes): only

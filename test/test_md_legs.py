@@ -82,3 +82,24 @@ def _passes_g(route, g) -> bool:
     from fleet_planner.geometry import polyline_passes_near
 
     return polyline_passes_near(route, tuple(g.waypoints[0, :2]), 0.8)
+
+
+def test_a_leg_alone_on_the_map_is_the_shortest_path_for_the_robots_own_radius():
+    # session 30: md's path finders take the robot's own radius; rounded up to the centimetre (0.354 m -> 0.36 m
+    # on this 0.5 m grid, every cell diagonal to a rack corner blocked) its legs were 0.98 m longer on average
+    from fleet_planner.delivery import warehouse_problem
+    from fleet_planner.geometry import polyline_length
+    from fleet_planner.paths import PathFinder
+    from fleet_planner.warehouse import generate_warehouse
+
+    problem = warehouse_problem(generate_warehouse(5, 10, 24, 2, 3, 0.5, "large"), 4, 4, seed=0)
+    finder = PathFinder(problem.grid, problem.radius)
+    points = sorted(problem.stations.values())
+    planner, longer = get_planner("md"), []
+    for a, b in zip(points[::3], points[1::3]):
+        leg = planner.plan_incremental(problem.grid, [RobotSpec("r", problem.radius, problem.max_speed, a, b)],
+                                       [], 0.0)[0]
+        shortest = polyline_length(finder.find(a, b))
+        assert leg.length >= shortest - 1e-6 and leg.arrival_time == pytest.approx(leg.length / problem.max_speed)
+        longer.append(leg.length - shortest)
+    assert len(longer) >= 8 and max(longer) < 1e-6

@@ -5,6 +5,9 @@ Each time a robot needs a new leg, the planner's
 every other robot is driving (a robot standing still is a one-waypoint trajectory). A leg that
 cannot be planned is tried again a little later, once some other robot got a new leg. Where the
 robots go is decided by the station discipline of :mod:`fleet_planner.delivery.stations`.
+A planner that re-orders legs in flight (md: ``Planner.reorders_legs``) lets a late new leg go first past a
+robot driving in its way and times again the robots that waited for a leg that was cut; PRIOR keeps
+first come first served.
 """
 from __future__ import annotations
 
@@ -30,6 +33,18 @@ TURN_EN_ROUTE = True
 HAND_OVER_EARLY_S = 3.0
 #: ... under these queue rules
 EARLY_RULES = PLACE_RULES
+#: planners that re-order legs in flight (md, ``Planner.reorders_legs``): a new leg arriving this many seconds
+#: later than driving straight off at top speed tries going first past a robot driving its own leg in its way
+#: (:meth:`_CentralRun._go_first`)
+SWAP_AFTER_S = 2.0
+#: ... trying at most this many of the robots in its way, the one it would meet first first
+SWAP_TRIES = 2
+#: ... and keeping the swap when the two arrivals' sum drops by more than this (s)
+SWAP_GAIN_S = 0.5
+#: ... and once a robot's leg is cut (turned to its station, swapped), the robots still waiting on a leg whose
+#: route comes near the cut one's are planned again from where they are (:meth:`_CentralRun._retime`): they
+#: waited for a trajectory no longer driven; kept when they arrive this much (s) sooner
+RETIME_GAIN_S = 0.5
 
 
 class _CentralRun:
@@ -58,6 +73,9 @@ class _CentralRun:
         #: per robot: when its docking ends (HAND_OVER_EARLY_S: its event comes sooner)
         self.dock_end = [0.0] * n
         self.turned = 0             # legs cut to turn to a station handed over en route (TURN_EN_ROUTE)
+        self.swaps = 0              # legs that went first past a robot driving already (_go_first)
+        self.retimed = 0            # legs planned again after a leg they waited for was cut (_retime)
+        self._swapped: tuple[_SimRobot, TimedPath] | None = None   # the robot _go_first just re-planned, its old leg
 
     def run(self) -> DeliveryResult:
         for r in self.robots:
@@ -167,8 +185,11 @@ class _CentralRun:
         if begun:
             self.legs[q.idx].append(np.vstack([wp[wp[:, 2] < now], [*at, now]]))
         self.turned += 1
+        old = tp
         self._take_leg(q, leg, now)
         self.rules.to_station_now(q, at, now)
+        if self.planner.reorders_legs:
+            self._retime(q, old, now)
         return True
 
     def _take_leg(self, r: _SimRobot, leg: TimedPath, now: float) -> None:
@@ -199,6 +220,8 @@ class _CentralRun:
                 if evac is not None and (leg is None or evac.start_time < leg.start_time):
                     rules.evacuate(r, spot)
                     leg = evac
+        elif leg is not None and at is None and self.planner.reorders_legs:
+            leg = self._go_first(r, leg, now)
         if leg is None:
             self.legs_at_failure[r.idx], self.failed_at[r.idx] = self.tally.legs, now
             r.wake = now + RETRY_LATEST * self.limits.retry_s
@@ -206,7 +229,110 @@ class _CentralRun:
         self._take_leg(r, leg, now)
         rules.left(r, now)
         rules.enter(r, "drive", now)
+        if self._swapped is not None:
+            (q, old), self._swapped = self._swapped, None
+            self._retime(q, old, now)
         return True
+
+    def _in_the_way(self, r: _SimRobot, leg: TimedPath, now: float) -> list[_SimRobot]:
+        """The robots driving a leg (begun, not arrived) that r would meet on ``leg``'s route driven
+        straight off at top speed: their discs would overlap; the one met first first."""
+        wp = leg.waypoints[:, :2]
+        keep = np.ones(len(wp), dtype=bool)
+        keep[1:] = np.any(wp[1:] != wp[:-1], axis=1)
+        route = wp[keep]
+        s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(route, axis=0).T))])
+        ts = np.arange(0.0, s[-1] / self.problem.max_speed + 0.25, 0.2)
+        at_s = np.minimum(ts * self.problem.max_speed, s[-1])
+        mine = np.column_stack([np.interp(at_s, s, route[:, 0]), np.interp(at_s, s, route[:, 1])])
+        ts = ts + now
+        met: list[tuple[float, _SimRobot]] = []
+        for q in self.robots:
+            tp = self.driving[q.idx]
+            if q is r or q.phase != "drive" or tp.waypoints[0, 2] > now or tp.arrival_time <= now + 1e-6:
+                continue
+            qw = tp.waypoints
+            theirs = np.column_stack([np.interp(ts, qw[:, 2], qw[:, 0]), np.interp(ts, qw[:, 2], qw[:, 1])])
+            close = np.nonzero(np.hypot(*(mine - theirs).T) < 2 * self.problem.radius + 0.05)[0]
+            if len(close):
+                met.append((float(ts[close[0]]), q))
+        return [q for _, q in sorted(met, key=lambda m: m[0])]
+
+    def _go_first(self, r: _SimRobot, leg: TimedPath, now: float) -> TimedPath:
+        """md's priority search in the live fleet: r's new ``leg`` arrives more than :data:`SWAP_AFTER_S`
+        late; for a robot q driving in its way (:meth:`_in_the_way`), plan r's leg around everybody but q's
+        leg from ``now`` on (q stands where it is at ``now``), then q's rest of its leg from there around
+        everybody, r's new leg included. Kept (q's leg cut at ``now``, the new one driven) when the sum of the
+        two arrivals drops by more than :data:`SWAP_GAIN_S` (q's not counted when it drives to park: it has
+        no delivery left; a robot driving to park never goes first). Both new legs are planned around every other
+        trajectory, so the swap is as safe as any leg. Returns r's leg."""
+        if r.target_kind == "park" or leg.arrival_time - now - leg.length / self.problem.max_speed <= SWAP_AFTER_S:
+            return leg
+        assert r.target is not None
+        for q in self._in_the_way(r, leg, now)[:SWAP_TRIES]:
+            tp = self.driving[q.idx]
+            at = tp.position(now)
+            standing = TimedPath(q.id, self.problem.radius, np.array([[*at, now]]))
+            rest = [self._as_fixed(o, now) for o in self.robots if o is not r and o is not q]
+            mine = self._plan_leg(r, r.target, [*rest, standing], now)
+            if mine is None or mine.arrival_time >= leg.arrival_time - SWAP_GAIN_S:
+                continue
+            assert q.target is not None
+            theirs = self._plan_leg(q, q.target, [*rest, mine], now, start=at)
+            if theirs is None:
+                continue
+            # (a robot driving to park has no delivery left: when it arrives does not count)
+            lost = 0.0 if q.target_kind == "park" else theirs.arrival_time - tp.arrival_time
+            if leg.arrival_time - mine.arrival_time - lost <= SWAP_GAIN_S:
+                continue
+            self._cut(q, at, now)
+            self._take_leg(q, theirs, now)
+            self.swaps += 1
+            self._swapped = (q, tp)
+            return mine
+        return leg
+
+    def _cut(self, q: _SimRobot, at: Point, now: float) -> None:
+        """q's leg as driven ends at ``at`` at ``now`` (a new one follows)."""
+        wp = self.legs[q.idx].pop()
+        self.legs[q.idx].append(np.vstack([wp[wp[:, 2] < now], [*at, now]]))
+        q.pos = at
+
+    def _retime(self, q: _SimRobot, old: TimedPath, now: float, skip: _SimRobot | None = None) -> None:
+        """q's leg ``old`` was cut at ``now``: the robots driving a leg that still holds a wait (they arrive more
+        than :data:`RETIME_GAIN_S` after driving their rest straight at top speed) and that would pass within
+        0.3 m of ``old`` at the same time (their leg kept clear of it there) may have waited for it: each is
+        planned again from where it is, around every trajectory driven now, and takes the new leg when it
+        arrives :data:`RETIME_GAIN_S` sooner."""
+        v, keep_off = self.problem.max_speed, 2 * self.problem.radius + 0.3
+        if old.arrival_time <= now:
+            return
+        ow = old.waypoints
+        for r in self.robots:
+            tp = self.driving[r.idx]
+            if r is q or r is skip or r.phase != "drive" or r.target_kind == "park" or tp.waypoints[0, 2] > now \
+                    or tp.arrival_time <= now:
+                continue
+            wp = tp.waypoints
+            rest = np.vstack([tp.position(now), wp[wp[:, 2] > now, :2]])
+            left = float(np.sum(np.hypot(*np.diff(rest, axis=0).T)))
+            if tp.arrival_time - now - left / v <= RETIME_GAIN_S:
+                continue
+            # did r's leg pass close by q's old one (at the same time), where it was shaped around it?
+            ts = np.arange(now, tp.arrival_time + 0.25, 0.25)
+            gap = np.hypot(np.interp(ts, wp[:, 2], wp[:, 0]) - np.interp(ts, ow[:, 2], ow[:, 0]),
+                           np.interp(ts, wp[:, 2], wp[:, 1]) - np.interp(ts, ow[:, 2], ow[:, 1]))
+            if gap.min() > keep_off:
+                continue
+            at = (float(rest[0, 0]), float(rest[0, 1]))
+            assert r.target is not None
+            others = [self._as_fixed(o, now) for o in self.robots if o is not r]
+            leg = self._plan_leg(r, r.target, others, now, start=at)
+            if leg is None or leg.arrival_time >= tp.arrival_time - RETIME_GAIN_S:
+                continue
+            self._cut(r, at, now)
+            self._take_leg(r, leg, now)
+            self.retimed += 1
 
     def _result(self, t: float, stop: str) -> DeliveryResult:
         p, rules, tally = self.problem, self.rules, self.tally
@@ -223,7 +349,8 @@ class _CentralRun:
             deadlocks=rules.deadlocked(t, self.limits.no_progress_s, ("dock", "drive")),
             wall_s=tally.wall_s(), violations=violations, trajectories=paths,
             extra={"mean_leg_delay_s": round(self.leg_delay_s / per_leg, 2), "hold_legs": rules.hold_legs,
-                   "turned": self.turned, "queue": rules.queue_rule, "mean_phase_s": rules.mean_phase_s(t)})
+                   "turned": self.turned, "swaps": self.swaps, "retimed": self.retimed, "queue": rules.queue_rule,
+                   "mean_phase_s": rules.mean_phase_s(t)})
 
 
 def simulate_central(problem: DeliveryProblem, method: str, limits: RunLimits, planner_options: dict | None = None,

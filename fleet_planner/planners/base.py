@@ -29,6 +29,10 @@ class Planner(ABC):
     """
 
     name: ClassVar[str]
+    #: a run driving this planner's legs may re-order two of them in flight (a new leg goes first past a
+    #: robot already driving, whose leg is then planned again around it): md's priority search in the live
+    #: fleet. False: first come first served, every leg planned once stays (PRIOR)
+    reorders_legs: bool = False
 
     @abstractmethod
     def plan(self, grid: GridMap, robots: Sequence[RobotSpec], progress: Progress | None = None) -> Plan:
