@@ -36,17 +36,20 @@ def _run(problem, method: str, options: dict | None = None):
 
     def logged_go_first(r, leg, now):
         before = list(run.driving)
-        out = go_first(r, leg, now)
+        out, swapped = go_first(r, leg, now)
         changed = [k for k, tp in enumerate(run.driving) if tp is not before[k] and len(tp.waypoints) > 1]
         if out is not leg:
-            assert len(changed) == 1
+            assert len(changed) == 1 and swapped is not None
+            assert swapped[0] is run.robots[changed[0]] and swapped[1] is before[changed[0]]
             swaps.append((leg, out, before[changed[0]], run.driving[changed[0]], now,
                           run.robots[changed[0]].target_kind))
-        return out
+        else:
+            assert swapped is None
+        return out, swapped
 
-    def logged_retime(q, old, now, skip=None):
+    def logged_retime(q, old, now):
         before = list(run.driving)
-        retime(q, old, now, skip)
+        retime(q, old, now)
         retimes.extend((now, before[k], tp) for k, tp in enumerate(run.driving)
                        if tp is not before[k] and len(tp.waypoints) > 1)   # (not a robot just seen standing)
 

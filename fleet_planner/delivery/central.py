@@ -15,8 +15,10 @@ import math
 
 import numpy as np
 
+from ..geometry import arc_lengths
 from ..model import PlanningError, Point, RobotSpec, TimedPath
 from ..planners import get_planner
+from ..plot import points_along, positions_at
 from .problem import DeliveryProblem
 from .result import DeliveryResult, RunLimits, RunTally, SimProgress, check_driven, distance_driven, mean_velocity
 from .stations import DEFAULT_QUEUE, EVACUATE_S, PLACE_RULES, _DeliveryRules, _SimRobot
@@ -75,7 +77,6 @@ class _CentralRun:
         self.turned = 0             # legs cut to turn to a station handed over en route (TURN_EN_ROUTE)
         self.swaps = 0              # legs that went first past a robot driving already (_go_first)
         self.retimed = 0            # legs planned again after a leg they waited for was cut (_retime)
-        self._swapped: tuple[_SimRobot, TimedPath] | None = None   # the robot _go_first just re-planned, its old leg
 
     def run(self) -> DeliveryResult:
         for r in self.robots:
@@ -181,15 +182,15 @@ class _CentralRun:
         leg = self._plan_leg(q, station, others, t0, start=at)
         if leg is None or leg.arrival_time >= tp.arrival_time + math.dist(q.target, station) / self.problem.max_speed:
             return False
-        wp = self.legs[q.idx].pop()
         if begun:
-            self.legs[q.idx].append(np.vstack([wp[wp[:, 2] < now], [*at, now]]))
+            self._cut(q, at, now)
+        else:
+            self.legs[q.idx].pop()
         self.turned += 1
-        old = tp
         self._take_leg(q, leg, now)
         self.rules.to_station_now(q, at, now)
         if self.planner.reorders_legs:
-            self._retime(q, old, now)
+            self._retime(q, tp, now)
         return True
 
     def _take_leg(self, r: _SimRobot, leg: TimedPath, now: float) -> None:
@@ -213,6 +214,7 @@ class _CentralRun:
             return True
         others = [self._as_fixed(q, now if at is None else at) for q in self.robots if q is not r]
         leg = self._plan_leg(r, r.target, others, now)
+        swapped: tuple[_SimRobot, TimedPath] | None = None   # the robot r went first past, its leg before
         if rules.others_queue_here(r) and (leg is None or leg.start_time > now + EVACUATE_S):
             spot = rules.spot_near_here(r)
             if spot is not None:
@@ -221,7 +223,7 @@ class _CentralRun:
                     rules.evacuate(r, spot)
                     leg = evac
         elif leg is not None and at is None and self.planner.reorders_legs:
-            leg = self._go_first(r, leg, now)
+            leg, swapped = self._go_first(r, leg, now)
         if leg is None:
             self.legs_at_failure[r.idx], self.failed_at[r.idx] = self.tally.legs, now
             r.wake = now + RETRY_LATEST * self.limits.retry_s
@@ -229,45 +231,39 @@ class _CentralRun:
         self._take_leg(r, leg, now)
         rules.left(r, now)
         rules.enter(r, "drive", now)
-        if self._swapped is not None:
-            (q, old), self._swapped = self._swapped, None
-            self._retime(q, old, now)
+        if swapped is not None:
+            self._retime(*swapped, now)
         return True
 
     def _in_the_way(self, r: _SimRobot, leg: TimedPath, now: float) -> list[_SimRobot]:
         """The robots driving a leg (begun, not arrived) that r would meet on ``leg``'s route driven
         straight off at top speed: their discs would overlap; the one met first first."""
-        wp = leg.waypoints[:, :2]
-        keep = np.ones(len(wp), dtype=bool)
-        keep[1:] = np.any(wp[1:] != wp[:-1], axis=1)
-        route = wp[keep]
-        s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(route, axis=0).T))])
-        ts = np.arange(0.0, s[-1] / self.problem.max_speed + 0.25, 0.2)
-        at_s = np.minimum(ts * self.problem.max_speed, s[-1])
-        mine = np.column_stack([np.interp(at_s, s, route[:, 0]), np.interp(at_s, s, route[:, 1])])
+        v, length = self.problem.max_speed, leg.length
+        ts = np.arange(0.0, length / v + 0.25, 0.2)
+        mine = points_along(leg, np.minimum(ts * v, length))
         ts = ts + now
         met: list[tuple[float, _SimRobot]] = []
         for q in self.robots:
             tp = self.driving[q.idx]
             if q is r or q.phase != "drive" or tp.waypoints[0, 2] > now or tp.arrival_time <= now + 1e-6:
                 continue
-            qw = tp.waypoints
-            theirs = np.column_stack([np.interp(ts, qw[:, 2], qw[:, 0]), np.interp(ts, qw[:, 2], qw[:, 1])])
-            close = np.nonzero(np.hypot(*(mine - theirs).T) < 2 * self.problem.radius + 0.05)[0]
+            close = np.nonzero(np.hypot(*(mine - positions_at(tp, ts)).T) < 2 * self.problem.radius + 0.05)[0]
             if len(close):
                 met.append((float(ts[close[0]]), q))
         return [q for _, q in sorted(met, key=lambda m: m[0])]
 
-    def _go_first(self, r: _SimRobot, leg: TimedPath, now: float) -> TimedPath:
+    def _go_first(self, r: _SimRobot, leg: TimedPath,
+                  now: float) -> tuple[TimedPath, tuple[_SimRobot, TimedPath] | None]:
         """md's priority search in the live fleet: r's new ``leg`` arrives more than :data:`SWAP_AFTER_S`
         late; for a robot q driving in its way (:meth:`_in_the_way`), plan r's leg around everybody but q's
         leg from ``now`` on (q stands where it is at ``now``), then q's rest of its leg from there around
         everybody, r's new leg included. Kept (q's leg cut at ``now``, the new one driven) when the sum of the
         two arrivals drops by more than :data:`SWAP_GAIN_S` (q's not counted when it drives to park: it has
         no delivery left; a robot driving to park never goes first). Both new legs are planned around every other
-        trajectory, so the swap is as safe as any leg. Returns r's leg."""
+        trajectory, so the swap is as safe as any leg. Returns r's leg and, after a swap, q and its leg before
+        (the caller times again the robots that waited for it, :meth:`_retime`, once r drives its leg)."""
         if r.target_kind == "park" or leg.arrival_time - now - leg.length / self.problem.max_speed <= SWAP_AFTER_S:
-            return leg
+            return leg, None
         assert r.target is not None
         for q in self._in_the_way(r, leg, now)[:SWAP_TRIES]:
             tp = self.driving[q.idx]
@@ -288,9 +284,8 @@ class _CentralRun:
             self._cut(q, at, now)
             self._take_leg(q, theirs, now)
             self.swaps += 1
-            self._swapped = (q, tp)
-            return mine
-        return leg
+            return mine, (q, tp)
+        return leg, None
 
     def _cut(self, q: _SimRobot, at: Point, now: float) -> None:
         """q's leg as driven ends at ``at`` at ``now`` (a new one follows)."""
@@ -298,7 +293,7 @@ class _CentralRun:
         self.legs[q.idx].append(np.vstack([wp[wp[:, 2] < now], [*at, now]]))
         q.pos = at
 
-    def _retime(self, q: _SimRobot, old: TimedPath, now: float, skip: _SimRobot | None = None) -> None:
+    def _retime(self, q: _SimRobot, old: TimedPath, now: float) -> None:
         """q's leg ``old`` was cut at ``now``: the robots driving a leg that still holds a wait (they arrive more
         than :data:`RETIME_GAIN_S` after driving their rest straight at top speed) and that would pass within
         0.3 m of ``old`` at the same time (their leg kept clear of it there) may have waited for it: each is
@@ -307,24 +302,20 @@ class _CentralRun:
         v, keep_off = self.problem.max_speed, 2 * self.problem.radius + 0.3
         if old.arrival_time <= now:
             return
-        ow = old.waypoints
         for r in self.robots:
             tp = self.driving[r.idx]
-            if r is q or r is skip or r.phase != "drive" or r.target_kind == "park" or tp.waypoints[0, 2] > now \
+            if r is q or r.phase != "drive" or r.target_kind == "park" or tp.waypoints[0, 2] > now \
                     or tp.arrival_time <= now:
                 continue
             wp = tp.waypoints
-            rest = np.vstack([tp.position(now), wp[wp[:, 2] > now, :2]])
-            left = float(np.sum(np.hypot(*np.diff(rest, axis=0).T)))
+            left = tp.length - float(np.interp(now, wp[:, 2], arc_lengths(wp)))   # (its rest of route)
             if tp.arrival_time - now - left / v <= RETIME_GAIN_S:
                 continue
             # did r's leg pass close by q's old one (at the same time), where it was shaped around it?
             ts = np.arange(now, tp.arrival_time + 0.25, 0.25)
-            gap = np.hypot(np.interp(ts, wp[:, 2], wp[:, 0]) - np.interp(ts, ow[:, 2], ow[:, 0]),
-                           np.interp(ts, wp[:, 2], wp[:, 1]) - np.interp(ts, ow[:, 2], ow[:, 1]))
-            if gap.min() > keep_off:
+            if np.hypot(*(positions_at(tp, ts) - positions_at(old, ts)).T).min() > keep_off:
                 continue
-            at = (float(rest[0, 0]), float(rest[0, 1]))
+            at = tp.position(now)
             assert r.target is not None
             others = [self._as_fixed(o, now) for o in self.robots if o is not r]
             leg = self._plan_leg(r, r.target, others, now, start=at)
