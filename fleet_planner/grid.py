@@ -79,6 +79,16 @@ class GridMap:
             raise MapError(f"{path}: header says width {w} but rows have {grid.width} cells")
         return grid
 
+    def refined(self, k: int) -> GridMap:
+        """The same obstacles on cells ``k`` times finer (``k`` odd, so that every cell centre of this map is a
+        cell centre of the finer one: a point a planner puts on this map's lattice stays on the finer one)."""
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1 or k % 2 == 0:
+            raise MapError(f"{self.name}: refine by an odd integer >= 1 (got {k!r})")
+        if k == 1:
+            return self
+        return GridMap(np.repeat(np.repeat(self.blocked, k, axis=0), k, axis=1), self.resolution / k,
+                       f"{self.name}/{k}")
+
     # -- queries ------------------------------------------------------------------------------
     @property
     def height(self) -> int:

@@ -60,7 +60,9 @@ def _run(problem, method: str, options: dict | None = None):
 def test_a_late_leg_goes_first_and_robots_waiting_for_a_cut_leg_are_timed_again(tiny):
     all_swaps, all_retimes = [], []
     for problem in tiny:
-        result, swaps, retimes = _run(problem, "md")
+        # on the map's cells: on md's finer lattice for legs (session 31) these small runs have too little
+        # traffic left to swap
+        result, swaps, retimes = _run(problem, "md", {"leg_lattice": 1})
         assert result.finished and result.completed == 20 and result.deadlocks == 0
         assert result.collisions == 0 and result.violations == []    # the independent checker, cut legs included
         assert result.extra["swaps"] == len(swaps) and result.extra["retimed"] == len(retimes)

@@ -7,7 +7,7 @@ import pytest
 
 import fleet_planner.planners.md as md
 from fleet_planner.checker import check_plan
-from fleet_planner.grid import GridMap
+from fleet_planner.grid import GridMap, MapError
 from fleet_planner.model import Plan, RobotSpec, TimedPath
 from fleet_planner.planners import get_planner
 
@@ -92,14 +92,54 @@ def test_a_leg_alone_on_the_map_is_the_shortest_path_for_the_robots_own_radius()
     from fleet_planner.paths import PathFinder
     from fleet_planner.warehouse import generate_warehouse
 
+    # (session 31: on the finer lattice md plans legs on here, ``leg_lattice``: no longer than on the map's cells)
     problem = warehouse_problem(generate_warehouse(5, 10, 24, 2, 3, 0.5, "large"), 4, 4, seed=0)
-    finder = PathFinder(problem.grid, problem.radius)
     points = sorted(problem.stations.values())
     planner, longer = get_planner("md"), []
+    spec = RobotSpec("r", problem.radius, problem.max_speed, points[0], points[1])
+    finder = PathFinder(planner._leg_grid(problem.grid, [spec]), problem.radius)
+    on_cells = PathFinder(problem.grid, problem.radius)
     for a, b in zip(points[::3], points[1::3]):
         leg = planner.plan_incremental(problem.grid, [RobotSpec("r", problem.radius, problem.max_speed, a, b)],
                                        [], 0.0)[0]
         shortest = polyline_length(finder.find(a, b))
         assert leg.length >= shortest - 1e-6 and leg.arrival_time == pytest.approx(leg.length / problem.max_speed)
+        assert leg.length <= polyline_length(on_cells.find(a, b)) + 1e-6
         longer.append(leg.length - shortest)
     assert len(longer) >= 8 and max(longer) < 1e-6
+
+
+# a 2 m aisle on 0.5 m cells (a rack aisle of the default warehouse): s docks 0.75 m from its lower wall, as at a
+# storing site; 0.354 m discs pass it only with their centres between y = 1.978 and 2.146, off the map's lattice
+AISLE = GridMap.from_rows(["@" * 16, *["." * 16] * 4, "@" * 16], resolution=0.5, name="aisle")
+S = TimedPath("s", 0.354, np.array([[4.25, 1.25, 0.0]]))      # standing there for good
+S_SPEC = RobotSpec("s", 0.354, 0.8, (4.25, 1.25), (4.25, 1.25))
+PASSER = RobotSpec("r", 0.354, 0.8, (0.75, 1.75), (7.25, 1.75))
+
+
+def test_a_leg_passes_a_robot_docked_in_a_narrow_aisle_on_the_finer_lattice():
+    leg = get_planner("md").plan_incremental(AISLE, [PASSER], [S], 0.0)[0]
+    assert check_plan(AISLE, [S_SPEC, PASSER], Plan("md", [S, leg])) == []
+    assert leg.waypoints[:, 1].max() > 1.97                          # it passes on the far side of s
+    assert leg.arrival_time < 6.5 / 0.8 + 1.0                       # 6.5 m straight, a small swerve, no wait
+    # control: on the map's own cells the aisle is shut for as long as s stands there
+    with pytest.raises(md.PlanningError):
+        get_planner("md", leg_lattice=1).plan_incremental(AISLE, [PASSER], [S], 0.0)
+
+
+def test_auto_refines_only_cells_narrower_than_the_robots_and_keeps_the_maps_cell_centres():
+    planner = get_planner("md")
+    assert planner._leg_grid(GRID, [R]) is GRID                      # 1 m cells, 0.8 m robots: two lanes already
+    fine = planner._leg_grid(AISLE, [PASSER])
+    assert fine.resolution == pytest.approx(0.5 / md.LEG_LATTICE) and planner._leg_grid(AISLE, [PASSER]) is fine
+    assert fine.is_free_cell(*fine.cell_of(0.75, 1.75)) and fine.centre(*fine.cell_of(0.75, 1.75)) == \
+        pytest.approx((0.75, 1.75))
+    assert np.array_equal(fine.blocked[::md.LEG_LATTICE, ::md.LEG_LATTICE], AISLE.blocked)
+    with pytest.raises(MapError, match="odd integer"):
+        AISLE.refined(2)                                             # the map's cell centres would fall on corners
+
+
+@pytest.mark.parametrize("bad", [2, 0, -3, 1.5, True, "fine"])
+def test_a_bad_leg_lattice_is_refused_by_name(bad):
+    with pytest.raises(ValueError, match="leg_lattice"):
+        get_planner("md", leg_lattice=bad)
