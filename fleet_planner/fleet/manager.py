@@ -103,6 +103,12 @@ STEP_TIME_FADE = 0.9
 MIN_STEP_BUDGET_S = 0.05
 #: wall seconds the planner may spend on one leg at least (md's leg_time_limit)
 MIN_LEG_LIMIT_S = 0.1
+#: the default md planner plans the live fleet's legs on the map's own cells (md's ``leg_lattice``; the delivery
+#: simulation uses md's "auto", a lattice 3x finer on the 0.5 m default warehouse). Measured in session 31 with "auto":
+#: `bench_fleet.py --default 9 15 22 30 --same-stream --sim on --rate 5` did 216 / 298 / 295 jobs per simulated hour
+#: at 9 / 15 / 22 robots (on the map's cells 210 / 283 / 310), but at 30 robots the planner node took 84% of a core
+#: and the clock fell from 5x to 1.1x (41 of 100 jobs in 600 s wall): its legs cost about 3.5x the CPU
+LIVE_LEG_LATTICE = 1
 #: finished jobs kept in memory (the latest ones); older ones are only in the job store, which
 #: still answers a re-sent id with its state (without a store such an id is a new job again)
 MAX_CLOSED_JOBS = 1000
@@ -176,7 +182,8 @@ class FleetManager:
         self.margin = 2 * max(lag_allowance(k, self.params.speed_factor) for k in self.kinds.values()) \
             + self.params.safety_margin
         # the live fleet paces its legs in wall-clock seconds (paced_budgets, MIN_LEG_LIMIT_S)
-        self.planner = planner if planner is not None else get_planner("md", margin=self.margin, leg_clock="wall")
+        self.planner = planner if planner is not None else get_planner("md", margin=self.margin, leg_clock="wall",
+                                                                         leg_lattice=LIVE_LEG_LATTICE)
         warm_up = getattr(self.planner, "warm_up", None)   # (a planner is anything with plan_incremental)
         if warm_up is not None:
             warm_up()   # its compiled kernels, loaded now: not inside the first steps' budgets
