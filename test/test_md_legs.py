@@ -137,6 +137,9 @@ def test_auto_refines_only_cells_narrower_than_the_robots_and_keeps_the_maps_cel
     assert np.array_equal(fine.blocked[::md.LEG_LATTICE, ::md.LEG_LATTICE], AISLE.blocked)
     with pytest.raises(MapError, match="odd integer"):
         AISLE.refined(2)                                             # the map's cell centres would fall on corners
+    from fleet_planner.roadmap import RoadMap, with_lanes
+    laned = with_lanes(AISLE, RoadMap.open(AISLE))
+    assert get_planner("md", leg_lattice=3)._leg_grid(laned, [PASSER]) is laned   # lanes are laid on its cells
 
 
 @pytest.mark.parametrize("bad", [2, 0, -3, 1.5, True, "fine"])

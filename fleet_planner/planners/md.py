@@ -214,9 +214,8 @@ class MDPlanner(Planner):
     driving in its way, whose leg is planned again behind it, and robots that waited for a leg that was cut
     are timed again. ``leg_lattice`` (default "auto"): legs are planned on cells this many times finer than
     the map's (odd, so that the map's cell centres stay on the lattice; the one-shot :meth:`plan` keeps the
-    map's cells); "auto" takes :data:`LEG_LATTICE` when the map's cells are narrower than the robots' diameter
-    (two of them cannot pass on neighbouring cells) and the map carries no lanes (lanes are laid on its cells),
-    else 1."""
+    map's cells, and so does a map with lanes: they are laid on its cells); "auto" takes :data:`LEG_LATTICE` when
+    the map's cells are narrower than the robots' diameter (two of them cannot pass on neighbouring cells), else 1."""
 
     name = "md"
 
@@ -508,8 +507,10 @@ class MDPlanner(Planner):
         k = self.leg_lattice
         if k == "auto":
             narrow = bool(robots) and grid.resolution < 2 * min(r.radius for r in robots)
-            k = LEG_LATTICE if narrow and getattr(grid, "lanes", None) is None else 1
-        return grid if k == 1 else self._finders.refined(grid, int(k))
+            k = LEG_LATTICE if narrow else 1
+        if k == 1 or getattr(grid, "lanes", None) is not None:   # (lanes are laid on the map's cells)
+            return grid
+        return self._finders.refined(grid, int(k))
 
     def _leg_budget(self) -> Budget:
         return Budget(self.leg_time_limit, wall=self.leg_clock == "wall")
