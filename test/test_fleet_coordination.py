@@ -11,6 +11,7 @@ from fleet_planner.fleet import (
     RobotAgent,
     coordination_names,
     get_coordination,
+    manager,
 )
 from fleet_planner.planners.md import MDPlanner
 from fleet_planner.robots import RobotModel, load_kinds
@@ -49,7 +50,7 @@ class CountingPlanner:
     """A planner handed in: the (M,D) planner, counting its calls."""
 
     def __init__(self, margin):
-        self.inner, self.calls = MDPlanner(margin=margin), 0
+        self.inner, self.calls = MDPlanner(margin=margin, leg_lattice=manager.LIVE_LEG_LATTICE), 0
 
     def plan_incremental(self, grid, robots, fixed, t0):
         self.calls += 1
@@ -59,6 +60,7 @@ class CountingPlanner:
 def test_the_manager_plans_central_legs_with_the_planner_it_is_given():
     default = FleetManager(SMALL, {"cargo": CARGO})
     assert isinstance(default.planner, MDPlanner) and default.planner.margin == default.margin
+    assert default.planner.leg_lattice == manager.LIVE_LEG_LATTICE   # the live fleet's legs: the map's cells
     planner = CountingPlanner(default.margin)
     fm = FleetManager(SMALL, {"cargo": CARGO}, DispatchParams(), planner=planner)
     assert fm.planner is planner
