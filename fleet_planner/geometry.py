@@ -87,6 +87,38 @@ def arc_lengths(points: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts[:, :2], axis=0).T))])
 
 
+def points_at_arcs(points: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The points of the polyline ``points`` (its first two columns) at the given arc lengths (clamped to its
+    ends), shape (len(lengths), 2)."""
+    pts = np.asarray(points, dtype=float)
+    cum = arc_lengths(pts)
+    s = np.asarray(lengths, dtype=float)
+    return np.column_stack([np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
+
+
+def positions_at_times(waypoints: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Where a timed path's robot is at each of ``times`` (waypoints (x, y, t)), shape (len(times), 2): as
+    ``TimedPath.position``, on the first waypoint until its time and on the last one after it."""
+    wp = np.asarray(waypoints, dtype=float)
+    t = np.asarray(times, dtype=float)
+    if len(wp) == 1:
+        return np.broadcast_to(wp[0, :2], (len(t), 2)).copy()
+    k = np.clip(np.searchsorted(wp[:, 2], t, side="right") - 1, 0, len(wp) - 2)
+    t0, t1 = wp[k, 2], wp[k + 1, 2]
+    span = t1 - t0
+    a = np.clip(np.where(span > 0, (t - t0) / np.where(span > 0, span, 1.0), 0.0), 0.0, 1.0)
+    p = wp[k, :2] + a[:, None] * (wp[k + 1, :2] - wp[k, :2])
+    p[t <= wp[0, 2]] = wp[0, :2]      # as position() even where the first or last waypoints
+    p[t >= wp[-1, 2]] = wp[-1, :2]    # share a time
+    return p
+
+
+def arc_at_time(waypoints: np.ndarray, t: float) -> float:
+    """How far along its polyline a timed path (waypoints (x, y, t)) is at time ``t`` (clamped to its ends)."""
+    wp = np.asarray(waypoints, dtype=float)
+    return float(np.interp(t, wp[:, 2], arc_lengths(wp)))
+
+
 def point_at_arc(pts: np.ndarray, arc: np.ndarray, s: float) -> Point:
     """The point at arc length ``s`` along the polyline ``pts`` (``arc``: arc length at each point;
     clamped to the ends)."""

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .geometry import arc_lengths, polyline_point_distances
+from .geometry import arc_lengths, points_at_arcs, polyline_point_distances, positions_at_times
 from .grid import GridMap
 from .model import Network, Plan, RobotSpec, TimedPath
 
@@ -49,28 +49,14 @@ _REGION_ALPHA = 0.4
 def positions_at(path: TimedPath, times: np.ndarray) -> np.ndarray:
     """Where the robot is at each of ``times``, shape (len(times), 2): as
     :meth:`TimedPath.position`, parked on the first waypoint until its time and on the last one
-    after it."""
-    wp = path.waypoints
-    t = np.asarray(times, dtype=float)
-    if len(wp) == 1:
-        return np.broadcast_to(wp[0, :2], (len(t), 2)).copy()
-    k = np.clip(np.searchsorted(wp[:, 2], t, side="right") - 1, 0, len(wp) - 2)
-    t0, t1 = wp[k, 2], wp[k + 1, 2]
-    span = t1 - t0
-    a = np.clip(np.where(span > 0, (t - t0) / np.where(span > 0, span, 1.0), 0.0), 0.0, 1.0)
-    p = wp[k, :2] + a[:, None] * (wp[k + 1, :2] - wp[k, :2])
-    p[t <= wp[0, 2]] = wp[0, :2]      # as position() even where the first or last waypoints
-    p[t >= wp[-1, 2]] = wp[-1, :2]    # share a time
-    return p
+    after it (:func:`~fleet_planner.geometry.positions_at_times`)."""
+    return positions_at_times(path.waypoints, times)
 
 
 def points_along(path: TimedPath, lengths: np.ndarray) -> np.ndarray:
     """The points of the path's polyline at the given travelled lengths (clamped to its ends),
-    shape (len(lengths), 2)."""
-    wp = path.waypoints
-    cum = arc_lengths(wp)
-    s = np.asarray(lengths, dtype=float)
-    return np.column_stack([np.interp(s, cum, wp[:, 0]), np.interp(s, cum, wp[:, 1])])
+    shape (len(lengths), 2) (:func:`~fleet_planner.geometry.points_at_arcs`)."""
+    return points_at_arcs(path.waypoints, lengths)
 
 
 def travelled_length(path: TimedPath) -> tuple[np.ndarray, np.ndarray]:

@@ -15,10 +15,9 @@ import math
 
 import numpy as np
 
-from ..geometry import arc_lengths
+from ..geometry import arc_at_time, points_at_arcs, positions_at_times
 from ..model import PlanningError, Point, RobotSpec, TimedPath
 from ..planners import get_planner
-from ..plot import points_along, positions_at
 from .problem import DeliveryProblem
 from .result import DeliveryResult, RunLimits, RunTally, SimProgress, check_driven, distance_driven, mean_velocity
 from .stations import DEFAULT_QUEUE, EVACUATE_S, PLACE_RULES, _DeliveryRules, _SimRobot
@@ -193,11 +192,16 @@ class _CentralRun:
             self._retime(q, tp, now)
         return True
 
+    def _late_by(self, tp: TimedPath, now: float) -> float:
+        """How much later than driving the rest of its route straight off at top speed from ``now`` the robot on
+        ``tp`` arrives (a leg planned at ``now``: its whole route)."""
+        return tp.arrival_time - now - (tp.length - arc_at_time(tp.waypoints, now)) / self.problem.max_speed
+
     def _take_leg(self, r: _SimRobot, leg: TimedPath, now: float) -> None:
         """r drives ``leg`` (planned at ``now``): counted, kept as what the others' legs are planned around,
         appended to what r drove; r's next event is its arrival."""
         self.tally.legs += 1
-        self.leg_delay_s += leg.arrival_time - now - leg.length / self.problem.max_speed
+        self.leg_delay_s += self._late_by(leg, now)
         self.driving[r.idx] = leg
         self.legs[r.idx].append(leg.waypoints)
         r.wake = max(now, leg.arrival_time)
@@ -240,14 +244,15 @@ class _CentralRun:
         straight off at top speed: their discs would overlap; the one met first first."""
         v, length = self.problem.max_speed, leg.length
         ts = np.arange(0.0, length / v + 0.25, 0.2)
-        mine = points_along(leg, np.minimum(ts * v, length))
+        mine = points_at_arcs(leg.waypoints, np.minimum(ts * v, length))
         ts = ts + now
         met: list[tuple[float, _SimRobot]] = []
         for q in self.robots:
             tp = self.driving[q.idx]
             if q is r or q.phase != "drive" or tp.waypoints[0, 2] > now or tp.arrival_time <= now + 1e-6:
                 continue
-            close = np.nonzero(np.hypot(*(mine - positions_at(tp, ts)).T) < 2 * self.problem.radius + 0.05)[0]
+            close = np.nonzero(np.hypot(*(mine - positions_at_times(tp.waypoints, ts)).T)
+                               < 2 * self.problem.radius + 0.05)[0]
             if len(close):
                 met.append((float(ts[close[0]]), q))
         return [q for _, q in sorted(met, key=lambda m: m[0])]
@@ -262,7 +267,7 @@ class _CentralRun:
         no delivery left; a robot driving to park never goes first). Both new legs are planned around every other
         trajectory, so the swap is as safe as any leg. Returns r's leg and, after a swap, q and its leg before
         (the caller times again the robots that waited for it, :meth:`_retime`, once r drives its leg)."""
-        if r.target_kind == "park" or leg.arrival_time - now - leg.length / self.problem.max_speed <= SWAP_AFTER_S:
+        if r.target_kind == "park" or self._late_by(leg, now) <= SWAP_AFTER_S:
             return leg, None
         assert r.target is not None
         for q in self._in_the_way(r, leg, now)[:SWAP_TRIES]:
@@ -299,7 +304,7 @@ class _CentralRun:
         0.3 m of ``old`` at the same time (their leg kept clear of it there) may have waited for it: each is
         planned again from where it is, around every trajectory driven now, and takes the new leg when it
         arrives :data:`RETIME_GAIN_S` sooner."""
-        v, keep_off = self.problem.max_speed, 2 * self.problem.radius + 0.3
+        keep_off = 2 * self.problem.radius + 0.3
         if old.arrival_time <= now:
             return
         for r in self.robots:
@@ -307,13 +312,12 @@ class _CentralRun:
             if r is q or r.phase != "drive" or r.target_kind == "park" or tp.waypoints[0, 2] > now \
                     or tp.arrival_time <= now:
                 continue
-            wp = tp.waypoints
-            left = tp.length - float(np.interp(now, wp[:, 2], arc_lengths(wp)))   # (its rest of route)
-            if tp.arrival_time - now - left / v <= RETIME_GAIN_S:
+            if self._late_by(tp, now) <= RETIME_GAIN_S:
                 continue
             # did r's leg pass close by q's old one (at the same time), where it was shaped around it?
             ts = np.arange(now, tp.arrival_time + 0.25, 0.25)
-            if np.hypot(*(positions_at(tp, ts) - positions_at(old, ts)).T).min() > keep_off:
+            if np.hypot(*(positions_at_times(tp.waypoints, ts) - positions_at_times(old.waypoints, ts)).T).min() \
+                    > keep_off:
                 continue
             at = tp.position(now)
             assert r.target is not None

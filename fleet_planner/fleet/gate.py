@@ -42,7 +42,7 @@ from scipy.spatial.distance import cdist
 
 from msg_schemas.records import MAX_RECORD_BYTES, GateRecord, RobotStatus
 
-from ..geometry import arc_lengths, polyline_passes_near
+from ..geometry import arc_at_time, arc_lengths, polyline_passes_near
 from ..model import TimedPath
 from .state import FleetRobot
 
@@ -237,8 +237,7 @@ def sample(path: TimedPath, lo: float = 0.0, hi: float = math.inf, step: float =
 
 def arc_at(path: TimedPath, t: float) -> float:
     """How far along ``path`` its plan is at time ``t``."""
-    wp = path.waypoints
-    return float(np.interp(t, wp[:, 2], arc_lengths(path.waypoints)))
+    return arc_at_time(path.waypoints, t)
 
 
 def regions(a: _Samples, b: _Samples, reach: float) -> list[tuple[np.ndarray, np.ndarray]]:
